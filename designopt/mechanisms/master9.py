@@ -1,0 +1,403 @@
+"""9-DOF haptic master manipulator of seed 000 (SPEC §3.1).
+
+Joint vector everywhere in this module: q = (q1, q2, q3, q6, q7, q8, q9) in rad; the
+passive joints q4 = -q3 (parallelogram) and q5 = -q1 - q2 (position compensation) are
+applied inside. Lengths in mm. ``design`` is a dict with the keys ``DESIGN_KEYS``; its
+values may be floats or arrays broadcastable against q's leading dimensions (a swarm).
+
+Typos of the seed fixed here (docs/kinematics.md lists them with their checks):
+eq. (3) R23; eq. (34) J21 and J22; eq. (53) d4 → a4; eq. (10) denominator; eq. (21)
+degenerate (the redundancy is resolved by an explicit rule, see ``ik``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.typing import ArrayLike
+
+from designopt.kinematics.chain import DHChain, DHParams
+from designopt.kinematics.jacobian import geometric_jacobian
+
+Array = jnp.ndarray
+
+DESIGN_KEYS: tuple[str, ...] = ("a1", "a3", "d3", "a4", "a5", "d2", "d5", "d6")
+"""Design parameters (mm). a1, a3, d3 are the paper's design variables; the rest are fixed
+structural lengths whose values the seed's Table 5 no longer shows (docs/kinematics.md)."""
+
+PAPER_INITIAL = {"a1": 285.997, "a3": 280.933, "d3": 130.030}
+"""Design at the paper's first PTPSO iteration (seed 000 §IV.C)."""
+PAPER_FINAL = {"a1": 324.238, "a3": 317.076, "d3": 50.000}
+"""Design at the paper's last PTPSO iteration (seed 000 §IV.C)."""
+
+FIXED_DEFAULTS = {"a4": 10.0, "a5": 60.0, "d2": 30.0, "d5": 50.0, "d6": 80.0}
+"""Our defaults for the lengths of the unreadable Table 5. a4 = 10 mm makes the convex-hull
+workspace volumes of the two published designs reproduce the paper's ratio V_final/V_initial
+(docs/indices.md); a5, d2, d5, d6 only translate the workspace."""
+
+JOINT_NAMES: tuple[str, ...] = ("q1", "q2", "q3", "q6", "q7", "q8", "q9")
+JOINT_LIMITS_DEG = np.array(
+    [[-50, 40], [-60, 60], [-70, 70], [-120, 120], [-130, 160], [-45, 45], [-180, 180]],
+    dtype=np.float64,
+)
+JOINT_LIMITS = np.deg2rad(JOINT_LIMITS_DEG)
+"""(7, 2) joint ranges in rad (seed 000 Table 1); q9 is unlimited, stored as [-π, π]."""
+
+POSITION_LIMITS = JOINT_LIMITS[:3]
+
+CHAIN = DHChain(joint_types=("R",) * 9, convention="modified")
+"""The 9-joint modified-DH chain of SPEC §3.1 (reconstructed Table 1)."""
+
+
+def default_design() -> dict[str, float]:
+    """The paper's optimised design (PAPER_FINAL) with the fixed lengths' defaults, in mm."""
+    return {**PAPER_FINAL, **FIXED_DEFAULTS}
+
+
+def check_design(design: Mapping[str, ArrayLike]) -> None:
+    """Raise ValueError naming any missing or unknown key (called at the Python edge)."""
+    if not isinstance(design, Mapping):
+        raise ValueError(f"design must be a dict with keys {DESIGN_KEYS}, got {type(design).__name__}")
+    missing = [k for k in DESIGN_KEYS if k not in design]
+    if missing:
+        raise ValueError(f"design is missing key(s) {missing}; needs {list(DESIGN_KEYS)}")
+    unknown = [k for k in design if k not in DESIGN_KEYS]
+    if unknown:
+        raise ValueError(f"design has unknown key(s) {unknown}; allowed {list(DESIGN_KEYS)}")
+
+
+def _check_q(q: ArrayLike, n: int = 7, name: str = "q") -> Array:
+    q = jnp.asarray(q)
+    if q.ndim < 1 or q.shape[-1] != n:
+        raise ValueError(f"{name} must have shape (..., {n}), got {tuple(q.shape)}")
+    return q
+
+
+def _d(design: Mapping[str, ArrayLike], dtype) -> dict[str, Array]:
+    return {k: jnp.asarray(design[k], dtype=dtype) for k in DESIGN_KEYS}
+
+
+def _float(q: Array) -> Array:
+    return q if jnp.issubdtype(q.dtype, jnp.floating) else q.astype(jnp.float64)
+
+
+def dh_params(design: Mapping[str, ArrayLike], dtype=jnp.float64) -> DHParams:
+    """The DH table of SPEC §3.1 as arrays (shape design_batch + (9,))."""
+    p = _d(design, dtype)
+    z = jnp.zeros_like(p["a1"] + p["a3"] + p["d3"] + p["a4"] + p["a5"] + p["d2"] + p["d5"] + p["d6"])
+    hp = jnp.pi / 2
+
+    def row(*xs):
+        return jnp.stack([x + z for x in xs], axis=-1)
+
+    alpha = row(0.0, 0.0, -hp, 0.0, hp, 0.0, -hp, hp, hp)
+    a = row(0.0, p["a1"], 0.0, p["a3"], p["a4"], p["a5"], 0.0, 0.0, 0.0)
+    d = row(0.0, -p["d2"], p["d3"], 0.0, p["d5"], p["d6"], 0.0, 0.0, 0.0)
+    theta = row(0.0, -hp, 0.0, 0.0, 0.0, -hp, 0.0, hp, -hp)
+    return DHParams(alpha=alpha.astype(dtype), a=a.astype(dtype), d=d.astype(dtype), theta=theta.astype(dtype))
+
+
+def full_joints(q: ArrayLike) -> Array:
+    """(..., 7) active joints → (..., 9) chain joints with the passive constraints applied."""
+    q = jnp.asarray(q)
+    q1, q2, q3 = q[..., 0], q[..., 1], q[..., 2]
+    return jnp.stack([q1, q2, q3, -q3, -q1 - q2, q[..., 3], q[..., 4], q[..., 5], q[..., 6]], -1)
+
+
+def _fk(q: Array, design: Mapping[str, ArrayLike]) -> Array:
+    return CHAIN.fk(dh_params(design, q.dtype), full_joints(q))
+
+
+def fk(q: ArrayLike, design: Mapping[str, ArrayLike]) -> Array:
+    """Base-to-holding-point transform (..., 4, 4) from the DH chain (seed 000 eq. 1-2)."""
+    check_design(design)
+    q = _float(_check_q(q))
+    return _fk(q, design)
+
+
+def position(q3: ArrayLike, design: Mapping[str, ArrayLike]) -> Array:
+    """Holding-point position from q1..q3 (..., 3), closed form of seed 000 eq. (4)."""
+    q3 = _float(jnp.asarray(q3))
+    p = _d(design, q3.dtype)
+    q1, q2, qq3 = q3[..., 0], q3[..., 1], q3[..., 2]
+    s12, c12 = jnp.sin(q1 + q2), jnp.cos(q1 + q2)
+    w = p["a3"] * jnp.cos(qq3) + p["a4"]
+    px = p["a1"] * jnp.cos(q1) + p["d3"] * c12 + w * s12
+    py = p["a1"] * jnp.sin(q1) + p["d3"] * s12 - w * c12 - p["a5"]
+    pz = p["d6"] - p["d2"] + p["d5"] - p["a3"] * jnp.sin(qq3)
+    return jnp.stack(jnp.broadcast_arrays(px, py, pz), axis=-1)
+
+
+def rotation(q4: ArrayLike) -> Array:
+    """Holding-point orientation from q6..q9 (..., 3, 3), seed 000 eq. (3) with R23 fixed.
+
+    The printed R23 = -c6 s8 - c7 c9 is a typo; the chain gives -c6 s8 - c7 c8 s6 (which
+    is also the third column of eq. (33)'s J_w, the approach vector a).
+    """
+    q4 = _float(jnp.asarray(q4))
+    c6, s6 = jnp.cos(q4[..., 0]), jnp.sin(q4[..., 0])
+    c7, s7 = jnp.cos(q4[..., 1]), jnp.sin(q4[..., 1])
+    c8, s8 = jnp.cos(q4[..., 2]), jnp.sin(q4[..., 2])
+    c9, s9 = jnp.cos(q4[..., 3]), jnp.sin(q4[..., 3])
+    rows = [
+        [c6 * c9 * s7 + c8 * s6 * s9 + c6 * c7 * s8 * s9, c8 * c9 * s6 - c6 * s7 * s9 + c6 * c7 * c9 * s8, s6 * s8 - c6 * c7 * c8],
+        [c9 * s6 * s7 - c6 * c8 * s9 + c7 * s6 * s8 * s9, c7 * c9 * s6 * s8 - c6 * c8 * c9 - s6 * s7 * s9, -c6 * s8 - c7 * c8 * s6],
+        [s7 * s8 * s9 - c7 * c9, c7 * s9 + c9 * s7 * s8, -c8 * s7],
+    ]  # fmt: skip
+    return jnp.stack([jnp.stack(r, -1) for r in rows], -2)
+
+
+def fk_closed(q: ArrayLike, design: Mapping[str, ArrayLike]) -> Array:
+    """Transform (..., 4, 4) from the paper's closed forms eq. (3)-(4) (typos fixed)."""
+    check_design(design)
+    q = _float(_check_q(q))
+    R = rotation(q[..., 3:])
+    P = position(q[..., :3], design)
+    lead = jnp.broadcast_shapes(R.shape[:-2], P.shape[:-1])
+    R = jnp.broadcast_to(R, lead + (3, 3))
+    P = jnp.broadcast_to(P, lead + (3,))
+    top = jnp.concatenate([R, P[..., None]], axis=-1)
+    bottom = jnp.broadcast_to(jnp.array([0.0, 0.0, 0.0, 1.0], dtype=top.dtype), lead + (1, 4))
+    return jnp.concatenate([top, bottom], axis=-2)
+
+
+def jacobian(q: ArrayLike, design: Mapping[str, ArrayLike]) -> Array:
+    """Geometric Jacobian (..., 6, 7) in the base frame, rows v then ω, by autodiff of the
+    chain with the passive constraints inside (equivalent to seed 000 eq. 31)."""
+    check_design(design)
+    q = _float(_check_q(q))
+    return geometric_jacobian(_fk, q, _d(design, q.dtype))
+
+
+def jacobian_v_closed(q3: ArrayLike, design: Mapping[str, ArrayLike]) -> Array:
+    """Position block J_v (..., 3, 3) in closed form, seed 000 eq. (34) with two typos fixed:
+    J21 ends in + a1 c1 (printed: a repeated d3 c12), J22 has + d3 c12 (missing in print).
+
+    J_v is linear in (a1, a3, a4, d3) and independent of a5, d2, d5, d6.
+    """
+    q3 = _float(jnp.asarray(q3))
+    p = _d(design, q3.dtype)
+    q1, q2, qq3 = q3[..., 0], q3[..., 1], q3[..., 2]
+    s12, c12 = jnp.sin(q1 + q2), jnp.cos(q1 + q2)
+    w = p["a3"] * jnp.cos(qq3) + p["a4"]
+    j12 = w * c12 - p["d3"] * s12
+    j22 = w * s12 + p["d3"] * c12
+    j11 = j12 - p["a1"] * jnp.sin(q1)
+    j21 = j22 + p["a1"] * jnp.cos(q1)
+    j13 = -p["a3"] * s12 * jnp.sin(qq3)
+    j23 = p["a3"] * c12 * jnp.sin(qq3)
+    j33 = -p["a3"] * jnp.cos(qq3)
+    z = jnp.zeros_like(j33 + j11)
+    rows = [[j11, j12, j13], [j21, j22, j23], [z, z, j33]]
+    rows = [jnp.broadcast_arrays(*r) for r in rows]
+    lead = jnp.broadcast_shapes(*[x.shape for r in rows for x in r])
+    return jnp.stack([jnp.stack([jnp.broadcast_to(x, lead) for x in r], -1) for r in rows], -2)
+
+
+def jacobian_w_closed(q4: ArrayLike) -> Array:
+    """Angular block J_w (..., 3, 4) for (q6, q7, q8, q9), seed 000 eq. (33)."""
+    q4 = _float(jnp.asarray(q4))
+    c6, s6 = jnp.cos(q4[..., 0]), jnp.sin(q4[..., 0])
+    c7, s7 = jnp.cos(q4[..., 1]), jnp.sin(q4[..., 1])
+    c8, s8 = jnp.cos(q4[..., 2]), jnp.sin(q4[..., 2])
+    z, o = jnp.zeros_like(c6), jnp.ones_like(c6)
+    rows = [
+        [z, s6, -c6 * s7, s6 * s8 - c6 * c7 * c8],
+        [z, -c6, -s6 * s7, -c6 * s8 - c7 * c8 * s6],
+        [o, z, c7, -c8 * s7],
+    ]
+    return jnp.stack([jnp.stack(r, -1) for r in rows], -2)
+
+
+def jacobian_closed(q: ArrayLike, design: Mapping[str, ArrayLike]) -> Array:
+    """Block-diagonal J = [J_v 0; 0 J_w] (..., 6, 7), seed 000 eq. (32)-(34)."""
+    check_design(design)
+    q = _float(_check_q(q))
+    Jv = jacobian_v_closed(q[..., :3], design)
+    Jw = jacobian_w_closed(q[..., 3:])
+    lead = jnp.broadcast_shapes(Jv.shape[:-2], Jw.shape[:-2])
+    Jv = jnp.broadcast_to(Jv, lead + (3, 3))
+    Jw = jnp.broadcast_to(Jw, lead + (3, 4))
+    top = jnp.concatenate([Jv, jnp.zeros(lead + (3, 4), Jv.dtype)], -1)
+    bot = jnp.concatenate([jnp.zeros(lead + (3, 3), Jv.dtype), Jw], -1)
+    return jnp.concatenate([top, bot], -2)
+
+
+def det_jv(q3: ArrayLike, design: Mapping[str, ArrayLike]) -> Array:
+    """det J_v = a1 a3 cos q3 ((a3 cos q3 + a4) cos q2 - d3 sin q2) (derived from eq. 34)."""
+    q3 = _float(jnp.asarray(q3))
+    p = _d(design, q3.dtype)
+    c3 = jnp.cos(q3[..., 2])
+    return p["a1"] * p["a3"] * c3 * ((p["a3"] * c3 + p["a4"]) * jnp.cos(q3[..., 1]) - p["d3"] * jnp.sin(q3[..., 1]))
+
+
+def cond_fro_eq53(q3: ArrayLike, design: Mapping[str, ArrayLike]) -> Array:
+    """Raw Frobenius condition number of J_v as printed in seed 000 eq. (53), with the
+    printed ``d_4`` read as ``a_4`` (the only reading that matches ‖J‖_F‖J⁻¹‖_F)."""
+    q3 = _float(jnp.asarray(q3))
+    p = _d(design, q3.dtype)
+    a1, a3, a4, d3 = p["a1"], p["a3"], p["a4"], p["d3"]
+    cq2, sq2, cq3 = jnp.cos(q3[..., 1]), jnp.sin(q3[..., 1]), jnp.cos(q3[..., 2])
+    num = (
+        2 * a3**4 * cq3**2 + a1**2 * a3**2 + 2 * a3**2 * a4**2 + a1**2 * d3**2
+        - a1**2 * a3**2 * cq2**2 + a1**2 * a4**2 * cq2**2 - a1**2 * d3**2 * cq2**2
+        + 2 * a3**2 * d3**2 * cq3**2 + 4 * a3**3 * a4 * cq3 - a1**2 * a4 * d3 * jnp.sin(2 * q3[..., 1])
+        + 2 * a1 * a3**3 * cq3 * sq2 + 2 * a1**2 * a3**2 * cq2**2 * cq3**2 + 2 * a1 * a3**2 * a4 * sq2
+        + 2 * a1**2 * a3 * a4 * cq2**2 * cq3 + 2 * a1 * a3**2 * d3 * cq2 * cq3**2
+        - 2 * a1**2 * a3 * d3 * cq2 * cq3 * sq2
+    )  # fmt: skip
+    den = a1**2 * a3**2 * cq3**2 * (
+        a4**2 * cq2**2 - d3**2 * cq2**2 + d3**2 + a3**2 * cq2**2 * cq3**2
+        + 2 * a3 * a4 * cq2**2 * cq3 - 2 * a4 * d3 * cq2 * sq2 - 2 * a3 * d3 * cq2 * cq3 * sq2
+    )  # fmt: skip
+    fro2 = (
+        2 * a3**2 * cq3**2 + a1**2 + a3**2 + 2 * a4**2 + 2 * d3**2 + 2 * a1 * a4 * sq2
+        + 4 * a3 * a4 * cq3 + 2 * a1 * d3 * cq2 + 2 * a1 * a3 * cq3 * sq2
+    )  # fmt: skip
+    return jnp.sqrt(num / den) * jnp.sqrt(fro2)
+
+
+# ----------------------------------------------------------------------------- IK
+
+
+def _wrap(x: Array) -> Array:
+    return jnp.arctan2(jnp.sin(x), jnp.cos(x))
+
+
+def _in_limits(q: Array, lim: np.ndarray, tol: float = 1e-9) -> Array:
+    lo = jnp.asarray(lim[:, 0], q.dtype)
+    hi = jnp.asarray(lim[:, 1], q.dtype)
+    return jnp.all((q >= lo - tol) & (q <= hi + tol), axis=-1)
+
+
+def ik_position(p: ArrayLike, design: Mapping[str, ArrayLike]) -> tuple[Array, Array]:
+    """q1..q3 from the holding-point position (seed 000 eq. 9-15, corrected).
+
+    The planar part is a two-link arm: (p_x, p_y + a5) = a1 e(q1) + Rot(q1+q2)(d3, -w),
+    w = a3 cos q3 + a4. Eq. (10)-(12) are this arm's law of cosines divided by p_x (the
+    printed eq. 10 misses the brackets around its numerator); we solve it without the
+    division so p_x = 0 is no singularity. Of the two branches we keep one within the
+    joint limits, preferring the one with det J_v > 0 (the sheet the workspace is built on).
+    Returns (q (..., 3), ok (...)) with ok False where no branch is within limits.
+    """
+    p = _float(jnp.asarray(p))
+    dd = _d(design, p.dtype)
+    a1, a3, a4, d3 = dd["a1"], dd["a3"], dd["a4"], dd["d3"]
+    s3 = (dd["d6"] - dd["d2"] + dd["d5"] - p[..., 2]) / a3  # eq. (9)
+    reach3 = jnp.abs(s3) <= 1.0
+    q3 = jnp.arcsin(jnp.clip(s3, -1.0, 1.0))
+    w = a3 * jnp.cos(q3) + a4
+    ux, uy = p[..., 0], p[..., 1] + dd["a5"]
+    r2 = ux**2 + uy**2
+    K = (r2 + a1**2 - d3**2 - w**2) / (2 * a1)  # = u · e(q1)
+    ratio = K / jnp.sqrt(jnp.where(r2 > 0, r2, 1.0))
+    reach = reach3 & (jnp.abs(ratio) <= 1.0) & (r2 > 0)
+    base = jnp.arctan2(uy, ux)
+    dq = jnp.arccos(jnp.clip(ratio, -1.0, 1.0))
+    cands = []
+    for sgn in (1.0, -1.0):
+        q1 = _wrap(base + sgn * dq)
+        rx, ry = ux - a1 * jnp.cos(q1), uy - a1 * jnp.sin(q1)
+        q12 = jnp.arctan2(ry, rx) - jnp.arctan2(-w, d3)  # eq. (14)-(15) with atan2
+        q2 = _wrap(q12 - q1)
+        cands.append(jnp.stack([q1, q2, q3], -1))
+    qa, qb = cands
+    oka = reach & _in_limits(qa, POSITION_LIMITS)
+    okb = reach & _in_limits(qb, POSITION_LIMITS)
+    deta = det_jv(qa, design)
+    prefer_a = oka & (~okb | (deta > 0))
+    q = jnp.where(prefer_a[..., None], qa, qb)
+    return q, oka | okb
+
+
+def _rz_t(R: Array, t: Array) -> Array:
+    """Rz(t)ᵀ R."""
+    c, s = jnp.cos(t), jnp.sin(t)
+    r0 = c[..., None] * R[..., 0, :] + s[..., None] * R[..., 1, :]
+    r1 = -s[..., None] * R[..., 0, :] + c[..., None] * R[..., 1, :]
+    return jnp.stack([r0, r1, R[..., 2, :]], -2)
+
+
+def ik_orientation(R: ArrayLike, q6: ArrayLike | None = None) -> tuple[Array, Array]:
+    """q6..q9 from the holding-point rotation (replaces seed 000 eq. 16-25).
+
+    With the chain of SPEC §3.1, R = Rz(q6-π)·Ry(q7)·Rz(q8+π/2)·Ry(π/2-q9)·Rx(π/2): four
+    joints for three DOF. Eq. (21) cannot fix q6 (its numerator n_x o_z - n_z o_x + a_y is
+    zero for every rotation because n × o = a), so:
+    - ``q6`` given: q7, q8, q9 follow uniquely (q8 ∈ (-90°, 90°)) as Y-Z-Y Euler angles of
+      N = Rz(q6-π)ᵀ R Rx(π/2)ᵀ;
+    - ``q6=None``: among the solutions within limits, the one with the smallest |q8|, i.e.
+      farthest from q8 = ±90° where the q7 and q9 axes coincide (the seed's "A6 coincident
+      with A8" singularity). q6 = atan2(a_y, a_x) or that + π gives q8 = 0 exactly
+      (s8 = a_x s6 - a_y c6, eq. 18) and is tried first; where both put q7 out of limits,
+      a grid of q6 over its range is searched (``Q6_GRID`` points).
+    Returns (q (..., 4), ok (...)).
+    """
+    R = _float(jnp.asarray(R))
+    if q6 is None:
+        return _ik_orientation_auto(R)
+    q6 = jnp.broadcast_to(jnp.asarray(q6, R.dtype), R.shape[:-2])
+    M = _rz_t(R, q6 - jnp.pi)
+    # N = M Rx(π/2)ᵀ: columns (m0, m1, m2) → (m0, -m2, m1)
+    N = jnp.stack([M[..., :, 0], -M[..., :, 2], M[..., :, 1]], -1)
+    sb = jnp.sqrt(N[..., 1, 0] ** 2 + N[..., 1, 2] ** 2)
+    beta = jnp.arctan2(sb, N[..., 1, 1])
+    q7 = jnp.arctan2(N[..., 2, 1], -N[..., 0, 1])
+    gamma = jnp.arctan2(N[..., 1, 2], N[..., 1, 0])
+    q8 = beta - jnp.pi / 2
+    q9 = _wrap(jnp.pi / 2 - gamma)
+    q = jnp.stack([q6, q7, q8, q9], -1)
+    return q, _in_limits(q, JOINT_LIMITS[3:])
+
+
+Q6_GRID = 73
+
+
+def _ik_orientation_auto(R: Array) -> tuple[Array, Array]:
+    base = jnp.arctan2(R[..., 1, 2], R[..., 0, 2])
+    grid = jnp.linspace(JOINT_LIMITS[3, 0], JOINT_LIMITS[3, 1], Q6_GRID, dtype=R.dtype)
+    grid = jnp.broadcast_to(grid, base.shape + (Q6_GRID,))
+    cands = jnp.concatenate([base[..., None], _wrap(base + jnp.pi)[..., None], grid], -1)
+    qs, oks = jax.vmap(lambda c: ik_orientation(R, c), in_axes=-1, out_axes=(-2, -1))(cands)
+    score = jnp.where(oks, jnp.abs(qs[..., 2]), jnp.inf)
+    best = jnp.argmin(score, axis=-1)
+    q = jnp.take_along_axis(qs, best[..., None, None], axis=-2)[..., 0, :]
+    ok = jnp.take_along_axis(oks, best[..., None], axis=-1)[..., 0]
+    return q, ok
+
+
+def ik(
+    T: ArrayLike,
+    design: Mapping[str, ArrayLike],
+    q6: ArrayLike | None = None,
+    full_output: bool = False,
+) -> Array | tuple[Array, Array]:
+    """Closed-form IK (..., 4, 4) → q (..., 7) within the joint limits.
+
+    Position and orientation decouple (seed 000 §III.B): ``ik_position`` and
+    ``ik_orientation`` say how each is solved and which typos of the seed they avoid.
+    Poses with no solution within limits give NaN rows; ``full_output=True`` also returns
+    the boolean mask of solved poses.
+    """
+    check_design(design)
+    T = _float(jnp.asarray(T))
+    if T.ndim < 2 or T.shape[-2:] != (4, 4):
+        raise ValueError(f"T must have shape (..., 4, 4), got {tuple(T.shape)}")
+    qp, okp = ik_position(T[..., :3, 3], design)
+    qo, oko = ik_orientation(T[..., :3, :3], q6)
+    lead = jnp.broadcast_shapes(qp.shape[:-1], qo.shape[:-1])
+    q = jnp.concatenate([jnp.broadcast_to(qp, lead + (3,)), jnp.broadcast_to(qo, lead + (4,))], -1)
+    ok = okp & oko
+    q = jnp.where(ok[..., None], q, jnp.nan)
+    return (q, ok) if full_output else q
+
+
+def sample_joints(key: jax.Array, n: int, dtype=jnp.float64) -> Array:
+    """n configurations (n, 7) uniform in the joint limits (for tests and demos)."""
+    lo = jnp.asarray(JOINT_LIMITS[:, 0], dtype)
+    hi = jnp.asarray(JOINT_LIMITS[:, 1], dtype)
+    return jax.random.uniform(key, (n, 7), dtype, lo, hi)
+
