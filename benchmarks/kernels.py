@@ -13,8 +13,8 @@ import argparse
 import jax
 import jax.numpy as jnp
 import numpy as np
-
 from _timing import best_of, compile_time, header
+
 from designopt.kinematics import inv_cond_fro3
 from designopt.mechanisms import master9 as m
 
@@ -42,7 +42,9 @@ def numpy_reference(q: np.ndarray, D: dict[str, np.ndarray]) -> tuple[np.ndarray
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--designs", type=int, default=50)
     ap.add_argument("--configs", type=int, default=20_000)
     args = ap.parse_args()
@@ -57,7 +59,9 @@ def main() -> None:
     total = M * N
 
     t_np = best_of(lambda: numpy_reference(qn, Dn), 3)
-    print(f"numpy closed form (float64):          {total / t_np:12.3e} configs/s  ({t_np * 1e3:8.1f} ms)")
+    print(
+        f"numpy closed form (float64):          {total / t_np:12.3e} configs/s  ({t_np * 1e3:8.1f} ms)"
+    )
 
     for dtype in (jnp.float32, jnp.float64):
         q = jnp.asarray(qn, dtype)

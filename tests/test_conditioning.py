@@ -16,7 +16,9 @@ def test_random_matrices_match_numpy():
         A = rng.normal(size=(200, n, n))
         np.testing.assert_allclose(cond_2(A), np.linalg.cond(A, 2), rtol=1e-9)
         np.testing.assert_allclose(cond_fro(A), np.linalg.cond(A, "fro"), rtol=1e-9)
-        np.testing.assert_allclose(cond_fro(A, normalized=True), np.linalg.cond(A, "fro") / n, rtol=1e-9)
+        np.testing.assert_allclose(
+            cond_fro(A, normalized=True), np.linalg.cond(A, "fro") / n, rtol=1e-9
+        )
 
 
 def test_near_singular_matrices_match_numpy():
@@ -61,7 +63,9 @@ def test_identity_is_isotropic():
         np.testing.assert_allclose(inv_cond_fro(I, normalized=True), 1.0)
 
 
-mats = arrays(np.float64, (3, 3), elements=st.floats(-10, 10, allow_nan=False, allow_subnormal=False))
+mats = arrays(
+    np.float64, (3, 3), elements=st.floats(-10, 10, allow_nan=False, allow_subnormal=False)
+)
 
 
 @settings(max_examples=60, deadline=None)

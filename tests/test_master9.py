@@ -40,7 +40,14 @@ def test_printed_R23_is_a_typo():
     """eq. (3) prints R23 = -c6 s8 - c7 c9; the chain says -c6 s8 - c7 c8 s6."""
     q = np.array([0.1, 0.2, 0.3, 0.7, 0.4, -0.3, 1.1])
     T = np.asarray(m.fk(q, m.default_design()))
-    c6, s6, c7, c8, s8, c9 = np.cos(0.7), np.sin(0.7), np.cos(0.4), np.cos(-0.3), np.sin(-0.3), np.cos(1.1)
+    c6, s6, c7, c8, s8, c9 = (
+        np.cos(0.7),
+        np.sin(0.7),
+        np.cos(0.4),
+        np.cos(-0.3),
+        np.sin(-0.3),
+        np.cos(1.1),
+    )
     assert abs(T[1, 2] - (-c6 * s8 - c7 * c9)) > 0.1
     assert abs(T[1, 2] - (-c6 * s8 - c7 * c8 * s6)) < 1e-12
 
@@ -65,7 +72,9 @@ def test_jacobian_angular_block_matches_finite_differences_of_R():
     for j in range(7):
         e = np.zeros(7)
         e[j] = h
-        dR = (np.asarray(m.fk(q + e, d))[:, :3, :3] - np.asarray(m.fk(q - e, d))[:, :3, :3]) / (2 * h)
+        dR = (np.asarray(m.fk(q + e, d))[:, :3, :3] - np.asarray(m.fk(q - e, d))[:, :3, :3]) / (
+            2 * h
+        )
         W = dR @ np.swapaxes(np.asarray(m.fk(q, d))[:, :3, :3], 1, 2)
         w = np.stack([W[:, 2, 1], W[:, 0, 2], W[:, 1, 0]], -1)
         np.testing.assert_allclose(J[:, 3:, j], w, atol=1e-7)
@@ -84,8 +93,12 @@ def test_jacobian_linear_block_independent_of_a5_d2_d5_d6():
     q = m.sample_joints(KEY, 200)
     d = m.default_design()
     d2 = {**d, "a5": 7.0, "d2": 99.0, "d5": -13.0, "d6": 250.0}
-    np.testing.assert_allclose(m.jacobian(q, d)[:, :3, :3], m.jacobian(q, d2)[:, :3, :3], atol=1e-10)
-    np.testing.assert_array_equal(m.jacobian_v_closed(q[:, :3], d), m.jacobian_v_closed(q[:, :3], d2))
+    np.testing.assert_allclose(
+        m.jacobian(q, d)[:, :3, :3], m.jacobian(q, d2)[:, :3, :3], atol=1e-10
+    )
+    np.testing.assert_array_equal(
+        m.jacobian_v_closed(q[:, :3], d), m.jacobian_v_closed(q[:, :3], d2)
+    )
 
 
 def test_eq53_frobenius_condition_number_with_a4_for_d4():
@@ -99,7 +112,9 @@ def test_eq53_frobenius_condition_number_with_a4_for_d4():
 def test_det_jv_closed_form():
     q = m.sample_joints(KEY, 300)
     d = m.default_design()
-    np.testing.assert_allclose(m.det_jv(q[:, :3], d), det3(m.jacobian_v_closed(q[:, :3], d)), rtol=1e-9)
+    np.testing.assert_allclose(
+        m.det_jv(q[:, :3], d), det3(m.jacobian_v_closed(q[:, :3], d)), rtol=1e-9
+    )
 
 
 def test_ik_joint_round_trip_with_q6_given():

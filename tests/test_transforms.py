@@ -1,10 +1,20 @@
 """DH and elementary transforms against an independent numpy implementation."""
 
-import numpy as np
 import jax.numpy as jnp
+import numpy as np
 import pytest
 
-from designopt.kinematics import DHChain, ET, ETChain, dh_modified, dh_standard, rotx, roty, rotz, trans
+from designopt.kinematics import (
+    ET,
+    DHChain,
+    ETChain,
+    dh_modified,
+    dh_standard,
+    rotx,
+    roty,
+    rotz,
+    trans,
+)
 from designopt.kinematics.chain import DHParams
 
 
@@ -50,23 +60,35 @@ def test_dh_link_transforms_are_products_of_elementary_ones():
     for _ in range(20):
         th, d, a, al = rng.uniform(-3, 3, 4) * [1, 100, 100, 1]
         np.testing.assert_allclose(
-            dh_standard(th, d, a, al), np_rz(th) @ np_t(0, 0, d) @ np_t(a, 0, 0) @ np_rx(al), atol=1e-12
+            dh_standard(th, d, a, al),
+            np_rz(th) @ np_t(0, 0, d) @ np_t(a, 0, 0) @ np_rx(al),
+            atol=1e-12,
         )
         np.testing.assert_allclose(
-            dh_modified(al, a, th, d), np_rx(al) @ np_t(a, 0, 0) @ np_rz(th) @ np_t(0, 0, d), atol=1e-12
+            dh_modified(al, a, th, d),
+            np_rx(al) @ np_t(a, 0, 0) @ np_rz(th) @ np_t(0, 0, d),
+            atol=1e-12,
         )
 
 
 def test_standard_chain_fk_matches_numpy_puma():
     chain = DHChain(("R",) * 6, "standard")
-    p = DHParams(jnp.asarray(PUMA["alpha"]), jnp.asarray(PUMA["a"]), jnp.asarray(PUMA["d"]), jnp.zeros(6))
+    p = DHParams(
+        jnp.asarray(PUMA["alpha"]), jnp.asarray(PUMA["a"]), jnp.asarray(PUMA["d"]), jnp.zeros(6)
+    )
     rng = np.random.default_rng(2)
     qs = rng.uniform(-np.pi, np.pi, (50, 6))
     T = chain.fk(p, qs)
     for q, Ti in zip(qs, np.asarray(T), strict=True):
         ref = np.eye(4)
         for i in range(6):
-            ref = ref @ np_rz(q[i]) @ np_t(0, 0, PUMA["d"][i]) @ np_t(PUMA["a"][i], 0, 0) @ np_rx(PUMA["alpha"][i])
+            ref = (
+                ref
+                @ np_rz(q[i])
+                @ np_t(0, 0, PUMA["d"][i])
+                @ np_t(PUMA["a"][i], 0, 0)
+                @ np_rx(PUMA["alpha"][i])
+            )
         np.testing.assert_allclose(Ti, ref, atol=1e-9)
     # the Robotics Toolbox's p560.fkine(qz) translation: (0.4521, -0.1500, 0.4318) m
     np.testing.assert_allclose(chain.fk(p, jnp.zeros(6))[:3, 3], [452.1, -150.05, 431.8], atol=1e-9)
@@ -79,7 +101,10 @@ def test_modified_and_standard_tables_describe_the_same_arm():
     al, a, d = PUMA["alpha"], PUMA["a"], PUMA["d"]
     ps = DHParams(jnp.asarray(al), jnp.asarray(a), jnp.asarray(d), jnp.zeros(6))
     pm = DHParams(
-        jnp.asarray(np.r_[0.0, al[:-1]]), jnp.asarray(np.r_[0.0, a[:-1]]), jnp.asarray(d), jnp.zeros(6)
+        jnp.asarray(np.r_[0.0, al[:-1]]),
+        jnp.asarray(np.r_[0.0, a[:-1]]),
+        jnp.asarray(d),
+        jnp.zeros(6),
     )
     rng = np.random.default_rng(3)
     q = rng.uniform(-2, 2, (100, 6))
@@ -94,7 +119,14 @@ def test_prismatic_joint_adds_to_d():
 
 
 def test_et_chain_matches_numpy_and_uses_params():
-    chain = ETChain((ET("Rx", param="alpha", scale=-1.0), ET("Rz", joint=0), ET("Tz", param="L"), ET("Ty", joint=1)))
+    chain = ETChain(
+        (
+            ET("Rx", param="alpha", scale=-1.0),
+            ET("Rz", joint=0),
+            ET("Tz", param="L"),
+            ET("Ty", joint=1),
+        )
+    )
     q = np.array([0.3, 12.0])
     T = chain.fk({"alpha": 0.2, "L": 100.0}, q)
     ref = np_rx(-0.2) @ np_rz(0.3) @ np_t(0, 0, 100) @ np_t(0, 12, 0)

@@ -1,6 +1,6 @@
 """Kernel layer shared by every study (SPEC §2): transforms, chains, Jacobians, conditioning."""
 
-from designopt.kinematics.chain import DHChain, ETChain, ET
+from designopt.kinematics.chain import ET, DHChain, ETChain
 from designopt.kinematics.conditioning import (
     cond_2,
     cond_fro,

@@ -54,7 +54,9 @@ class DHChain:
 
     def __post_init__(self) -> None:
         if self.convention not in ("standard", "modified"):
-            raise ValueError(f"DH convention must be 'standard' or 'modified', got {self.convention!r}")
+            raise ValueError(
+                f"DH convention must be 'standard' or 'modified', got {self.convention!r}"
+            )
         bad = [t for t in self.joint_types if t not in ("R", "P")]
         if bad:
             raise ValueError(f"joint types must be 'R' or 'P', got {bad}")

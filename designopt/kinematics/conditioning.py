@@ -108,9 +108,7 @@ def cond_fro(J: ArrayLike, normalized: bool = False) -> Array:
     return jnp.where(r > 0, 1.0 / jnp.where(r > 0, r, 1.0), jnp.inf)
 
 
-def inv_cond(
-    J: ArrayLike, norm: Literal["fro", "2"] = "fro", normalized: bool = False
-) -> Array:
+def inv_cond(J: ArrayLike, norm: Literal["fro", "2"] = "fro", normalized: bool = False) -> Array:
     """Dispatch: 1/k in the chosen norm. ``normalized`` only affects the Frobenius norm."""
     if norm == "fro":
         return inv_cond_fro(J, normalized)

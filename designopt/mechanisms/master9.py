@@ -60,7 +60,9 @@ def default_design() -> dict[str, float]:
 def check_design(design: Mapping[str, ArrayLike]) -> None:
     """Raise ValueError naming any missing or unknown key (called at the Python edge)."""
     if not isinstance(design, Mapping):
-        raise ValueError(f"design must be a dict with keys {DESIGN_KEYS}, got {type(design).__name__}")
+        raise ValueError(
+            f"design must be a dict with keys {DESIGN_KEYS}, got {type(design).__name__}"
+        )
     missing = [k for k in DESIGN_KEYS if k not in design]
     if missing:
         raise ValueError(f"design is missing key(s) {missing}; needs {list(DESIGN_KEYS)}")
@@ -87,7 +89,9 @@ def _float(q: Array) -> Array:
 def dh_params(design: Mapping[str, ArrayLike], dtype=jnp.float64) -> DHParams:
     """The DH table of SPEC §3.1 as arrays (shape design_batch + (9,))."""
     p = _d(design, dtype)
-    z = jnp.zeros_like(p["a1"] + p["a3"] + p["d3"] + p["a4"] + p["a5"] + p["d2"] + p["d5"] + p["d6"])
+    z = jnp.zeros_like(
+        p["a1"] + p["a3"] + p["d3"] + p["a4"] + p["a5"] + p["d2"] + p["d5"] + p["d6"]
+    )
     hp = jnp.pi / 2
 
     def row(*xs):
@@ -97,7 +101,9 @@ def dh_params(design: Mapping[str, ArrayLike], dtype=jnp.float64) -> DHParams:
     a = row(0.0, p["a1"], 0.0, p["a3"], p["a4"], p["a5"], 0.0, 0.0, 0.0)
     d = row(0.0, -p["d2"], p["d3"], 0.0, p["d5"], p["d6"], 0.0, 0.0, 0.0)
     theta = row(0.0, -hp, 0.0, 0.0, 0.0, -hp, 0.0, hp, -hp)
-    return DHParams(alpha=alpha.astype(dtype), a=a.astype(dtype), d=d.astype(dtype), theta=theta.astype(dtype))
+    return DHParams(
+        alpha=alpha.astype(dtype), a=a.astype(dtype), d=d.astype(dtype), theta=theta.astype(dtype)
+    )
 
 
 def full_joints(q: ArrayLike) -> Array:
@@ -231,7 +237,12 @@ def det_jv(q3: ArrayLike, design: Mapping[str, ArrayLike]) -> Array:
     q3 = _float(jnp.asarray(q3))
     p = _d(design, q3.dtype)
     c3 = jnp.cos(q3[..., 2])
-    return p["a1"] * p["a3"] * c3 * ((p["a3"] * c3 + p["a4"]) * jnp.cos(q3[..., 1]) - p["d3"] * jnp.sin(q3[..., 1]))
+    return (
+        p["a1"]
+        * p["a3"]
+        * c3
+        * ((p["a3"] * c3 + p["a4"]) * jnp.cos(q3[..., 1]) - p["d3"] * jnp.sin(q3[..., 1]))
+    )
 
 
 def cond_fro_eq53(q3: ArrayLike, design: Mapping[str, ArrayLike]) -> Array:
@@ -401,3 +412,37 @@ def sample_joints(key: jax.Array, n: int, dtype=jnp.float64) -> Array:
     hi = jnp.asarray(JOINT_LIMITS[:, 1], dtype)
     return jax.random.uniform(key, (n, 7), dtype, lo, hi)
 
+
+# ---------------------------------------------------------------- indices and problem
+
+
+def indices(
+    design: Mapping[str, float] | None = None,
+    n_samples: int = 200_000,
+    key: jax.Array | None = None,
+    **settings,
+) -> dict[str, float]:
+    """Global indices of one design (seed 000 eq. 35-42) with standard errors.
+
+    Returns gci, gcsei, f_k, gpi, f_p, volume (∫|det J_v| dq, mm³), L, f_l and the
+    ``*_se`` standard errors; ``settings`` are fields of
+    ``designopt.indices.master9.IndexSettings`` (measure, sampler, backlash_deg, norm, …).
+    """
+    from designopt.indices.master9 import IndexSettings, swarm_indices
+
+    design = {**default_design(), **(design or {})}
+    check_design(design)
+    s = IndexSettings(n_samples=n_samples, **settings)
+    key = jax.random.key(0) if key is None else key
+    batch = {k: jnp.asarray([v], jnp.float64) for k, v in design.items()}
+    out = jax.jit(lambda d, k: swarm_indices(d, k, s))(batch, key)
+    res = {k: float(v[0]) for k, v in out.items()}
+    res["n_samples"] = s.n_used
+    return res
+
+
+def problem(config: Mapping | None = None):
+    """The study-A problem over (a1, a3, d3); see ``designopt.problems.master9.problem``."""
+    from designopt.problems.master9 import problem as _problem
+
+    return _problem(config)

@@ -1,0 +1,1 @@
+"""Global performance indices of the case studies (Monte-Carlo workspace integrals)."""

@@ -1,0 +1,159 @@
+"""Study A indices (seed 000 eq. 35-43) against independent numpy estimates and identities."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from designopt import montecarlo as mc
+from designopt.indices.master9 import IndexSettings, _features, inv_cond_fro_jv, jv_entries
+from designopt.indices.volume import hull_volume, voxel_volume
+from designopt.mechanisms import master9 as m
+
+PUBLISHED = [(m.PAPER_INITIAL, 696.960), (m.PAPER_FINAL, 691.314)]
+
+
+def numpy_indices(design, n, seed, backlash_deg=0.1):
+    """Independent estimate: numpy RNG, np.linalg.cond, FK of eq. (4) at the 8 corners."""
+    d = {**m.default_design(), **design}
+    rng = np.random.default_rng(seed)
+    lim = m.POSITION_LIMITS
+    q = rng.uniform(lim[:, 0], lim[:, 1], (n, 3))
+
+    def P(q):
+        q1, q2, q3 = q[..., 0], q[..., 1], q[..., 2]
+        w = d["a3"] * np.cos(q3) + d["a4"]
+        return np.stack(
+            [
+                d["a1"] * np.cos(q1) + d["d3"] * np.cos(q1 + q2) + w * np.sin(q1 + q2),
+                d["a1"] * np.sin(q1) + d["d3"] * np.sin(q1 + q2) - w * np.cos(q1 + q2),
+                -d["a3"] * np.sin(q3),
+            ],
+            -1,
+        )
+
+    h = 1e-6
+    J = np.stack([(P(q + h * e) - P(q - h * e)) / (2 * h) for e in np.eye(3)], -1)
+    inv_k = 1.0 / np.linalg.cond(J, "fro")
+    w = np.abs(np.linalg.det(J))
+    dl = np.deg2rad(backlash_deg)
+    corners = np.array(np.meshgrid([-dl, dl], [-dl, dl], [-dl, dl])).reshape(3, -1).T
+    e = np.max([np.linalg.norm(P(q + c) - P(q), axis=-1) for c in corners], axis=0)
+
+    def wstats(g):
+        mu = np.sum(w * g) / np.sum(w)
+        sd = np.sqrt(np.sum(w * (g - mu) ** 2) / np.sum(w))
+        se = np.sqrt(np.sum((w * (g - mu)) ** 2)) / np.sum(w)
+        return mu, sd, se
+
+    gci, gcsei, gci_se = wstats(inv_k)
+    gpi, _, gpi_se = wstats(e)
+    vol = np.prod(lim[:, 1] - lim[:, 0]) * w.mean()
+    return dict(gci=gci, gcsei=gcsei, gci_se=gci_se, gpi=gpi, gpi_se=gpi_se, volume=vol)
+
+
+@pytest.mark.parametrize("design,L", PUBLISHED)
+def test_indices_match_independent_numpy_within_4_se(design, L):
+    ind = m.indices(design, n_samples=200_000, key=jax.random.key(1))
+    ref = numpy_indices(design, 200_000, seed=7)
+    for k in ("gci", "gcsei", "gpi"):
+        se = np.hypot(ind[f"{k}_se"], ref.get(f"{k}_se", ind[f"{k}_se"]))
+        assert abs(ind[k] - ref[k]) < 4 * se, (k, ind[k], ref[k], se)
+    assert ind["L"] == pytest.approx(L, abs=1e-9)  # 696.960 and 691.314 mm exactly
+    assert ind["f_k"] == pytest.approx(ind["gcsei"] - ind["gci"], abs=1e-12)
+    assert ind["f_l"] == pytest.approx(L / ind["volume"] ** (1 / 3), rel=1e-12)
+
+
+@pytest.mark.parametrize("design,_", PUBLISHED)
+def test_volume_estimators_agree(design, _):
+    ind = m.indices(design, n_samples=400_000, key=jax.random.key(2))
+    vox = voxel_volume(design, h=4.0)
+    assert abs(ind["volume"] - vox) / vox < 0.02
+    assert hull_volume(design, n=100_000) >= vox
+
+
+def test_standard_errors_shrink_like_one_over_sqrt_n_and_fixed_key_is_reproducible():
+    a = m.indices(m.PAPER_FINAL, n_samples=20_000, key=jax.random.key(3))
+    b = m.indices(m.PAPER_FINAL, n_samples=320_000, key=jax.random.key(3))
+    for k in ("gci", "gcsei", "gpi", "volume"):
+        ratio = b[f"{k}_se"] / a[f"{k}_se"]
+        assert 0.25 * 0.85 < ratio < 0.25 * 1.15, (k, ratio)
+    assert m.indices(m.PAPER_FINAL, n_samples=20_000, key=jax.random.key(3)) == a
+
+
+def test_unweighted_mean_and_std_se_match_textbook_formulas():
+    g = np.random.default_rng(0).normal(2.0, 0.5, 10_000)
+    ps = mc.power_sums(jnp.ones_like(g), jnp.asarray(g))
+    est = mc.mean(ps)
+    assert float(est.value) == pytest.approx(g.mean(), rel=1e-12)
+    assert float(est.se) == pytest.approx(g.std(ddof=1) / np.sqrt(g.size), rel=1e-9)
+    sd = mc.std(ps)
+    assert float(sd.value) == pytest.approx(g.std(), rel=1e-12)
+    # for a normal sample SE(sd) ≈ sd / sqrt(2 N)
+    assert float(sd.se) == pytest.approx(g.std() / np.sqrt(2 * g.size), rel=0.05)
+
+
+def test_halton_sampler_is_low_discrepancy_and_in_unit_cube():
+    u = np.asarray(mc.unit_samples(jax.random.key(0), 0, 4096, 3, "halton"))
+    assert u.min() >= 0 and u.max() < 1
+    # each 1/8-slab of each axis holds 1/8 of the points to within 1 %
+    for j in range(3):
+        counts = np.histogram(u[:, j], bins=8, range=(0, 1))[0]
+        assert np.all(np.abs(counts - 512) <= 6)
+    ind = m.indices(m.PAPER_FINAL, n_samples=65_536, key=jax.random.key(4), sampler="halton")
+    ref = m.indices(m.PAPER_FINAL, n_samples=400_000, key=jax.random.key(5))
+    assert abs(ind["gci"] - ref["gci"]) < 4 * np.hypot(ind["gci_se"], ref["gci_se"])
+
+
+def test_swarm_evaluation_equals_per_design_rows():
+    P = m.problem({"indices": {"n_samples": 8192}, "n_norm": 16})
+    X = jnp.array([[285.997, 280.933, 130.03], [324.238, 317.076, 50.0], [300.0, 260.0, 90.0]])
+    f, aux = P.evaluate(X)
+    for i in range(3):
+        fi, ai = P.evaluate(X[i : i + 1])
+        np.testing.assert_allclose(fi, f[i : i + 1], rtol=1e-12)
+        np.testing.assert_allclose(ai["gci"], aux["gci"][i : i + 1], rtol=1e-12)
+
+
+def test_grad_of_composite_matches_central_differences():
+    P = m.problem({"indices": {"n_samples": 8192}, "n_norm": 16})
+    fn = lambda x: P.fn(P.params, x[None], jax.random.key(0))[0][0]  # noqa: E731
+    x0 = jnp.array([300.0, 290.0, 100.0])
+    g = np.asarray(jax.grad(fn)(x0))
+    h = 1e-3
+    fd = np.array([(fn(x0 + h * e) - fn(x0 - h * e)) / (2 * h) for e in np.eye(3)])
+    np.testing.assert_allclose(g, fd, rtol=1e-4)
+
+
+def test_singular_configuration_contributes_zero_not_nan():
+    x = {k: jnp.array([[v]]) for k, v in m.default_design().items()}
+    q = jnp.array([[0.1, 0.2, np.pi / 2], [0.0, 0.0, 0.0]])  # q3 = 90°: numerically singular
+    _, r = inv_cond_fro_jv(jv_entries(x, _features(q)))
+    assert float(r[0, 0]) < 1e-15 and float(r[0, 1]) > 0.05
+    x0 = {**x, "a3": jnp.array([[0.0]])}  # a3 = 0: J33 = 0 exactly, singular everywhere
+    det, r0 = inv_cond_fro_jv(jv_entries(x0, _features(q)))
+    assert np.all(np.asarray(r0) == 0.0) and np.all(np.asarray(det) == 0.0)
+    ind = m.indices({**m.PAPER_FINAL, "a3": 0.0}, n_samples=4096)
+    assert not any(np.isnan(v) for v in ind.values())
+    assert ind["gci"] == 0.0 and ind["volume"] == 0.0 and ind["f_l"] == np.inf
+    g = jax.grad(lambda a: inv_cond_fro_jv(jv_entries({**x, "a3": a}, _features(q)))[1].sum())(
+        jnp.array([[0.0]])
+    )
+    assert np.isfinite(np.asarray(g)).all()
+
+
+def test_kernel_matches_generic_closed_form_condition_number():
+    from designopt.kinematics import inv_cond_fro3
+
+    q = m.sample_joints(jax.random.key(6), 1000)[:, :3]
+    d = m.default_design()
+    x = {k: jnp.asarray([[d[k]]]) for k in d}
+    _, r = inv_cond_fro_jv(jv_entries(x, _features(q)))
+    np.testing.assert_allclose(r[0], inv_cond_fro3(m.jacobian_v_closed(q, d)), rtol=1e-12)
+
+
+def test_settings_reject_bad_values():
+    with pytest.raises(ValueError, match="n_samples"):
+        IndexSettings(n_samples=-5)
+    with pytest.raises(ValueError, match="measure"):
+        IndexSettings(measure="polar")
