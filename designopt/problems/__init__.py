@@ -1,5 +1,6 @@
 """Optimisation problems: a design box and a swarm-evaluating objective."""
 
 from designopt.problems.base import Problem
+from designopt.problems.benchmarks import FUNCTIONS, benchmark
 
-__all__ = ["Problem"]
+__all__ = ["FUNCTIONS", "Problem", "benchmark"]

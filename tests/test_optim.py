@@ -1,0 +1,140 @@
+"""PSO family and test functions: values, convergence, determinism, PTPSO identities."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from designopt import optim
+from designopt.problems import benchmark
+from designopt.problems import benchmarks as bf
+
+
+def test_functions_at_optimum_and_hand_computed_points():
+    for name, (f, _, xo) in bf.FUNCTIONS.items():
+        x = jnp.full((1, 7), xo)
+        assert abs(float(f(x)[0])) < 1e-9, name
+    one = jnp.ones((1, 2))
+    assert float(bf.sphere(one)[0]) == pytest.approx(2.0)
+    assert float(bf.rastrigin(one)[0]) == pytest.approx(2.0)  # 20 + 2·(1 − 10)
+    assert float(bf.griewank(one)[0]) == pytest.approx(
+        1 + 2 / 4000 - np.cos(1) * np.cos(1 / np.sqrt(2))
+    )
+    e = np.e
+    assert float(bf.ackley(one)[0]) == pytest.approx(-20 * np.exp(-0.2) - e + 20 + e)
+    assert float(bf.rosenbrock(jnp.zeros((1, 2)))[0]) == pytest.approx(1.0)
+
+
+def test_shifted_optimum_moves_with_the_shift():
+    for name in bf.FUNCTIONS:
+        P = benchmark(name, dim=5, shift=3)
+        xo = P.info["optimum"]
+        assert np.all(xo >= P.lower) and np.all(xo <= P.upper)
+        f0, _ = P.evaluate(jnp.asarray(xo)[None])
+        assert abs(float(f0[0])) < 1e-9
+        assert np.abs(P.info["shift"]).max() > 0
+        fc, _ = P.evaluate(jnp.asarray(np.full(5, bf.FUNCTIONS[name][2]))[None])
+        assert float(fc[0]) > 1e-3  # the unshifted optimum is no longer optimal
+
+
+def test_constriction_factor():
+    assert optim.constriction(4.1) == pytest.approx(0.72984, abs=5e-6)
+
+
+def test_penalty_coefficient_eq48():
+    a, rc = jnp.asarray(10.0), jnp.asarray(0.9)
+    assert float(optim.penalty_coefficient(jnp.asarray(0.0), a, rc)) == pytest.approx(
+        0.0, abs=1e-15
+    )
+    assert float(optim.penalty_coefficient(rc, a, rc)) == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("name", ["p1", "p2", "p4", "p5", "p6", "p7"])
+def test_variants_solve_sphere_10(name):
+    r = optim.run(name, benchmark("sphere", 10), jax.random.key(0), 50, 1000, 10)
+    assert r.best_f.mean() < 1e-6
+
+
+def test_ptpso_on_sphere_reaches_its_penalty_floor():
+    """Eq. (47) counts the best particle itself, so ρ ≥ 1/M and p_c > 0: a permanent small
+    one-sided kick sets a floor (docs/optimizers.md). Disabled penalty = p2 reaches 1e-40."""
+    r = optim.run("ptpso", benchmark("sphere", 10), jax.random.key(0), 50, 1000, 10)
+    assert r.best_f.mean() < 1e-4
+    assert np.all(np.diff(r.history, axis=1) <= 0)
+
+
+def test_ptpso_without_penalty_is_p2_exactly():
+    P = benchmark("rastrigin", 10)
+    a = optim.run("p3", P, jax.random.key(3), 20, 200, 4, penalty=0.0)
+    b = optim.run("p2", P, jax.random.key(3), 20, 200, 4)
+    np.testing.assert_array_equal(a.history, b.history)
+
+
+def test_single_run_equals_same_run_inside_batch():
+    P = benchmark("ackley", 10)
+    key = jax.random.key(11)
+    batch = optim.run("p5", P, key, 30, 100, 5)
+    keys = jax.random.split(key, 5)
+    # run 3 alone, with the same key the batch gave it
+    alone = optim.runner._init(keys[3:4], optim.make_params("p5"), P.params,
+                               jnp.asarray(P.lower), jnp.asarray(P.upper), fn=P.fn, n_particles=30)  # fmt: skip
+    st, (f, _) = optim.runner._advance(
+        alone, optim.make_params("p5"), P.params, jnp.asarray(P.lower), jnp.asarray(P.upper),
+        fn=P.fn, n_particles=30, rule="linear", bounds="clip", n_iters=100, length=100,
+    )  # fmt: skip
+    np.testing.assert_array_equal(np.asarray(f)[0], batch.history[3, 1:])
+    chunked = optim.run("p5", P, key, 30, 100, 5, chunk_iters=7)
+    np.testing.assert_array_equal(chunked.history, batch.history)
+
+
+def test_convergence_iteration_definition():
+    h = np.array([[5.0, 4.0, 4.0, 3.0, 3.0 - 5e-7, 3.0 - 6e-7]])
+    assert optim.convergence_iteration(h)[0] == 3
+    assert optim.convergence_iteration(np.array([[1.0, 1.0, 1.0]]))[0] == 0
+
+
+def test_p2_matches_numpy_reference_by_mann_whitney():
+    """p2 on Rastrigin D=10 over 50 runs vs a straightforward numpy implementation."""
+    from scipy.stats import mannwhitneyu
+
+    D, M, T, R = 10, 30, 300, 50
+    chi = optim.constriction(4.1)
+    rng = np.random.default_rng(0)
+    lo, hi = -5.12, 5.12
+    vmax = 0.2 * (hi - lo)
+
+    def f(x):
+        return 10 * D + np.sum(x * x - 10 * np.cos(2 * np.pi * x), -1)
+
+    ref = []
+    for _ in range(R):
+        x = rng.uniform(lo, hi, (M, D))
+        v = rng.uniform(-vmax, vmax, (M, D))
+        fx = f(x)
+        pb, pf = x.copy(), fx.copy()
+        g = pb[np.argmin(pf)].copy()
+        for _ in range(T):
+            v = chi * (
+                v + 2.05 * rng.random((M, D)) * (pb - x) + 2.05 * rng.random((M, D)) * (g - x)
+            )
+            v = np.clip(v, -vmax, vmax)
+            x = x + v
+            out = (x < lo) | (x > hi)
+            x = np.clip(x, lo, hi)
+            v[out] = 0.0
+            fx = f(x)
+            b = fx < pf
+            pb[b], pf[b] = x[b], fx[b]
+            g = pb[np.argmin(pf)].copy()
+        ref.append(pf.min())
+    r = optim.run("p2", benchmark("rastrigin", D), jax.random.key(0), M, T, R)
+    assert mannwhitneyu(r.best_f, np.array(ref)).pvalue > 0.01
+
+
+def test_bad_names_and_settings():
+    with pytest.raises(ValueError, match="unknown optimizer"):
+        optim.resolve("p9")
+    with pytest.raises(ValueError, match="unknown optimizer setting"):
+        optim.make_params("p1", inertia=3)
+    with pytest.raises(ValueError, match="unknown benchmark"):
+        benchmark("styblinski")
