@@ -1,0 +1,69 @@
+"""designopt run/show end to end, and bad input: one line, exit 2, nothing written."""
+
+import h5py
+import numpy as np
+import pytest
+
+from designopt.cli import main
+
+TINY = """
+study:
+  indices: {n_samples: 2048}
+  n_norm: 8
+optimizer: {name: ptpso, n_particles: 8, n_iters: 4, n_runs: 2}
+precision: float64
+seed: 1
+output: OUT
+"""
+
+
+def write(tmp_path, text, name="c.yaml"):
+    p = tmp_path / name
+    p.write_text(text.replace("OUT", str(tmp_path / "a.h5")))
+    return p
+
+
+def test_run_writes_archive_and_same_seed_gives_same_numbers(tmp_path, capsys):
+    cfg = write(tmp_path, TINY)
+    assert main(["run", str(cfg), "--quiet"]) == 0
+    with h5py.File(tmp_path / "a.h5") as h:
+        assert h.attrs["complete"] and "ptpso" in h.attrs["config_yaml"]
+        hist = h["optimizer/history"][()]
+        assert hist.shape == (2, 5) and np.all(np.diff(hist, axis=1) <= 0)
+        assert h["best_run/f_k_se"][()].shape == (5,)
+    assert main(["run", str(cfg), "--quiet", "--out", str(tmp_path / "b.h5")]) == 0
+    with h5py.File(tmp_path / "a.h5") as a, h5py.File(tmp_path / "b.h5") as b:
+        np.testing.assert_array_equal(a["optimizer/history"][()], b["optimizer/history"][()])
+    assert main(["show", str(tmp_path / "a.h5")]) == 0
+    assert "best design" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    "text,needle",
+    [
+        (TINY + "bogus: 1\n", "bogus"),
+        (TINY.replace("n_particles: 8", "n_particles: many"), "optimizer.n_particles"),
+        (TINY.replace("{n_samples: 2048}", "{n_samples: -5}"), "study.indices.n_samples"),
+        (TINY.replace("name: ptpso", "name: p9"), "optimizer.name"),
+        (TINY + "study:\n  name: davinci\n", "study.name"),
+        (TINY.replace("n_norm: 8", "n_norm: 8\n  variables: {a1: [350, 250]}"), "variables"),
+        ("study: [unclosed\n", "malformed YAML"),
+    ],
+)
+def test_bad_config_one_line_exit_2_nothing_written(tmp_path, capsys, text, needle):
+    cfg = write(tmp_path, text)
+    assert main(["run", str(cfg), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert needle in err and str(cfg) in err and err.count("\n") == 1
+    assert not (tmp_path / "a.h5").exists()
+
+
+def test_missing_file_and_unwritable_output(tmp_path, capsys):
+    assert main(["run", str(tmp_path / "nope.yaml")]) == 2
+    assert "not found" in capsys.readouterr().err
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    cfg = write(tmp_path, TINY.replace("output: OUT", f"output: {blocker / 'x.h5'}"))
+    assert main(["run", str(cfg), "--quiet"]) == 2
+    assert "cannot create folder" in capsys.readouterr().err
+    assert blocker.read_text() == "not a folder"
