@@ -1,4 +1,10 @@
-"""HDF5 archives (docs/archive.md), written atomically: a temporary file, then rename."""
+"""HDF5 archives (schema: docs/archive.md), written atomically: a temporary file, then rename.
+
+``write(path, tree, attrs)`` stores a nested dict: dict values become groups, everything
+else a dataset; a group's ``"attrs"`` entry becomes its HDF5 attributes (non-scalars as
+JSON). A run in progress writes checkpoints to ``partial_path(out)`` — a valid archive
+with ``complete = False`` — and removes it once the final archive is in place.
+"""
 
 from __future__ import annotations
 
@@ -13,10 +19,12 @@ import h5py
 import jax
 import numpy as np
 
+SCHEMA_VERSION = 1
+
 
 def versions() -> dict[str, str]:
     out = {"python": platform.python_version()}
-    for pkg in ("designopt", "jax", "jaxlib", "numpy", "optax", "h5py", "pydantic"):
+    for pkg in ("designopt", "jax", "jaxlib", "numpy", "optax", "h5py", "pydantic", "matplotlib"):
         try:
             out[pkg] = metadata.version(pkg)
         except metadata.PackageNotFoundError:
@@ -24,27 +32,71 @@ def versions() -> dict[str, str]:
     return out
 
 
-def write(path: str | Path, groups: dict[str, dict[str, Any]], attrs: dict[str, Any]) -> Path:
-    """Write {group: {name: array}} and root attributes to ``path`` atomically."""
+def _attr(v: Any) -> Any:
+    if isinstance(v, (str, bool, int, float, np.integer, np.floating)):
+        return v
+    if isinstance(v, np.ndarray) and v.dtype.kind in "biuf":
+        return v
+    return json.dumps(v, default=lambda o: np.asarray(o).tolist())
+
+
+def _put(grp: h5py.Group, tree: dict[str, Any]) -> None:
+    for name, val in tree.items():
+        if name == "attrs":
+            for k, v in val.items():
+                grp.attrs[k] = _attr(v)
+        elif isinstance(val, dict):
+            _put(grp.create_group(name), val)
+        else:
+            arr = np.asarray(val)
+            if arr.dtype.kind == "U":
+                arr = arr.astype("S")
+            grp.create_dataset(name, data=arr, compression="gzip" if arr.size > 4096 else None)
+
+
+def write(
+    path: str | Path, tree: dict[str, Any], attrs: dict[str, Any], complete: bool = True
+) -> Path:
+    """Write the nested dict ``tree`` and root ``attrs`` to ``path`` atomically."""
     path = Path(path)
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     try:
         with h5py.File(tmp, "w") as h:
-            for k, v in attrs.items():
-                h.attrs[k] = v if isinstance(v, (str, int, float, np.ndarray)) else json.dumps(v)
+            _put(h, {"attrs": attrs})
+            h.attrs["schema_version"] = SCHEMA_VERSION
             h.attrs["versions"] = json.dumps(versions())
             h.attrs["jax_backend"] = jax.default_backend()
             h.attrs["jax_devices"] = json.dumps([str(d) for d in jax.devices()])
-            h.attrs["complete"] = True
-            for g, items in groups.items():
-                grp = h.create_group(g)
-                for name, val in items.items():
-                    if isinstance(val, dict):
-                        grp.attrs[name] = json.dumps(val)
-                    else:
-                        grp.create_dataset(name, data=np.asarray(val))
+            h.attrs["complete"] = complete
+            _put(h, tree)
         os.replace(tmp, path)
     finally:
         if tmp.exists():
             tmp.unlink()
     return path
+
+
+def partial_path(path: str | Path) -> Path:
+    """Where a run in progress keeps its checkpoint archive (``x.h5`` → ``x.partial.h5``)."""
+    p = Path(path)
+    return p.with_name(f"{p.stem}.partial{p.suffix or '.h5'}")
+
+
+def read(path: str | Path, group: str = "/") -> dict[str, Any]:
+    """Read a group back into a nested dict of numpy arrays (attrs under ``"attrs"``)."""
+
+    def get(g: h5py.Group) -> dict[str, Any]:
+        out: dict[str, Any] = {"attrs": {}}
+        for k, v in g.attrs.items():
+            if isinstance(v, str) and v[:1] in "[{":
+                try:
+                    v = json.loads(v)
+                except json.JSONDecodeError:
+                    pass
+            out["attrs"][k] = v
+        for k, v in g.items():
+            out[k] = get(v) if isinstance(v, h5py.Group) else v[()]
+        return out
+
+    with h5py.File(path, "r") as h:
+        return get(h[group])

@@ -57,15 +57,72 @@ class Optimizer(_Strict):
     settings: dict[str, float] = {}
 
 
+class Refine(_Strict):
+    """Optional gradient polish after PSO (optax), projected onto the design box."""
+
+    method: Literal["adam", "sgd"] = "adam"
+    steps: int = Field(100, ge=1)
+    learning_rate: float = Field(0.5, gt=0)  # in mm per step (Adam); the box is in mm
+    n_best: int = Field(1, ge=1)  # polish the best design of the n_best best runs
+
+
+class Sweep(_Strict):
+    """Variations of numeric keys: ``grid`` (Cartesian product) or ``list`` (zipped)."""
+
+    mode: Literal["grid", "list"] = "grid"
+    vary: dict[str, list[float]]
+
+    @field_validator("vary")
+    @classmethod
+    def _nonempty(cls, v: dict[str, list[float]]) -> dict[str, list[float]]:
+        if not v:
+            raise ValueError("needs at least one key to vary")
+        for k, vals in v.items():
+            if not vals:
+                raise ValueError(f"{k}: needs at least one value")
+        return v
+
+
 class RunConfig(_Strict):
     study: Study = Study()
     optimizer: Optimizer = Optimizer()
+    refine: Refine | None = None
+    sweep: Sweep | None = None
     precision: Literal["float32", "float64"] = "float64"
     seed: int = 0
     output: str = "results/master9/master9.h5"
 
 
-def load(path: str | Path) -> tuple[RunConfig, str]:
+BENCH_FUNCTIONS = ("griewank", "rastrigin", "ackley", "sphere", "rosenbrock", "schwefel226")
+# "acceptable" final values for the success rate (our choice, D = 30 scale)
+DEFAULT_SUCCESS = {"griewank": 0.1, "rastrigin": 100.0, "ackley": 0.1, "sphere": 0.01,
+                   "rosenbrock": 100.0, "schwefel226": 3000.0}  # fmt: skip
+
+
+class Bench(_Strict):
+    functions: list[Literal[BENCH_FUNCTIONS]] = ["griewank", "rastrigin", "ackley", "sphere"]  # type: ignore[valid-type]
+    dim: int = Field(30, ge=1)
+    shifted: bool = True  # also run every function with a seeded shift of its optimum
+    shift_seed: int = 1
+    variants: list[str] = ["p1", "p2", "p3", "p4", "p5", "p6", "p7"]
+    reference: str = "p3"  # Mann-Whitney of every other variant against this one
+    n_particles: int = Field(50, ge=2)
+    n_iters: int = Field(1000, ge=1)
+    n_runs: int = Field(100, ge=2)
+    bounds: Literal["clip", "reflect", "reinit"] = "clip"
+    draws: Literal["uniform", "bits16"] = "uniform"
+    success: dict[str, float] = {}
+    settings: dict[str, dict[str, float]] = {}  # per-variant overrides
+
+
+class BenchConfig(_Strict):
+    bench: Bench = Bench()
+    precision: Literal["float32", "float64"] = "float32"
+    seed: int = 0
+    output: str = "results/bench/pso_benchmark.h5"
+
+
+def load(path: str | Path, model: type[BaseModel] = RunConfig) -> tuple[Any, str]:
     """Parse and validate a config file; returns (config, the file's text)."""
     p = Path(path)
     if not p.is_file():
@@ -78,7 +135,7 @@ def load(path: str | Path) -> tuple[RunConfig, str]:
     if not isinstance(raw, dict):
         raise ConfigError(f"{p}: top level must be a mapping of keys")
     try:
-        cfg = RunConfig.model_validate(raw)
+        cfg = model.model_validate(raw)
     except ValidationError as e:
         err = e.errors()[0]
         loc = ".".join(str(x) for x in err["loc"])

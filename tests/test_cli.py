@@ -31,7 +31,7 @@ def test_run_writes_archive_and_same_seed_gives_same_numbers(tmp_path, capsys):
         hist = h["optimizer/history"][()]
         assert hist.shape == (2, 5) and np.all(np.diff(hist, axis=1) <= 0)
         assert h["best_run/f_k_se"][()].shape == (5,)
-    assert main(["run", str(cfg), "--quiet", "--out", str(tmp_path / "b.h5")]) == 0
+    assert main(["run", str(cfg), "--quiet", "--no-figures", "--out", str(tmp_path / "b.h5")]) == 0
     with h5py.File(tmp_path / "a.h5") as a, h5py.File(tmp_path / "b.h5") as b:
         np.testing.assert_array_equal(a["optimizer/history"][()], b["optimizer/history"][()])
     assert main(["show", str(tmp_path / "a.h5")]) == 0

@@ -77,10 +77,10 @@ def test_single_run_equals_same_run_inside_batch():
     keys = jax.random.split(key, 5)
     # run 3 alone, with the same key the batch gave it
     alone = optim.runner._init(keys[3:4], optim.make_params("p5"), P.params,
-                               jnp.asarray(P.lower), jnp.asarray(P.upper), fn=P.fn, n_particles=30)  # fmt: skip
+                               jnp.asarray(P.lower), jnp.asarray(P.upper), P.fn, 30)  # fmt: skip
     st, (f, _) = optim.runner._advance(
         alone, optim.make_params("p5"), P.params, jnp.asarray(P.lower), jnp.asarray(P.upper),
-        fn=P.fn, n_particles=30, rule="linear", bounds="clip", n_iters=100, length=100,
+        P.fn, "clip", 100, 100,
     )  # fmt: skip
     np.testing.assert_array_equal(np.asarray(f)[0], batch.history[3, 1:])
     chunked = optim.run("p5", P, key, 30, 100, 5, chunk_iters=7)
@@ -138,3 +138,42 @@ def test_bad_names_and_settings():
         optim.make_params("p1", inertia=3)
     with pytest.raises(ValueError, match="unknown benchmark"):
         benchmark("styblinski")
+
+
+def test_run_batch_members_equal_single_runs():
+    P = benchmark("rastrigin", 6)
+    key = jax.random.key(4)
+    members = [{"gamma": 1e-7}, {"gamma": 1e-2, "rho_c": 0.5}, {"penalty": 0.0}]
+    batch = optim.run_batch("p3", P, key, members, 12, 60, 3)
+    assert batch.history.shape == (3, 3, 61)
+    for i, m in enumerate(members):
+        one = optim.run("p3", P, key, 12, 60, 3, **m)
+        np.testing.assert_allclose(batch.history[i], one.history, rtol=1e-12)
+
+
+def test_checkpoint_resume_gives_the_uninterrupted_result():
+    P = benchmark("griewank", 8)
+    key = jax.random.key(9)
+    full = optim.run("p6", P, key, 15, 40, 3, chunk_iters=7)
+    saved = []
+    optim.run("p6", P, key, 15, 40, 3, chunk_iters=7, checkpoint=saved.append)
+    assert [c.done for c in saved] == [7, 14, 21, 28, 35]
+    resumed = optim.run("p6", P, key, 15, 40, 3, chunk_iters=7, resume=saved[2])
+    np.testing.assert_array_equal(resumed.history, full.history)
+    np.testing.assert_array_equal(resumed.history_x, full.history_x)
+
+
+def test_bits16_draws_are_statistically_equivalent():
+    """The fast 16-bit draws give the same distribution of final values (Mann-Whitney)."""
+    from scipy.stats import mannwhitneyu
+
+    P = benchmark("rastrigin", 10)
+    a = optim.run("p2", P, jax.random.key(0), 30, 300, 60)
+    b = optim.run("p2", P, jax.random.key(1), 30, 300, 60, draws="bits16")
+    assert mannwhitneyu(a.best_f, b.best_f).pvalue > 0.01
+    assert b.best_f.mean() < 30  # and it optimizes
+    u = optim.pso._halves(jax.random.key(3), (200_000,), jnp.float64)
+    for r in u:
+        assert float(r.min()) >= 0 and float(r.max()) < 1
+        assert abs(float(r.mean()) - 0.5) < 0.003 and abs(float(r.var()) - 1 / 12) < 0.002
+    assert abs(np.corrcoef(np.asarray(u[0]), np.asarray(u[1]))[0, 1]) < 0.01

@@ -24,6 +24,7 @@ import jax.numpy as jnp
 Array = jnp.ndarray
 INERTIA_RULES = ("constant", "nonlinear", "linear", "adaptive", "random")
 BOUNDS = ("clip", "reflect", "reinit")
+DRAWS = ("uniform", "bits16")  # how r1, r2, r3 are drawn (see _halves)
 
 
 class Params(NamedTuple):
@@ -42,6 +43,7 @@ class Params(NamedTuple):
     a: Array
     rho_c: Array
     symmetric_r3: Array  # 1 = r3 ~ U(−1, 1)
+    rule: Array  # int32 index into INERTIA_RULES (an array, so one kernel serves all variants)
 
 
 class State(NamedTuple):
@@ -55,6 +57,19 @@ class State(NamedTuple):
     f: Array  # (M,) current fitness
     t: Array  # iteration counter
     key: jax.Array
+
+
+def _halves(key: jax.Array, shape: tuple[int, ...], dt) -> tuple[Array, Array]:
+    """Two U[0, 1) arrays on the 2^-16 grid from one 32-bit word each (``draws="bits16"``).
+
+    Threefry dominates a PSO step on CPU (about 85 % of p2's time on Rastrigin-30); taking
+    r1 and r2 from the two halves of one word halves that. The grid is far finer than
+    anything PSO's dynamics resolve (tests compare both modes by Mann-Whitney); the default
+    stays ``"uniform"``, full-precision ``jax.random.uniform``.
+    """
+    b = jax.random.bits(key, shape, jnp.uint32)
+    scale = jnp.asarray(2.0**-16, dt)
+    return (b >> 16).astype(dt) * scale, (b & 0xFFFF).astype(dt) * scale
 
 
 def constriction(phi: float) -> float:
@@ -80,34 +95,45 @@ def init(
     return State(x, v, x, f, f, x[i], f[i], f, jnp.asarray(0, jnp.int32), key)
 
 
-def inertia(rule: str, s: State, p: Params, n_iters: int, key: jax.Array) -> Array:
-    """Per-particle inertia (M, 1) at iteration s.t for the chosen rule."""
+def inertia(s: State, p: Params, n_iters: int, key: jax.Array) -> Array:
+    """Per-particle inertia (M, 1) at iteration s.t for the rule p.rule (lax.switch)."""
     M = s.x.shape[0]
-    t = s.t.astype(s.x.dtype)
-    if rule == "constant":
-        w = jnp.broadcast_to(p.w, (M,))
-    elif rule == "linear":  # Shi & Eberhart 1999 [34]
-        w = jnp.broadcast_to(p.w_start - (p.w_start - p.w_end) * t / max(n_iters, 1), (M,))
-    elif rule == "nonlinear":  # Jiao, Lian & Gu 2008 [33]
-        w = jnp.broadcast_to(p.w_start * p.u ** (-t), (M,))
-    elif rule == "random":  # Eberhart & Shi 2001 [37]
-        w = 0.5 + 0.5 * jax.random.uniform(key, (M,), s.x.dtype)
-    elif rule == "adaptive":  # Yang, Yuan, Yuan & Mao 2007 [36]
+    dt = s.x.dtype
+    t = s.t.astype(dt)
+
+    def constant():
+        return jnp.broadcast_to(p.w, (M,)).astype(dt)
+
+    def nonlinear():  # Jiao, Lian & Gu 2008 [33]
+        return jnp.broadcast_to(p.w_start * p.u ** (-t), (M,)).astype(dt)
+
+    def linear():  # Shi & Eberhart 1999 [34]
+        w = p.w_start - (p.w_start - p.w_end) * t / max(n_iters, 1)
+        return jnp.broadcast_to(w, (M,)).astype(dt)
+
+    def adaptive():  # Yang, Yuan, Yuan & Mao 2007 [36]
         a_, b_ = jnp.abs(s.prev_pbest_f), jnp.abs(s.pbest_f)
         hi = jnp.maximum(a_, b_)
-        h = jnp.where(
-            hi > 0, jnp.minimum(a_, b_) / jnp.where(hi > 0, hi, 1.0), 1.0
-        )  # evolution speed
-        fbest, fmean = (
-            jnp.abs(s.gbest_f),
-            jnp.abs(jnp.mean(jnp.where(jnp.isfinite(s.f), s.f, s.gbest_f))),
-        )
+        h = jnp.where(hi > 0, jnp.minimum(a_, b_) / jnp.where(hi > 0, hi, 1.0), 1.0)
+        fbest = jnp.abs(s.gbest_f)
+        fmean = jnp.abs(jnp.mean(jnp.where(jnp.isfinite(s.f), s.f, s.gbest_f)))
         top = jnp.maximum(fbest, fmean)
         agg = jnp.where(top > 0, jnp.minimum(fbest, fmean) / jnp.where(top > 0, top, 1.0), 1.0)
-        w = p.w_start - p.alpha * (1.0 - h) + p.beta * agg
-    else:
-        raise ValueError(f"unknown inertia rule {rule!r}; one of {INERTIA_RULES}")
+        return (p.w_start - p.alpha * (1.0 - h) + p.beta * agg).astype(dt)
+
+    def random():  # Eberhart & Shi 2001 [37]
+        return 0.5 + 0.5 * jax.random.uniform(key, (M,), dt)
+
+    branches = {"constant": constant, "nonlinear": nonlinear, "linear": linear,
+                "adaptive": adaptive, "random": random}  # fmt: skip
+    w = jax.lax.switch(p.rule, [branches[r] for r in INERTIA_RULES])
     return w[:, None]
+
+
+def rule_index(rule: str) -> int:
+    if rule not in INERTIA_RULES:
+        raise ValueError(f"unknown inertia rule {rule!r}; one of {INERTIA_RULES}")
+    return INERTIA_RULES.index(rule)
 
 
 def penalty_coefficient(rho: Array, a: Array, rho_c: Array) -> Array:
@@ -121,27 +147,39 @@ def step(
     evaluate: Callable,
     lower: Array,
     upper: Array,
-    rule: str,
     bounds: str,
     n_iters: int,
+    draws: str = "uniform",
 ) -> State:
     """One iteration of eq. (44)-(50) for the whole swarm."""
     key, k1, k2, k3, kw, kb, ke = jax.random.split(s.key, 7)
     M, D = s.x.shape
     dt = s.x.dtype
-    r1 = jax.random.uniform(k1, (M, D), dt)
-    r2 = jax.random.uniform(k2, (M, D), dt)
-    w = inertia(rule, s, p, n_iters, kw)
+    if draws == "uniform":
+        r1 = jax.random.uniform(k1, (M, D), dt)
+        r2 = jax.random.uniform(k2, (M, D), dt)
+    elif draws == "bits16":
+        r1, r2 = _halves(k1, (M, D), dt)
+    else:
+        raise ValueError(f"unknown draws {draws!r}; one of {DRAWS}")
+    w = inertia(s, p, n_iters, kw)
     v = p.chi * (w * s.v + p.c1 * r1 * (s.pbest_x - s.x) + p.c2 * r2 * (s.gbest_x - s.x))
     vmax = p.vmax_frac * (upper - lower)
-    # PTPSO penalty, eq. (46)-(49)
-    d = jnp.sqrt(jnp.sum((s.x - s.gbest_x) ** 2, axis=1))
-    dmax = jnp.sqrt(jnp.sum((upper - lower) ** 2))
-    rho = jnp.mean((d < p.gamma * dmax).astype(dt))
-    pc = penalty_coefficient(rho, p.a, p.rho_c)
-    u3 = jax.random.uniform(k3, (M, D), dt)
-    r3 = jnp.where(p.symmetric_r3 > 0, 2.0 * u3 - 1.0, u3)
-    v = v + p.penalty * pc * (1.0 - p.gamma) * vmax / jnp.sqrt(D) * r3
+
+    # PTPSO penalty, eq. (46)-(49); computed only when the penalty is on (a real branch
+    # unless the settings are vmapped)
+    def kick():
+        d = jnp.sqrt(jnp.sum((s.x - s.gbest_x) ** 2, axis=1))
+        dmax = jnp.sqrt(jnp.sum((upper - lower) ** 2))
+        rho = jnp.mean((d < p.gamma * dmax).astype(dt))
+        pc = penalty_coefficient(rho, p.a, p.rho_c)
+        u3 = (
+            jax.random.uniform(k3, (M, D), dt) if draws == "uniform" else _halves(k3, (M, D), dt)[0]
+        )
+        r3 = jnp.where(p.symmetric_r3 > 0, 2.0 * u3 - 1.0, u3)
+        return (p.penalty * pc * (1.0 - p.gamma) * vmax / jnp.sqrt(D) * r3).astype(dt)
+
+    v = v + jax.lax.cond(p.penalty != 0, kick, lambda: jnp.zeros((M, D), dt))
     v = jnp.clip(v, -vmax, vmax)
     x = s.x + v
     if bounds == "clip":

@@ -11,7 +11,7 @@ from typing import Any
 
 import jax.numpy as jnp
 
-from designopt.optim.pso import Params, constriction
+from designopt.optim.pso import Params, constriction, rule_index
 
 CHI_41 = constriction(4.1)  # 0.729843...
 
@@ -100,4 +100,10 @@ def make_params(name: str, dtype=jnp.float64, **overrides: Any) -> Params:
     if unknown:
         raise ValueError(f"unknown optimizer setting(s) {unknown}; known: {sorted(BASE)}")
     vals = {**BASE, **v.defaults, **overrides}
-    return Params(**{k: jnp.asarray(vals[k], dtype) for k in Params._fields})
+    out = {k: jnp.asarray(vals[k], dtype) for k in Params._fields if k != "rule"}
+    return Params(**out, rule=jnp.asarray(rule_index(v.rule), jnp.int32))
+
+
+def stack_params(params: list[Params]) -> Params:
+    """Stack Params along a new leading axis (a batch of settings to vmap over)."""
+    return Params(*(jnp.stack(leaves) for leaves in zip(*params, strict=True)))

@@ -1,0 +1,52 @@
+"""Wall time split into compile time (JAX tracing, lowering, XLA compile) and the rest.
+
+JAX reports each compilation stage through ``jax.monitoring``; one listener sums them so
+that commands and benchmarks can print compile and run time separately.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import jax
+
+_STAGES = (
+    "/jax/core/compile/jaxpr_trace_duration",
+    "/jax/core/compile/jaxpr_to_mlir_module_duration",
+    "/jax/core/compile/backend_compile_duration",
+)
+_total = [0.0]
+_registered = [False]
+
+
+def _listener(name: str, secs: float, **_: Any) -> None:
+    if name in _STAGES:
+        _total[0] += secs
+
+
+def compile_seconds() -> float:
+    """Seconds spent compiling in this process since the first Stopwatch was made."""
+    return _total[0]
+
+
+class Stopwatch:
+    """``with Stopwatch() as sw: ...`` then ``sw.wall``, ``sw.compile``, ``sw.run``."""
+
+    def __init__(self) -> None:
+        if not _registered[0]:
+            jax.monitoring.register_event_duration_secs_listener(_listener)
+            _registered[0] = True
+        self.wall = self.compile = 0.0
+
+    def __enter__(self) -> Stopwatch:
+        self._t, self._c = time.perf_counter(), _total[0]
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.wall = time.perf_counter() - self._t
+        self.compile = _total[0] - self._c
+
+    @property
+    def run(self) -> float:
+        return max(self.wall - self.compile, 0.0)

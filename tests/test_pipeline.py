@@ -1,0 +1,187 @@
+"""Pipeline end to end: archive schema, figures, refine, sweep, resume, bench, report."""
+
+import h5py
+import numpy as np
+import pytest
+
+from designopt import archive
+from designopt.cli import main
+
+TINY = """
+study:
+  indices: {n_samples: 2048}
+  n_norm: 8
+optimizer: {name: ptpso, n_particles: 8, n_iters: 6, n_runs: 2}
+precision: float64
+seed: 1
+output: OUT
+"""
+
+SCHEMA = {
+    "optimizer": ["history", "best_f", "best_x", "converged_at", "history_x"],
+    "best_run": ["iteration", "f", "f_k", "f_k_se", "f_l", "f_l_se", "f_p", "f_p_se",
+                 "volume", "volume_se", "L"],
+    "final": ["x", "f", "f_k", "f_k_se", "gci", "gci_se", "gpi", "gpi_se"],
+    "problem": ["names", "lower", "upper", "norm_bounds"],
+    "refine": ["run_index", "x0", "f0", "x", "f", "history", "gain"],
+}  # fmt: skip
+ROOT_ATTRS = ["kind", "config_yaml", "config_resolved_yaml", "seed", "versions", "jax_backend",
+              "jax_devices", "wall_time_s", "compile_time_s", "run_time_s", "complete"]  # fmt: skip
+
+
+def write(tmp_path, text, name="c.yaml"):
+    p = tmp_path / name
+    p.write_text(text.replace("OUT", str(tmp_path / "a.h5")))
+    return p
+
+
+def test_run_with_refine_matches_schema_and_draws_figures(tmp_path, capsys):
+    cfg = write(tmp_path, TINY + "refine: {steps: 15, learning_rate: 0.02, n_best: 2}\n")
+    assert main(["run", str(cfg), "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "polish" in out and "compile" in out
+    with h5py.File(tmp_path / "a.h5") as h:
+        for g, names in SCHEMA.items():
+            for n in names:
+                assert n in h[g], f"{g}/{n} missing"
+        for a in ROOT_ATTRS:
+            assert a in h.attrs, a
+        assert h.attrs["kind"] == "run" and h.attrs["complete"]
+        assert h["best_run/f"].shape == (7,) and h["refine/history"].shape == (2, 16)
+        # the polish never loses, stays in the box, and the final design is the better stage
+        assert np.all(h["refine/gain"][()] >= 0)
+        x = h["refine/x"][()]
+        assert np.all(x >= h["problem/lower"][()]) and np.all(x <= h["problem/upper"][()])
+        assert h["final/f"][()] <= h["optimizer/best_f"][()].min() + 1e-12
+        assert np.all(h["final/f_k_se"][()] > 0)
+    figs = sorted(p.name for p in (tmp_path / "a_figures").iterdir())
+    for n in (
+        "fig12_convergence",
+        "fig13_dexterity_maps",
+        "fig14_backlash_maps",
+        "fig15_workspace",
+    ):
+        assert f"{n}.png" in figs and f"{n}.pdf" in figs
+    assert main(["report", str(tmp_path / "a.h5")]) == 0
+
+
+def test_sweep_of_three_values_gives_three_members(tmp_path, capsys):
+    text = TINY + "sweep:\n  mode: list\n  vary: {optimizer.gamma: [1.0e-7, 1.0e-3, 1.0e-1]}\n"
+    cfg = write(tmp_path, text)
+    assert main(["sweep", str(cfg), "--quiet", "--no-figures"]) == 0
+    assert "1 vmapped batch" in capsys.readouterr().out
+    a = archive.read(tmp_path / "a.h5")
+    mem = {k: v for k, v in a["members"].items() if k != "attrs"}
+    assert len(mem) == 3 and a["attrs"]["n_members"] == 3
+    gammas = [m["attrs"]["overrides"]["optimizer.settings.gamma"] for m in mem.values()]
+    assert gammas == [1e-7, 1e-3, 1e-1]
+    assert [m["optimizer"]["attrs"]["settings"]["gamma"] for m in mem.values()] == pytest.approx(
+        gammas
+    )
+    # member 0 equals a plain run with the same gamma (common random numbers, same kernel)
+    one = write(tmp_path, TINY.replace("output: OUT", f"output: {tmp_path / 'one.h5'}"), "one.yaml")
+    assert main(["run", str(one), "--quiet", "--no-figures"]) == 0
+    b = archive.read(tmp_path / "one.h5")
+    np.testing.assert_allclose(
+        mem["000"]["optimizer"]["history"], b["optimizer"]["history"], rtol=1e-12
+    )
+
+
+def test_sweep_over_a_study_key_runs_one_batch_per_value(tmp_path, capsys):
+    text = TINY + "sweep:\n  vary: {design.a4: [5, 15], optimizer.rho_c: [0.5, 0.9]}\n"
+    assert main(["sweep", str(write(tmp_path, text)), "--quiet", "--no-figures"]) == 0
+    assert "4 members in 2 vmapped batch" in capsys.readouterr().out
+    a = archive.read(tmp_path / "a.h5")
+    a4 = [a["members"][k]["problem"]["attrs"]["info"]["fixed"]["a4"] for k in ("000", "002")]
+    assert a4 == [5.0, 15.0]
+
+
+@pytest.mark.parametrize(
+    "text,cmd,needle",
+    [
+        (TINY + "sweep:\n  vary: {optimizer.nonsense: [1, 2]}\n", "sweep", "sweep.vary"),
+        (TINY + "sweep:\n  vary: {design.a1: [300]}\n", "sweep", "design variable"),
+        (TINY + "sweep:\n  vary: {study.n_samples: [-5]}\n", "sweep", "n_samples"),
+        (TINY, "sweep", "key 'sweep'"),
+        (TINY + "sweep:\n  vary: {optimizer.gamma: [1, 2]}\n", "run", "key 'sweep'"),
+        (TINY + "refine: {steps: 0}\n", "run", "refine.steps"),
+    ],
+)
+def test_bad_sweep_and_refine_input(tmp_path, capsys, text, cmd, needle):
+    cfg = write(tmp_path, text)
+    assert main([cmd, str(cfg), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert needle in err and err.count("\n") == 1
+    assert not (tmp_path / "a.h5").exists()
+
+
+def test_interrupted_run_is_marked_incomplete_and_resume_matches(tmp_path, monkeypatch, capsys):
+    cfg = write(tmp_path, TINY.replace("n_iters: 6", "n_iters: 20"))
+    assert (
+        main(["run", str(cfg), "--quiet", "--no-figures", "--out", str(tmp_path / "ref.h5")]) == 0
+    )
+    # an existing good archive at the target must survive the interruption untouched
+    (tmp_path / "a.h5").write_bytes((tmp_path / "ref.h5").read_bytes())
+    before = (tmp_path / "a.h5").read_bytes()
+    real_write, calls = archive.write, []
+
+    def flaky(path, tree, attrs, complete=True):
+        real_write(path, tree, attrs, complete)
+        calls.append(path)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(archive, "write", flaky)
+    assert main(["run", str(cfg), "--quiet", "--no-figures"]) == 130
+    assert "--resume" in capsys.readouterr().err
+    monkeypatch.setattr(archive, "write", real_write)
+    partial = archive.partial_path(tmp_path / "a.h5")
+    with h5py.File(partial) as h:
+        assert not h.attrs["complete"] and h["checkpoint"].attrs["done"] == 3
+    assert (tmp_path / "a.h5").read_bytes() == before
+    assert main(["show", str(partial)]) == 0
+    assert main(["report", str(partial)]) == 2  # incomplete: says so, draws nothing
+    assert main(["run", str(cfg), "--quiet", "--no-figures", "--resume"]) == 0
+    assert not partial.exists()
+    with h5py.File(tmp_path / "a.h5") as a, h5py.File(tmp_path / "ref.h5") as r:
+        assert a.attrs["resumed_from"] == 3
+        for k in ("optimizer/history", "optimizer/history_x", "final/x", "final/f"):
+            np.testing.assert_array_equal(a[k][()], r[k][()])
+    # resuming with another seed is refused
+    assert main(["run", str(cfg), "--quiet", "--resume", "--seed", "5"]) == 2
+
+
+BENCH = """
+bench:
+  functions: [sphere, rastrigin]
+  dim: 5
+  shifted: true
+  variants: [p2, p3, p5]
+  n_particles: 10
+  n_iters: 50
+  n_runs: 12
+precision: float64
+output: OUT
+"""
+
+
+def test_bench_small_suite(tmp_path, capsys):
+    cfg = write(tmp_path, BENCH)
+    assert main(["bench", str(cfg), "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "rastrigin_shifted" in out and "p (Holm)" in out
+    a = archive.read(tmp_path / "a.h5")
+    assert a["attrs"]["kind"] == "bench"
+    st = a["bench"]["sphere"]["attrs"]["stats"]["rows"]
+    assert set(st) == {"p2", "p3", "p5"} and "p_holm" in st["p2"] and "p_holm" not in st["p3"]
+    h = a["bench"]["rastrigin"]["p5"]["history"]
+    assert h.shape == (12, 51)
+    assert st["p2"]["mean"] == pytest.approx(a["bench"]["sphere"]["p2"]["best_f"].mean())
+    for n in ("fig10_final_values", "fig11_convergence_iterations", "convergence_curves"):
+        assert (tmp_path / f"{n}.png").exists() and (tmp_path / f"{n}.pdf").exists()
+
+
+def test_bench_bad_variant(tmp_path, capsys):
+    cfg = write(tmp_path, BENCH.replace("[p2, p3, p5]", "[p2, p8]"))
+    assert main(["bench", str(cfg), "--quiet"]) == 2
+    assert "bench.variants.1" in capsys.readouterr().err
