@@ -62,12 +62,14 @@ def main() -> None:
         P = benchmark(fname, a.dim)
         with Stopwatch() as sw:
             r = optim.run_batch("p3", P, jax.random.key(0), members, 50, a.iters, a.runs,
-                                dtype=jnp.float32, draws="bits16")  # fmt: skip
+                                dtype=jnp.float32, draws="splitmix")  # fmt: skip
         print(f"\n{fname} ({len(members)} settings × {a.runs} runs in one batch: {sw.wall:.1f} s)")
         print(f"{'γ':>8}{'a':>6}{'ρc':>6}{'mean':>12}{'std':>12}{'median':>12}")
         for m, f in zip(members, r.best_f, strict=True):
             if "penalty" in m:
-                print(f"{'p2 (no penalty)':>20}{f.mean():>12.3e}{f.std(ddof=1):>12.3e}{np.median(f):>12.3e}")
+                print(
+                    f"{'p2 (no penalty)':>20}{f.mean():>12.3e}{f.std(ddof=1):>12.3e}{np.median(f):>12.3e}"
+                )
             else:
                 print(f"{m['gamma']:>8.0e}{m['a']:>6g}{m['rho_c']:>6g}"
                       f"{f.mean():>12.3e}{f.std(ddof=1):>12.3e}{np.median(f):>12.3e}")  # fmt: skip

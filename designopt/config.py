@@ -110,7 +110,7 @@ class Bench(_Strict):
     n_iters: int = Field(1000, ge=1)
     n_runs: int = Field(100, ge=2)
     bounds: Literal["clip", "reflect", "reinit"] = "clip"
-    draws: Literal["uniform", "bits16"] = "uniform"
+    draws: Literal["uniform", "splitmix"] = "uniform"
     success: dict[str, float] = {}
     settings: dict[str, dict[str, float]] = {}  # per-variant overrides
 

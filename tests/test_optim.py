@@ -163,17 +163,20 @@ def test_checkpoint_resume_gives_the_uninterrupted_result():
     np.testing.assert_array_equal(resumed.history_x, full.history_x)
 
 
-def test_bits16_draws_are_statistically_equivalent():
-    """The fast 16-bit draws give the same distribution of final values (Mann-Whitney)."""
+def test_splitmix_draws_are_statistically_equivalent():
+    """The SplitMix64 draws give the same distribution of final values (Mann-Whitney)."""
     from scipy.stats import mannwhitneyu
 
     P = benchmark("rastrigin", 10)
     a = optim.run("p2", P, jax.random.key(0), 30, 300, 60)
-    b = optim.run("p2", P, jax.random.key(1), 30, 300, 60, draws="bits16")
+    b = optim.run("p2", P, jax.random.key(1), 30, 300, 60, draws="splitmix")
     assert mannwhitneyu(a.best_f, b.best_f).pvalue > 0.01
     assert b.best_f.mean() < 30  # and it optimizes
-    u = optim.pso._halves(jax.random.key(3), (200_000,), jnp.float64)
+    u = optim.pso._splitmix_pair(jax.random.key(3), (200_000,), jnp.float64)
     for r in u:
         assert float(r.min()) >= 0 and float(r.max()) < 1
         assert abs(float(r.mean()) - 0.5) < 0.003 and abs(float(r.var()) - 1 / 12) < 0.002
     assert abs(np.corrcoef(np.asarray(u[0]), np.asarray(u[1]))[0, 1]) < 0.01
+    # the reference implementation's first outputs from state 0 (Vigna, splitmix64.c)
+    z = optim.pso.splitmix64(jnp.asarray(0, jnp.uint64), 3)
+    assert [int(v) for v in z] == [0xE220A8397B1DCDAF, 0x6E789E6AA1B965F4, 0x06C45D188009454F]

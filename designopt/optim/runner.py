@@ -175,8 +175,9 @@ def run(
     """Run ``n_runs`` independent runs of variant ``name`` (p1..p7 or an alias) on ``problem``.
 
     ``settings`` override the variant's parameters (see ``designopt.optim.variants.BASE``).
-    ``draws`` picks how r1, r2, r3 are drawn: ``"uniform"`` (default) or ``"bits16"``
-    (two 16-bit uniforms per random word, about twice as fast on CPU; ``pso._halves``).
+    ``draws`` picks how r1, r2, r3 are drawn: ``"uniform"`` (default) or ``"splitmix"``
+    (counter-based SplitMix64 seeded from the key, several times faster on CPU;
+    ``pso._splitmix_pair``).
     ``checkpoint`` is called between chunks with a :class:`Checkpoint`; passing one back
     as ``resume`` continues the run and gives exactly the uninterrupted result.
     """
