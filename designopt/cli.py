@@ -130,7 +130,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     print(f"archive: {out}")
     if not args.no_figures:
         figs = draw_figures(out)
-        print(f"figures: {len(figs) // 2} (PNG + PDF) in {out.parent}")
+        print(f"figures: {len(figs) // 2} (PNG + PDF) in {figs[0].parent}")
     return 0
 
 
@@ -203,7 +203,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     print(f"archive: {out}")
     if not args.no_figures:
         figs = draw_figures(out)
-        print(f"figures: {len(figs) // 2} (PNG + PDF) in {out.parent}")
+        print(f"figures: {len(figs) // 2} (PNG + PDF) in {figs[0].parent}")
     return 0
 
 
