@@ -127,6 +127,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     print(f"samples per design: {problem.info['n_samples_used']}; wall {total.wall:.1f} s = "
           f"compile {total.compile:.1f} s + run {total.run:.1f} s "
           f"(setup {setup.wall:.1f} s, PSO {opt.wall:.1f} s, scoring/polish {post.wall:.1f} s)")  # fmt: skip
+    return _finish(out, args)
+
+
+def _finish(out: Path, args: argparse.Namespace) -> int:
+    """Print the archive path and draw the figures unless --no-figures."""
     print(f"archive: {out}")
     if not args.no_figures:
         figs = draw_figures(out)
@@ -200,11 +205,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         keys = ", ".join(f"{k} = {v:g}" for k, v in m.items())
         print(f"  [{i:3d}] {keys}:  f = {f:.5f}, f_k = {float(fin['f_k']):.4f}, "
               f"f_l = {float(fin['f_l']):.4f}, f_p = {float(fin['f_p']):.4f}")  # fmt: skip
-    print(f"archive: {out}")
-    if not args.no_figures:
-        figs = draw_figures(out)
-        print(f"figures: {len(figs) // 2} (PNG + PDF) in {figs[0].parent}")
-    return 0
+    return _finish(out, args)
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
@@ -267,11 +268,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
 def draw_figures(path: Path) -> list[Path]:
     """Draw the figures an archive supports (run: Fig. 12-15; bench: Fig. 10-11 and curves;
     sweep: final f per member) beside it."""
-    import jax
-
     from designopt import archive
     from designopt.figures import bench as bench_figs
-    from designopt.figures import master9 as m9_figs
 
     a = archive.read(path)
     kind = a["attrs"].get("kind")
@@ -284,7 +282,7 @@ def draw_figures(path: Path) -> list[Path]:
                 if c != "attrs"}  # fmt: skip
         return bench_figs.draw(folder, st, hist, cfg["bench"]["n_runs"])
     if kind == "run":
-        return _draw_run(a, folder / f"{stem}_figures", jax, m9_figs)
+        return _draw_run(a, folder / f"{stem}_figures")
     if kind == "sweep":
         from designopt.figures import plt, save
 
@@ -306,7 +304,11 @@ def draw_figures(path: Path) -> list[Path]:
     raise ConfigError(f"{path}: archive kind {kind!r} has no figures")
 
 
-def _draw_run(a: dict, folder: Path, jax, m9_figs) -> list[Path]:
+def _draw_run(a: dict, folder: Path) -> list[Path]:
+    import jax
+
+    from designopt.figures import master9 as m9_figs
+
     cfg = a["attrs"]["config_resolved"]
     names = [n.decode() for n in a["problem"]["names"]]
     fixed = a["problem"]["attrs"]["info"]["fixed"]

@@ -62,7 +62,7 @@ class Refine(_Strict):
 
     method: Literal["adam", "sgd"] = "adam"
     steps: int = Field(100, ge=1)
-    learning_rate: float = Field(0.5, gt=0)  # in mm per step (Adam); the box is in mm
+    learning_rate: float = Field(0.01, gt=0)  # step size in units of the box width
     n_best: int = Field(1, ge=1)  # polish the best design of the n_best best runs
 
 

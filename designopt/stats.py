@@ -14,14 +14,9 @@ import numpy as np
 
 def rankdata(x: np.ndarray) -> np.ndarray:
     """Average ranks (1-based), ties sharing the mean of their ranks."""
-    x = np.asarray(x)
-    order = np.argsort(x, kind="mergesort")
-    xs = x[order]
-    ranks = np.empty(len(x), np.float64)
-    edges = np.flatnonzero(np.r_[True, xs[1:] != xs[:-1], True])
-    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
-        ranks[order[lo:hi]] = 0.5 * (lo + 1 + hi)
-    return ranks
+    _, inv, counts = np.unique(np.asarray(x), return_inverse=True, return_counts=True)
+    ends = np.cumsum(counts)
+    return (0.5 * (ends - counts + 1 + ends))[inv.ravel()].astype(np.float64)
 
 
 def mann_whitney_u(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
@@ -52,10 +47,7 @@ def holm(pvalues: np.ndarray) -> np.ndarray:
     m = len(p)
     order = np.argsort(p)
     adj = np.empty(m)
-    running = 0.0
-    for i, j in enumerate(order):
-        running = max(running, (m - i) * p[j])
-        adj[j] = min(running, 1.0)
+    adj[order] = np.minimum(np.maximum.accumulate((m - np.arange(m)) * p[order]), 1.0)
     return adj
 
 

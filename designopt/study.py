@@ -17,8 +17,6 @@ from designopt.mechanisms import master9
 from designopt.problems.base import Problem
 from designopt.refine import refine
 
-SUB_KEYS = ("f_k", "f_l", "f_p", "gci", "gcsei", "gpi", "volume", "L")
-
 
 def build_problem(cfg: RunConfig) -> Problem:
     return master9.problem(study_dict(cfg))

@@ -18,6 +18,11 @@ from designopt.indices.master9 import IndexSettings
 from designopt.mechanisms.master9 import DESIGN_KEYS
 from designopt.optim.variants import BASE
 
+NUMERIC_PATHS = {
+    "study.indices.n_samples", "study.indices.backlash_deg", "study.n_norm",
+    "optimizer.n_particles", "optimizer.n_iters", "optimizer.n_runs", "seed",
+}  # fmt: skip
+
 
 def canonical(path: str) -> str:
     """Resolve the short forms to a full dotted path; ValueError if it names nothing."""
@@ -37,12 +42,6 @@ def canonical(path: str) -> str:
     if not ok:
         raise ValueError(f"cannot vary '{path}': not a numeric key of the config")
     return full
-
-
-NUMERIC_PATHS = {
-    "study.indices.n_samples", "study.indices.backlash_deg", "study.n_norm",
-    "optimizer.n_particles", "optimizer.n_iters", "optimizer.n_runs", "seed",
-}  # fmt: skip
 
 
 def members(cfg: RunConfig) -> list[dict[str, float]]:

@@ -25,11 +25,6 @@ def _listener(name: str, secs: float, **_: Any) -> None:
         _total[0] += secs
 
 
-def compile_seconds() -> float:
-    """Seconds spent compiling in this process since the first Stopwatch was made."""
-    return _total[0]
-
-
 class Stopwatch:
     """``with Stopwatch() as sw: ...`` then ``sw.wall``, ``sw.compile``, ``sw.run``."""
 

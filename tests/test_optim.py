@@ -180,3 +180,24 @@ def test_splitmix_draws_are_statistically_equivalent():
     # the reference implementation's first outputs from state 0 (Vigna, splitmix64.c)
     z = optim.pso.splitmix64(jnp.asarray(0, jnp.uint64), 3)
     assert [int(v) for v in z] == [0xE220A8397B1DCDAF, 0x6E789E6AA1B965F4, 0x06C45D188009454F]
+
+
+def test_refine_reaches_known_minimisers_and_respects_the_box():
+    from designopt.problems.base import Problem
+    from designopt.refine import refine
+
+    P = benchmark("sphere", 4, shift=2)  # interior optimum at the seeded shift
+    x0 = np.array([[50.0, -40.0, 10.0, 30.0]])
+    r = refine(P, x0, steps=400, learning_rate=0.01)
+    np.testing.assert_allclose(r.x[0], P.info["optimum"], atol=1e-2)
+    assert r.gain[0] == pytest.approx(r.f0[0] - r.f[0]) and r.f[0] < 1e-3
+
+    # optimum (5, −5) outside the box [0, 3] × [−1, 1]: the projection lands on the corner
+    def fn(p, X, key):
+        y = jnp.sum((X - jnp.array([5.0, -5.0])) ** 2, axis=1)
+        return y, {"f": y}
+
+    Q = Problem(("u", "v"), np.array([0.0, -1.0]), np.array([3.0, 1.0]), fn)
+    r = refine(Q, np.array([[1.0, 0.5], [2.5, -0.2]]), steps=300, learning_rate=0.02)
+    np.testing.assert_allclose(r.x, [[3.0, -1.0], [3.0, -1.0]], atol=1e-9)
+    np.testing.assert_allclose(r.f, [20.0, 20.0], atol=1e-9)

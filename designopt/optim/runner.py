@@ -144,7 +144,14 @@ def _drive(variant, params, problem, key, n_particles, n_iters, n_runs, bounds, 
             checkpoint(Checkpoint(_to_numpy(states), hist, hist_x, done))
     history = np.concatenate(hf, axis=-1)
     history_x = np.concatenate(hx, axis=-2)
-    return history, history_x
+    return RunResult(
+        history=history,
+        best_f=history[..., -1],
+        best_x=history_x[..., -1, :],
+        converged_at=convergence_iteration(history),
+        history_x=history_x,
+        settings=_settings_record(variant, bounds, n_particles, n_iters, n_runs, params, draws),
+    )
 
 
 def _settings_record(
@@ -183,17 +190,8 @@ def run(
     """
     variant = resolve(name)
     params = make_params(name, dtype, **settings)
-    history, history_x = _drive(variant, params, problem, key, n_particles, n_iters, n_runs,
-                                bounds, dtype, chunk_iters, progress, checkpoint, resume,
-                                False, 1, draws)  # fmt: skip
-    return RunResult(
-        history=history,
-        best_f=history[..., -1],
-        best_x=history_x[..., -1, :],
-        converged_at=convergence_iteration(history),
-        history_x=history_x,
-        settings=_settings_record(variant, bounds, n_particles, n_iters, n_runs, params, draws),
-    )
+    return _drive(variant, params, problem, key, n_particles, n_iters, n_runs, bounds, dtype,
+                  chunk_iters, progress, checkpoint, resume, False, 1, draws)  # fmt: skip
 
 
 def run_batch(
@@ -222,14 +220,5 @@ def run_batch(
         raise ValueError("members must hold at least one settings dict")
     variant = resolve(name)
     params = stack_params([make_params(name, dtype, **m) for m in members])
-    history, history_x = _drive(variant, params, problem, key, n_particles, n_iters, n_runs,
-                                bounds, dtype, chunk_iters, progress, checkpoint, resume,
-                                True, len(members), draws)  # fmt: skip
-    return RunResult(
-        history=history,
-        best_f=history[..., -1],
-        best_x=history_x[..., -1, :],
-        converged_at=convergence_iteration(history),
-        history_x=history_x,
-        settings=_settings_record(variant, bounds, n_particles, n_iters, n_runs, params, draws),
-    )
+    return _drive(variant, params, problem, key, n_particles, n_iters, n_runs, bounds, dtype,
+                  chunk_iters, progress, checkpoint, resume, True, len(members), draws)  # fmt: skip
