@@ -16,7 +16,7 @@ import numpy as np
 from _timing import best_of, compile_time, header
 
 from designopt.kinematics import inv_cond_fro3
-from designopt.mechanisms import master9 as m
+from designopt.studies.master9 import mechanism as m
 
 
 def numpy_reference(q: np.ndarray, D: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:

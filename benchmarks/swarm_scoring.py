@@ -20,14 +20,14 @@ import numpy as np
 from _timing import best_of, compile_time, header
 
 from designopt import montecarlo as mc
-from designopt.indices.master9 import (
+from designopt.studies.master9.indices import (
     IndexSettings,
     _features,
     inv_cond_fro_jv,
     jv_entries,
     swarm_indices,
 )
-from designopt.mechanisms import master9 as m
+from designopt.studies.master9 import mechanism as m
 
 
 def numpy_dexterity(X: np.ndarray, q: np.ndarray, a4: float) -> tuple[np.ndarray, np.ndarray]:

@@ -307,7 +307,7 @@ def draw_figures(path: Path) -> list[Path]:
 def _draw_run(a: dict, folder: Path) -> list[Path]:
     import jax
 
-    from designopt.figures import master9 as m9_figs
+    from designopt.studies.master9 import figures as m9_figs
 
     cfg = a["attrs"]["config_resolved"]
     names = [n.decode() for n in a["problem"]["names"]]

@@ -13,7 +13,7 @@ import yaml
 
 from designopt import optim
 from designopt.config import RunConfig, study_dict
-from designopt.mechanisms import master9
+from designopt.studies.master9 import mechanism as master9
 from designopt.problems.base import Problem
 from designopt.refine import refine
 

@@ -14,8 +14,8 @@ import itertools
 from typing import Any
 
 from designopt.config import RunConfig
-from designopt.indices.master9 import IndexSettings
-from designopt.mechanisms.master9 import DESIGN_KEYS
+from designopt.studies.master9.indices import IndexSettings
+from designopt.studies.master9.mechanism import DESIGN_KEYS
 from designopt.optim.variants import BASE
 
 NUMERIC_PATHS = {

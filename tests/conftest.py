@@ -1,1 +1,6 @@
-import designopt  # noqa: F401  (enables float64 before any test builds arrays)
+"""Tests are the caller: they ask for float64 explicitly (``import designopt`` no longer
+changes JAX's global configuration)."""
+
+import jax
+
+jax.config.update("jax_enable_x64", True)

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from designopt import montecarlo as mc
-from designopt.indices.master9 import IndexSettings, _features, inv_cond_fro_jv, jv_entries
-from designopt.indices.volume import hull_volume, voxel_volume
-from designopt.mechanisms import master9 as m
+from designopt.studies.master9.indices import IndexSettings, _features, inv_cond_fro_jv, jv_entries
+from designopt.studies.master9.volume import hull_volume, voxel_volume
+from designopt.studies.master9 import mechanism as m
 
 PUBLISHED = [(m.PAPER_INITIAL, 696.960), (m.PAPER_FINAL, 691.314)]
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from designopt.kinematics import cond_fro, det3
-from designopt.mechanisms import master9 as m
+from designopt.studies.master9 import mechanism as m
 
 KEY = jax.random.key(0)
 

@@ -15,8 +15,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from designopt.figures import plt, save
-from designopt.indices import master9 as ind
-from designopt.mechanisms import master9 as m
+from designopt.studies.master9 import indices as ind
+from designopt.studies.master9 import mechanism as m
 
 PAIRS = ((0, 1), (0, 2), (1, 2))
 N_GRID = 121

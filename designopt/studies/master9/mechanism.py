@@ -426,9 +426,9 @@ def indices(
 
     Returns gci, gcsei, f_k, gpi, f_p, volume (∫|det J_v| dq, mm³), L, f_l and the
     ``*_se`` standard errors; ``settings`` are fields of
-    ``designopt.indices.master9.IndexSettings`` (measure, sampler, backlash_deg, norm, …).
+    ``designopt.studies.master9.indices.IndexSettings`` (measure, sampler, backlash_deg, norm, …).
     """
-    from designopt.indices.master9 import IndexSettings, swarm_indices
+    from designopt.studies.master9.indices import IndexSettings, swarm_indices
 
     design = {**default_design(), **(design or {})}
     check_design(design)
@@ -442,7 +442,7 @@ def indices(
 
 
 def problem(config: Mapping | None = None):
-    """The study-A problem over (a1, a3, d3); see ``designopt.problems.master9.problem``."""
-    from designopt.problems.master9 import problem as _problem
+    """The study-A problem over (a1, a3, d3); see ``designopt.studies.master9.objective.problem``."""
+    from designopt.studies.master9.objective import problem as _problem
 
     return _problem(config)

@@ -18,8 +18,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from designopt import montecarlo as mc
-from designopt.indices.master9 import IndexSettings, swarm_indices
-from designopt.mechanisms import master9 as m
+from designopt.studies.master9.indices import IndexSettings, swarm_indices
+from designopt.studies.master9 import mechanism as m
 from designopt.problems.base import Problem
 
 SUBOBJECTIVES = ("f_k", "f_l", "f_p")

@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from designopt.mechanisms import master9 as m
+from designopt.studies.master9 import mechanism as m
 
 
 def _cloud(design: Mapping[str, float], n: int, key: jax.Array, limits: np.ndarray) -> np.ndarray:

@@ -20,7 +20,7 @@ import numpy as np
 
 from designopt import montecarlo as mc
 from designopt.kinematics.conditioning import inv_cond
-from designopt.mechanisms.master9 import POSITION_LIMITS
+from designopt.studies.master9.mechanism import POSITION_LIMITS
 
 Array = jnp.ndarray
 LINEAR_KEYS = ("a1", "a3", "a4", "d3")

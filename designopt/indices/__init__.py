@@ -1,1 +1,0 @@
-"""Global performance indices of the case studies (Monte-Carlo workspace integrals)."""

@@ -1,1 +1,0 @@
-"""Mechanisms of the case studies. Each module exposes its kinematics as pure JAX functions."""
