@@ -20,6 +20,8 @@ import numpy as np
 from _timing import best_of, compile_time, header
 
 from designopt import montecarlo as mc
+from designopt.studies.master9 import mechanism as m
+from designopt.studies.master9 import objective as obj
 from designopt.studies.master9.indices import (
     IndexSettings,
     _features,
@@ -27,7 +29,6 @@ from designopt.studies.master9.indices import (
     jv_entries,
     swarm_indices,
 )
-from designopt.studies.master9 import mechanism as m
 
 
 def numpy_dexterity(X: np.ndarray, q: np.ndarray, a4: float) -> tuple[np.ndarray, np.ndarray]:
@@ -82,7 +83,7 @@ def main() -> None:
             ps = mc.power_sums(jnp.abs(det), r)
             return mc.mean(ps).value, mc.std(ps).value
 
-        P = m.problem({"indices": {"n_samples": N, "chunk": N}, "dtype": name, "n_norm": 16})
+        P = obj.problem({"indices": {"n_samples": N, "chunk": N}, "dtype": name, "n_norm": 16})
         full = jax.jit(P.fn)
         key = jax.random.key(0)
         tc_d = compile_time(lambda: dexterity(X, q))

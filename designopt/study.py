@@ -13,13 +13,13 @@ import yaml
 
 from designopt import optim
 from designopt.config import RunConfig, study_dict
-from designopt.studies.master9 import mechanism as master9
 from designopt.problems.base import Problem
 from designopt.refine import refine
+from designopt.studies.master9 import objective
 
 
 def build_problem(cfg: RunConfig) -> Problem:
-    return master9.problem(study_dict(cfg))
+    return objective.problem(study_dict(cfg))
 
 
 def resolved_yaml(cfg: RunConfig) -> str:

@@ -14,9 +14,9 @@ import itertools
 from typing import Any
 
 from designopt.config import RunConfig
+from designopt.optim.variants import BASE
 from designopt.studies.master9.indices import IndexSettings
 from designopt.studies.master9.mechanism import DESIGN_KEYS
-from designopt.optim.variants import BASE
 
 NUMERIC_PATHS = {
     "study.indices.n_samples", "study.indices.backlash_deg", "study.n_norm",

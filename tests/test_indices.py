@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 
 from designopt import montecarlo as mc
+from designopt.studies.master9 import mechanism as m
+from designopt.studies.master9 import objective as obj
 from designopt.studies.master9.indices import IndexSettings, _features, inv_cond_fro_jv, jv_entries
 from designopt.studies.master9.volume import hull_volume, voxel_volume
-from designopt.studies.master9 import mechanism as m
 
 PUBLISHED = [(m.PAPER_INITIAL, 696.960), (m.PAPER_FINAL, 691.314)]
 
@@ -54,7 +55,7 @@ def numpy_indices(design, n, seed, backlash_deg=0.1):
 
 @pytest.mark.parametrize("design,L", PUBLISHED)
 def test_indices_match_independent_numpy_within_4_se(design, L):
-    ind = m.indices(design, n_samples=200_000, key=jax.random.key(1))
+    ind = obj.indices(design, n_samples=200_000, key=jax.random.key(1))
     ref = numpy_indices(design, 200_000, seed=7)
     for k in ("gci", "gcsei", "gpi"):
         se = np.hypot(ind[f"{k}_se"], ref.get(f"{k}_se", ind[f"{k}_se"]))
@@ -66,19 +67,19 @@ def test_indices_match_independent_numpy_within_4_se(design, L):
 
 @pytest.mark.parametrize("design,_", PUBLISHED)
 def test_volume_estimators_agree(design, _):
-    ind = m.indices(design, n_samples=400_000, key=jax.random.key(2))
+    ind = obj.indices(design, n_samples=400_000, key=jax.random.key(2))
     vox = voxel_volume(design, h=4.0)
     assert abs(ind["volume"] - vox) / vox < 0.02
     assert hull_volume(design, n=100_000) >= vox
 
 
 def test_standard_errors_shrink_like_one_over_sqrt_n_and_fixed_key_is_reproducible():
-    a = m.indices(m.PAPER_FINAL, n_samples=20_000, key=jax.random.key(3))
-    b = m.indices(m.PAPER_FINAL, n_samples=320_000, key=jax.random.key(3))
+    a = obj.indices(m.PAPER_FINAL, n_samples=20_000, key=jax.random.key(3))
+    b = obj.indices(m.PAPER_FINAL, n_samples=320_000, key=jax.random.key(3))
     for k in ("gci", "gcsei", "gpi", "volume"):
         ratio = b[f"{k}_se"] / a[f"{k}_se"]
         assert 0.25 * 0.85 < ratio < 0.25 * 1.15, (k, ratio)
-    assert m.indices(m.PAPER_FINAL, n_samples=20_000, key=jax.random.key(3)) == a
+    assert obj.indices(m.PAPER_FINAL, n_samples=20_000, key=jax.random.key(3)) == a
 
 
 def test_unweighted_mean_and_std_se_match_textbook_formulas():
@@ -100,13 +101,13 @@ def test_halton_sampler_is_low_discrepancy_and_in_unit_cube():
     for j in range(3):
         counts = np.histogram(u[:, j], bins=8, range=(0, 1))[0]
         assert np.all(np.abs(counts - 512) <= 6)
-    ind = m.indices(m.PAPER_FINAL, n_samples=65_536, key=jax.random.key(4), sampler="halton")
-    ref = m.indices(m.PAPER_FINAL, n_samples=400_000, key=jax.random.key(5))
+    ind = obj.indices(m.PAPER_FINAL, n_samples=65_536, key=jax.random.key(4), sampler="halton")
+    ref = obj.indices(m.PAPER_FINAL, n_samples=400_000, key=jax.random.key(5))
     assert abs(ind["gci"] - ref["gci"]) < 4 * np.hypot(ind["gci_se"], ref["gci_se"])
 
 
 def test_swarm_evaluation_equals_per_design_rows():
-    P = m.problem({"indices": {"n_samples": 8192}, "n_norm": 16})
+    P = obj.problem({"indices": {"n_samples": 8192}, "n_norm": 16})
     X = jnp.array([[285.997, 280.933, 130.03], [324.238, 317.076, 50.0], [300.0, 260.0, 90.0]])
     f, aux = P.evaluate(X)
     for i in range(3):
@@ -116,7 +117,7 @@ def test_swarm_evaluation_equals_per_design_rows():
 
 
 def test_grad_of_composite_matches_central_differences():
-    P = m.problem({"indices": {"n_samples": 8192}, "n_norm": 16})
+    P = obj.problem({"indices": {"n_samples": 8192}, "n_norm": 16})
     fn = lambda x: P.fn(P.params, x[None], jax.random.key(0))[0][0]  # noqa: E731
     x0 = jnp.array([300.0, 290.0, 100.0])
     g = np.asarray(jax.grad(fn)(x0))
@@ -133,7 +134,7 @@ def test_singular_configuration_contributes_zero_not_nan():
     x0 = {**x, "a3": jnp.array([[0.0]])}  # a3 = 0: J33 = 0 exactly, singular everywhere
     det, r0 = inv_cond_fro_jv(jv_entries(x0, _features(q)))
     assert np.all(np.asarray(r0) == 0.0) and np.all(np.asarray(det) == 0.0)
-    ind = m.indices({**m.PAPER_FINAL, "a3": 0.0}, n_samples=4096)
+    ind = obj.indices({**m.PAPER_FINAL, "a3": 0.0}, n_samples=4096)
     assert not any(np.isnan(v) for v in ind.values())
     assert ind["gci"] == 0.0 and ind["volume"] == 0.0 and ind["f_l"] == np.inf
     g = jax.grad(lambda a: inv_cond_fro_jv(jv_entries({**x, "a3": a}, _features(q)))[1].sum())(
@@ -171,7 +172,7 @@ def test_generic_workspace_average_matches_study_kernel():
 
     lo, hi = m.POSITION_LIMITS[:, 0], m.POSITION_LIMITS[:, 1]
     est, n = mc.workspace_average(g_and_w, jax.random.key(8), lo, hi, 100_000, chunk=25_000)
-    ref = m.indices(d, n_samples=100_000, key=jax.random.key(9))
+    ref = obj.indices(d, n_samples=100_000, key=jax.random.key(9))
     assert n == 100_000
     assert abs(float(est.value) - ref["gci"]) < 4 * np.hypot(float(est.se), ref["gci_se"])
     joint, _ = mc.workspace_average(g_and_w, jax.random.key(8), lo, hi, 100_000, measure="joint")

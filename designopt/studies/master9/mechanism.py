@@ -411,38 +411,3 @@ def sample_joints(key: jax.Array, n: int, dtype=jnp.float64) -> Array:
     lo = jnp.asarray(JOINT_LIMITS[:, 0], dtype)
     hi = jnp.asarray(JOINT_LIMITS[:, 1], dtype)
     return jax.random.uniform(key, (n, 7), dtype, lo, hi)
-
-
-# ---------------------------------------------------------------- indices and problem
-
-
-def indices(
-    design: Mapping[str, float] | None = None,
-    n_samples: int = 200_000,
-    key: jax.Array | None = None,
-    **settings,
-) -> dict[str, float]:
-    """Global indices of one design (seed 000 eq. 35-42) with standard errors.
-
-    Returns gci, gcsei, f_k, gpi, f_p, volume (∫|det J_v| dq, mm³), L, f_l and the
-    ``*_se`` standard errors; ``settings`` are fields of
-    ``designopt.studies.master9.indices.IndexSettings`` (measure, sampler, backlash_deg, norm, …).
-    """
-    from designopt.studies.master9.indices import IndexSettings, swarm_indices
-
-    design = {**default_design(), **(design or {})}
-    check_design(design)
-    s = IndexSettings(n_samples=n_samples, **settings)
-    key = jax.random.key(0) if key is None else key
-    batch = {k: jnp.asarray([v], jnp.float64) for k, v in design.items()}
-    out = jax.jit(lambda d, k: swarm_indices(d, k, s))(batch, key)
-    res = {k: float(v[0]) for k, v in out.items()}
-    res["n_samples"] = s.n_used
-    return res
-
-
-def problem(config: Mapping | None = None):
-    """The study-A problem over (a1, a3, d3); see ``designopt.studies.master9.objective.problem``."""
-    from designopt.studies.master9.objective import problem as _problem
-
-    return _problem(config)

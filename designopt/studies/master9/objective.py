@@ -18,9 +18,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from designopt import montecarlo as mc
-from designopt.studies.master9.indices import IndexSettings, swarm_indices
-from designopt.studies.master9 import mechanism as m
 from designopt.problems.base import Problem
+from designopt.studies.master9 import mechanism as m
+from designopt.studies.master9.indices import IndexSettings, swarm_indices
 
 SUBOBJECTIVES = ("f_k", "f_l", "f_p")
 DEFAULT_VARIABLES = {"a1": (250.0, 350.0), "a3": (250.0, 350.0), "d3": (50.0, 150.0)}
@@ -108,3 +108,27 @@ def problem(config: Mapping[str, Any] | None = None) -> Problem:
         "dtype": dtype.name,
     }
     return Problem(names, lower, upper, fn, params, info)
+
+
+def indices(
+    design: Mapping[str, float] | None = None,
+    n_samples: int = 200_000,
+    key: jax.Array | None = None,
+    **settings,
+) -> dict[str, float]:
+    """Global indices of one design (seed 000 eq. 35-42) with standard errors, in float64.
+
+    Returns gci, gcsei, f_k, gpi, f_p, volume (∫|det J_v| dq, mm³), L, f_l and the
+    ``*_se`` standard errors; ``settings`` are fields of
+    :class:`~designopt.studies.master9.indices.IndexSettings` (measure, sampler,
+    backlash_deg, norm, …). Needs ``jax_enable_x64`` (float64 arrays).
+    """
+    design = {**m.default_design(), **(design or {})}
+    m.check_design(design)
+    s = IndexSettings(n_samples=n_samples, **settings)
+    key = jax.random.key(0) if key is None else key
+    batch = {k: jnp.asarray([v], jnp.float64) for k, v in design.items()}
+    out = jax.jit(lambda d, k: swarm_indices(d, k, s))(batch, key)
+    res = {k: float(v[0]) for k, v in out.items()}
+    res["n_samples"] = s.n_used
+    return res
