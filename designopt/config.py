@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal, Union
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model, field_validator
 
 
 class ConfigError(Exception):
@@ -17,44 +18,13 @@ class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
 
-class Indices(_Strict):
-    n_samples: int = Field(20_000, gt=1)
-    chunk: int = Field(32_768, gt=0)
-    measure: Literal["cartesian", "joint"] = "cartesian"
-    sampler: Literal["uniform", "halton"] = "uniform"
-    backlash_deg: float | list[float] = 0.1
-    norm: Literal["fro", "2"] = "fro"
-    normalized: bool = False
-    weights: list[float] = [4.0, 2.0, 1.0]
-
-
-class Study(_Strict):
-    name: Literal["master9"] = "master9"
-    variables: dict[str, tuple[float, float]] = {
-        "a1": (250, 350),
-        "a3": (250, 350),
-        "d3": (50, 150),
-    }
-    fixed: dict[str, float] = {}
-    indices: Indices = Indices()
-    n_norm: int = Field(64, gt=1)
-
-    @field_validator("variables")
-    @classmethod
-    def _bounds(cls, v: dict[str, tuple[float, float]]) -> dict[str, tuple[float, float]]:
-        for k, (lo, hi) in v.items():
-            if not lo < hi:
-                raise ValueError(f"variables.{k}: lower bound {lo} is not below upper bound {hi}")
-        return v
-
-
 class Optimizer(_Strict):
     name: str = "ptpso"
     n_particles: int = Field(50, ge=2)
     n_iters: int = Field(40, ge=1)
     n_runs: int = Field(1, ge=1)
     bounds: Literal["clip", "reflect", "reinit"] = "clip"
-    settings: dict[str, float] = {}
+    settings: dict[str, float | str] = {}
 
 
 class Refine(_Strict):
@@ -83,14 +53,71 @@ class Sweep(_Strict):
         return v
 
 
-class RunConfig(_Strict):
-    study: Study = Study()
+class Range(_Strict):
+    """An evenly spaced list of values: ``{from: a, to: b, num: n}`` (both ends included)."""
+
+    start: float = Field(alias="from")
+    stop: float = Field(alias="to")
+    num: int = Field(ge=1, le=1_000_000)
+
+    def values(self) -> list[float]:
+        import numpy as np
+
+        return np.linspace(self.start, self.stop, self.num).tolist()
+
+
+class Scan(_Strict):
+    """Designs to score without optimising (``designopt scan``): a ``grid`` (Cartesian
+    product) or ``list`` (zipped) over design variables; the other variables take
+    ``design`` or, if absent there, the middle of their box."""
+
+    mode: Literal["grid", "list"] = "grid"
+    vary: dict[str, list[float] | Range]
+    design: dict[str, float] = {}
+    batch: int = Field(256, ge=1)  # designs per vmapped call
+
+    @field_validator("vary")
+    @classmethod
+    def _nonempty(cls, v: dict[str, list[float] | Range]) -> dict[str, list[float] | Range]:
+        if not v:
+            raise ValueError("needs at least one design variable to vary")
+        for k, vals in v.items():
+            if isinstance(vals, list) and not vals:
+                raise ValueError(f"{k}: needs at least one value")
+        return v
+
+    def lists(self) -> dict[str, list[float]]:
+        return {k: (v.values() if isinstance(v, Range) else list(v)) for k, v in self.vary.items()}
+
+
+class RunConfigBase(_Strict):
+    """Everything but the ``study`` section, whose model comes from the study registry."""
+
     optimizer: Optimizer = Optimizer()
     refine: Refine | None = None
     sweep: Sweep | None = None
+    scan: Scan | None = None
     precision: Literal["float32", "float64"] = "float64"
     seed: int = 0
-    output: str = "results/master9/master9.h5"
+    output: str | None = None  # default results/<study>/<study>.h5
+
+    def output_path(self) -> str:
+        name = self.study.name  # type: ignore[attr-defined]
+        return self.output or f"results/{name}/{name}.h5"
+
+
+@functools.cache
+def _run_config(models: tuple[type[BaseModel], ...]) -> type[RunConfigBase]:
+    union = models[0] if len(models) == 1 else Annotated[Union[models], Field(discriminator="name")]  # noqa: UP007
+    return create_model("RunConfig", __base__=RunConfigBase, study=(union, ...))
+
+
+def run_config_model() -> type[RunConfigBase]:
+    """The run-config model: ``study`` is a union of every registered study's settings,
+    discriminated by ``study.name``."""
+    from designopt.studies import STUDIES
+
+    return _run_config(tuple(s.settings for s in STUDIES.values()))
 
 
 BENCH_FUNCTIONS = ("griewank", "rastrigin", "ackley", "sphere", "rosenbrock", "schwefel226")
@@ -122,8 +149,9 @@ class BenchConfig(_Strict):
     output: str = "results/bench/pso_benchmark.h5"
 
 
-def load(path: str | Path, model: type[BaseModel] = RunConfig) -> tuple[Any, str]:
-    """Parse and validate a config file; returns (config, the file's text)."""
+def load(path: str | Path, model: type[BaseModel] | None = None) -> tuple[Any, str]:
+    """Parse and validate a config file (a run config unless ``model`` says otherwise);
+    returns (config, the file's text)."""
     p = Path(path)
     if not p.is_file():
         raise ConfigError(f"{p}: config file not found")
@@ -132,25 +160,35 @@ def load(path: str | Path, model: type[BaseModel] = RunConfig) -> tuple[Any, str
         raw = yaml.safe_load(text) or {}
     except yaml.YAMLError as e:
         raise ConfigError(f"{p}: malformed YAML: {str(e).splitlines()[0]}") from None
+    return validate(raw, str(p), model), text
+
+
+def validate(raw: Any, where: str, model: type[BaseModel] | None = None) -> Any:
+    """Validate a parsed config (a dict); ConfigError naming ``where`` and the key."""
+    model = run_config_model() if model is None else model
     if not isinstance(raw, dict):
-        raise ConfigError(f"{p}: top level must be a mapping of keys")
+        raise ConfigError(f"{where}: top level must be a mapping of keys")
+    if model is not None and issubclass(model, RunConfigBase) and "study" not in raw:
+        raise ConfigError(f"{where}: key 'study': missing; name a study, e.g. "
+                          f"'study: {{name: master9}}' (`designopt studies` lists them)")  # fmt: skip
     try:
-        cfg = model.model_validate(raw)
+        return model.model_validate(raw)
     except ValidationError as e:
-        err = e.errors()[0]
-        loc = ".".join(str(x) for x in err["loc"])
-        raise ConfigError(f"{p}: key '{loc}': {err['msg']}") from None
-    return cfg, text
+        raise ConfigError(f"{where}: {error_text(e)}") from None
 
 
-def study_dict(cfg: RunConfig) -> dict[str, Any]:
-    s = cfg.study
-    ind = s.indices.model_dump()
-    return {
-        "variables": {k: list(v) for k, v in s.variables.items()},
-        "fixed": s.fixed,
-        "indices": ind,
-        "n_norm": s.n_norm,
-        "dtype": cfg.precision,
-        "seed": cfg.seed,
-    }
+def error_text(e: ValidationError) -> str:
+    """"key 'a.b.c': message" for the first error (study tags dropped from the path)."""
+    from designopt.studies import STUDIES
+
+    err = e.errors()[0]
+    loc = [str(x) for x in err["loc"]]
+    if len(loc) > 1 and loc[0] == "study" and loc[1] in STUDIES:
+        del loc[1]
+    msg = err["msg"]
+    if err["type"] in ("union_tag_invalid", "union_tag_not_found") and loc == ["study"]:
+        name = err["input"].get("name") if isinstance(err["input"], dict) else None
+        loc = ["study", "name"]
+        msg = (f"unknown study {name!r}" if name is not None else "missing") + (
+            f"; known: {sorted(STUDIES)} (`designopt studies` lists them)")
+    return f"key '{'.'.join(loc) or '(top level)'}': {msg}"

@@ -28,10 +28,15 @@ Measure = Literal["cartesian", "joint"]
 _PRIMES = (2, 3, 5, 7, 11, 13, 17, 19, 23, 29, 31, 37)
 
 
+def out_dtype(dtype=None) -> np.dtype:
+    """``dtype``, or the widest float JAX has now (float64 with x64 enabled, else float32)."""
+    return jnp.dtype(dtype) if dtype is not None else jax.dtypes.canonicalize_dtype(jnp.float64)
+
+
 def radical_inverse(index: Array, base: int, n_digits: int) -> Array:
     """Van der Corput radical inverse of integer indices in the given base."""
-    idx = index.astype(jnp.int64)
-    out = jnp.zeros(idx.shape, jnp.float64)
+    idx = jnp.asarray(index).astype(jax.dtypes.canonicalize_dtype(jnp.int64))
+    out = jnp.zeros(idx.shape, jax.dtypes.canonicalize_dtype(jnp.float64))
     f = 1.0 / base
     for _ in range(n_digits):
         out = out + f * (idx % base)
@@ -41,13 +46,14 @@ def radical_inverse(index: Array, base: int, n_digits: int) -> Array:
 
 
 def unit_samples(
-    key: jax.Array, start: Array | int, n: int, dim: int, sampler: Sampler, dtype=jnp.float64
+    key: jax.Array, start: Array | int, n: int, dim: int, sampler: Sampler, dtype=None
 ) -> Array:
     """n points in [0, 1)^dim: rows start .. start+n-1 of the sampler's sequence.
 
     ``uniform``: draws from ``fold_in(key, start)`` (so chunk k of a stream is reproducible).
     ``halton``: Halton points shifted by one uniform vector drawn from ``key`` (mod 1).
     """
+    dtype = out_dtype(dtype)
     if sampler == "uniform":
         return jax.random.uniform(jax.random.fold_in(key, start), (n, dim), dtype)
     if sampler == "halton":
@@ -55,7 +61,7 @@ def unit_samples(
             raise ValueError(f"halton sampler supports up to {len(_PRIMES)} dimensions")
         idx = jnp.asarray(start) + jnp.arange(n) + 1
         cols = [radical_inverse(idx, b, int(np.ceil(40 / np.log2(b)))) for b in _PRIMES[:dim]]
-        shift = jax.random.uniform(key, (dim,), jnp.float64)
+        shift = jax.random.uniform(key, (dim,), out_dtype(None))
         return jnp.mod(jnp.stack(cols, -1) + shift, 1.0).astype(dtype)
     raise ValueError(f"sampler must be 'uniform' or 'halton', got {sampler!r}")
 
@@ -157,7 +163,7 @@ def workspace_average(
     measure: Measure = "cartesian",
     sampler: Sampler = "uniform",
     chunk: int = 65_536,
-    dtype=jnp.float64,
+    dtype=None,
 ) -> tuple[Estimate, int]:
     """Generic ∫_W g dW / ∫_W dW for ``g_and_w(q) -> (g, det_jv)`` on (chunk, dim) samples.
 
@@ -165,6 +171,7 @@ def workspace_average(
     Memory is bounded by ``chunk``; the number of samples used (a multiple of ``chunk``,
     at least ``n_samples``) is returned with the estimate.
     """
+    dtype = out_dtype(dtype)
     lower = jnp.asarray(lower, dtype)
     upper = jnp.asarray(upper, dtype)
     chunk = min(chunk, n_samples)

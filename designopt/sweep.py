@@ -1,11 +1,12 @@
-"""Sweeps: expand a config's ``sweep`` section into members (SPEC §7, issue 5).
+"""Sweeps: expand a config's ``sweep`` section into members (SPEC §7).
 
-A key is a dotted path into the config; short forms are accepted:
-``optimizer.<setting>`` → ``optimizer.settings.<setting>`` (PSO parameters such as gamma),
-``study.<index key>`` → ``study.indices.<key>`` (e.g. backlash_deg), and
-``design.<length>`` → ``study.fixed.<length>`` (e.g. a4). ``grid`` takes the Cartesian
-product of the value lists, ``list`` zips them (equal lengths). Members that differ only
-in optimizer settings share one problem and run as one vmapped batch.
+A key is a dotted path into the config. Short forms: ``optimizer.<setting>`` →
+``optimizer.settings.<setting>`` (the chosen optimizer's numeric settings, e.g. gamma),
+plus the study's own (``Study.sweep_aliases``; master9: ``study.<index key>`` →
+``study.indices.<key>``, ``design.<length>`` → ``study.fixed.<length>``). Any other path
+must name a number of the config. ``grid`` takes the Cartesian product of the value
+lists, ``list`` zips them (equal lengths). Members that differ only in optimizer settings
+share one problem and run as one vmapped batch.
 """
 
 from __future__ import annotations
@@ -13,43 +14,48 @@ from __future__ import annotations
 import itertools
 from typing import Any
 
-from designopt.config import RunConfig
-from designopt.optim.variants import BASE
-from designopt.studies.master9.indices import IndexSettings
-from designopt.studies.master9.mechanism import DESIGN_KEYS
+from designopt.studies import get
 
-NUMERIC_PATHS = {
-    "study.indices.n_samples", "study.indices.backlash_deg", "study.n_norm",
-    "optimizer.n_particles", "optimizer.n_iters", "optimizer.n_runs", "seed",
-}  # fmt: skip
+PREFIX = "optimizer.settings."
 
 
-def canonical(path: str) -> str:
+def _numeric_paths(d: Any, prefix: str = "") -> set[str]:
+    out: set[str] = set()
+    if isinstance(d, dict):
+        for k, v in d.items():
+            out |= _numeric_paths(v, f"{prefix}{k}.")
+    elif isinstance(d, (int, float)) and not isinstance(d, bool):
+        out.add(prefix[:-1])
+    elif isinstance(d, list) and d and all(isinstance(x, (int, float)) for x in d):
+        out.add(prefix[:-1])  # a number or a list (e.g. backlash_deg) may be swept
+    return out
+
+
+def canonical(path: str, cfg: Any) -> str:
     """Resolve the short forms to a full dotted path; ValueError if it names nothing."""
+    from designopt import optim
+
+    settings = set(optim.setting_names(cfg.optimizer.name))
+    aliases = get(cfg.study.name).sweep_aliases(cfg.study)
     parts = path.split(".")
-    if len(parts) == 2 and parts[0] == "optimizer" and parts[1] in BASE:
-        parts = ["optimizer", "settings", parts[1]]
-    elif len(parts) == 2 and parts[0] == "study" and parts[1] in IndexSettings.__dataclass_fields__:
-        parts = ["study", "indices", parts[1]]
-    elif len(parts) == 2 and parts[0] == "design" and parts[1] in DESIGN_KEYS:
-        parts = ["study", "fixed", parts[1]]
-    full = ".".join(parts)
-    ok = (
-        (parts[:2] == ["optimizer", "settings"] and len(parts) == 3 and parts[2] in BASE)
-        or (parts[:2] == ["study", "fixed"] and len(parts) == 3 and parts[2] in DESIGN_KEYS)
-        or full in NUMERIC_PATHS
-    )
-    if not ok:
-        raise ValueError(f"cannot vary '{path}': not a numeric key of the config")
-    return full
+    if len(parts) == 2 and parts[0] == "optimizer" and parts[1] in settings:
+        return PREFIX + parts[1]
+    if path.startswith(PREFIX) and path[len(PREFIX) :] in settings:
+        return path
+    if path in aliases:
+        return aliases[path]
+    numeric = _numeric_paths(cfg.model_dump(by_alias=True)) - {"precision"}
+    if path in numeric and not path.startswith(PREFIX):
+        return path
+    raise ValueError(f"cannot vary '{path}': not a numeric key of the config")
 
 
-def members(cfg: RunConfig) -> list[dict[str, float]]:
+def members(cfg: Any) -> list[dict[str, float]]:
     """The list of {full path: value} overrides the sweep declares."""
     sw = cfg.sweep
     if sw is None:
         return []
-    keys = [canonical(k) for k in sw.vary]
+    keys = [canonical(k, cfg) for k in sw.vary]
     for k in keys:
         if k.startswith("study.fixed.") and k.split(".")[-1] in cfg.study.variables:
             raise ValueError(
@@ -66,9 +72,9 @@ def members(cfg: RunConfig) -> list[dict[str, float]]:
     return [dict(zip(keys, c, strict=True)) for c in combos]
 
 
-def apply(cfg: RunConfig, overrides: dict[str, Any]) -> RunConfig:
+def apply(cfg: Any, overrides: dict[str, Any]) -> Any:
     """A validated copy of ``cfg`` with the overrides set (and no sweep section)."""
-    d = cfg.model_dump()
+    d = cfg.model_dump(by_alias=True)
     d["sweep"] = None
     for path, v in overrides.items():
         node = d
@@ -80,12 +86,11 @@ def apply(cfg: RunConfig, overrides: dict[str, Any]) -> RunConfig:
                 raise ValueError(f"'{path}' takes whole numbers, got {v}")
             v = int(v)
         node[last] = v
-    return RunConfig.model_validate(d)
+    return type(cfg).model_validate(d)
 
 
 def split(overrides: dict[str, Any]) -> tuple[dict[str, Any], dict[str, float]]:
     """(keys that change the problem or the run shape, vmappable optimizer settings)."""
-    prefix = "optimizer.settings."
-    opt = {k.removeprefix(prefix): float(v) for k, v in overrides.items() if k.startswith(prefix)}
-    rest = {k: v for k, v in overrides.items() if not k.startswith(prefix)}
+    opt = {k.removeprefix(PREFIX): float(v) for k, v in overrides.items() if k.startswith(PREFIX)}
+    rest = {k: v for k, v in overrides.items() if not k.startswith(PREFIX)}
     return rest, opt

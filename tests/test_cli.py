@@ -8,6 +8,7 @@ from designopt.cli import main
 
 TINY = """
 study:
+  name: master9
   indices: {n_samples: 2048}
   n_norm: 8
 optimizer: {name: ptpso, n_particles: 8, n_iters: 4, n_runs: 2}

@@ -9,6 +9,7 @@ from designopt.cli import main
 
 TINY = """
 study:
+  name: master9
   indices: {n_samples: 2048}
   n_norm: 8
 optimizer: {name: ptpso, n_particles: 8, n_iters: 6, n_runs: 2}
@@ -149,39 +150,3 @@ def test_interrupted_run_is_marked_incomplete_and_resume_matches(tmp_path, monke
             np.testing.assert_array_equal(a[k][()], r[k][()])
     # resuming with another seed is refused
     assert main(["run", str(cfg), "--quiet", "--resume", "--seed", "5"]) == 2
-
-
-BENCH = """
-bench:
-  functions: [sphere, rastrigin]
-  dim: 5
-  shifted: true
-  variants: [p2, p3, p5]
-  n_particles: 10
-  n_iters: 50
-  n_runs: 12
-precision: float64
-output: OUT
-"""
-
-
-def test_bench_small_suite(tmp_path, capsys):
-    cfg = write(tmp_path, BENCH)
-    assert main(["bench", str(cfg), "--quiet"]) == 0
-    out = capsys.readouterr().out
-    assert "rastrigin_shifted" in out and "p (Holm)" in out
-    a = archive.read(tmp_path / "a.h5")
-    assert a["attrs"]["kind"] == "bench"
-    st = a["bench"]["sphere"]["attrs"]["stats"]["rows"]
-    assert set(st) == {"p2", "p3", "p5"} and "p_holm" in st["p2"] and "p_holm" not in st["p3"]
-    h = a["bench"]["rastrigin"]["p5"]["history"]
-    assert h.shape == (12, 51)
-    assert st["p2"]["mean"] == pytest.approx(a["bench"]["sphere"]["p2"]["best_f"].mean())
-    for n in ("fig10_final_values", "fig11_convergence_iterations", "convergence_curves"):
-        assert (tmp_path / f"{n}.png").exists() and (tmp_path / f"{n}.pdf").exists()
-
-
-def test_bench_bad_variant(tmp_path, capsys):
-    cfg = write(tmp_path, BENCH.replace("[p2, p3, p5]", "[p2, p8]"))
-    assert main(["bench", str(cfg), "--quiet"]) == 2
-    assert "bench.variants.1" in capsys.readouterr().err

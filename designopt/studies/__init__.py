@@ -1,0 +1,40 @@
+"""The study registry: ``STUDIES[name]`` is a :class:`~designopt.studies.base.Study`.
+
+Config, pipeline and CLI reach studies only through this registry. The built-in studies
+register themselves below; a user's own study registers with :func:`register` (before
+loading a config that names it).
+"""
+
+from __future__ import annotations
+
+from designopt.studies.base import STREAMS, Study, StudySettings, key_data, streams
+
+STUDIES: dict[str, Study] = {}
+
+
+def register(study: Study) -> Study:
+    """Add ``study`` to the registry (a name may be registered once)."""
+    if study.name in STUDIES and STUDIES[study.name] is not study:
+        raise ValueError(f"a study named {study.name!r} is already registered")
+    STUDIES[study.name] = study
+    return study
+
+
+def get(name: str) -> Study:
+    """The registered study ``name``; ValueError listing the known ones otherwise."""
+    try:
+        return STUDIES[name]
+    except KeyError:
+        raise ValueError(f"unknown study {name!r}; known: {sorted(STUDIES)}") from None
+
+
+def _builtins() -> None:
+    from designopt.studies import master9, serial
+
+    for mod in (master9, serial):
+        register(mod.STUDY)
+
+
+_builtins()
+
+__all__ = ["STREAMS", "STUDIES", "Study", "StudySettings", "get", "key_data", "register", "streams"]

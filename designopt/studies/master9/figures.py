@@ -9,11 +9,13 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from designopt import montecarlo as mc
 from designopt.figures import plt, save
 from designopt.studies.master9 import indices as ind
 from designopt.studies.master9 import mechanism as m
@@ -48,7 +50,7 @@ def inv_cond_map(x: Mapping[str, float], q: np.ndarray) -> np.ndarray:
 
 def emax_map(x: Mapping[str, float], q: np.ndarray, backlash_deg) -> np.ndarray:
     """Largest tip error (mm) over the backlash box (seed 000 eq. 39) at q (C, 3)."""
-    delta = jnp.deg2rad(jnp.asarray(backlash_deg, jnp.float64))
+    delta = jnp.deg2rad(jnp.asarray(backlash_deg, mc.out_dtype()))
     dP = ind._corner_deltas(jnp.asarray(q), delta)
     return np.asarray(ind.emax({k: v[:, None] for k, v in _design(x).items()}, dP)[0])
 
@@ -102,7 +104,7 @@ def draw(
                 designs, "magma")  # fmt: skip
     out += save(fig, folder, "fig14_backlash_maps")
     fig = plt.figure(figsize=(5.2 * len(designs), 4.6))
-    q3 = np.asarray(m.sample_joints(key, n_cloud))[:, :3]
+    q3 = np.asarray(m.sample_joints(key, n_cloud, mc.out_dtype()))[:, :3]
     for i, (label, x) in enumerate(designs.items()):
         ax = fig.add_subplot(1, len(designs), i + 1, projection="3d")
         full = {**m.default_design(), **{k: float(x[k]) for k in m.DESIGN_KEYS if k in x}}
@@ -119,3 +121,25 @@ def draw(
     fig.suptitle("Workspace of the position mechanism (seed 000 Fig. 15)", fontsize=10)
     out += save(fig, folder, "fig15_workspace")
     return out
+
+
+def draw_run(a: dict[str, Any], folder: Path) -> list[Path]:
+    """Fig. 12-15 of a run archive (read by ``designopt.archive.read``) into ``folder``:
+    the initial design of the best run (iteration 0) against the final design."""
+    cfg = a["attrs"]["config_resolved"]
+    names = [n.decode() for n in a["problem"]["names"]]
+    fixed = a["problem"]["attrs"]["info"]["fixed"]
+    br = a["best_run"]
+    run = int(br["attrs"]["run_index"])
+    x0 = a["optimizer"]["history_x"][run, 0]
+    xf = a["final"]["x"]
+    designs = {
+        "initial (iteration 0)": {**fixed, **dict(zip(names, x0, strict=True)),
+                                  "volume": float(br["volume"][0])},
+        "final": {**fixed, **dict(zip(names, xf, strict=True)),
+                  "volume": float(a["final"]["volume"])},
+    }  # fmt: skip
+    bl = cfg["study"]["indices"]["backlash_deg"]
+    bl = bl if isinstance(bl, list) else [bl] * 3
+    key = jax.random.wrap_key_data(np.asarray(a["attrs"]["keys"]["figures"], np.uint32))
+    return draw(folder, br["iteration"], br, designs, bl, key)

@@ -159,7 +159,8 @@ def _chunk_sums(x, q, delta, s: IndexSettings):
     return mc.power_sums(w, r), mc.power_sums(w, e), mc.power_sums(adet, jnp.ones_like(adet))
 
 
-def index_sums(x: dict[str, Array], key: jax.Array, s: IndexSettings, dtype=jnp.float64):
+def index_sums(x: dict[str, Array], key: jax.Array, s: IndexSettings, dtype=None):
+    dtype = mc.out_dtype(dtype)
     """Accumulated power sums for (1/k, e_max, |det J_v|) over all samples, per design."""
     lo, hi = s.box
     lo, hi = jnp.asarray(lo, dtype), jnp.asarray(hi, dtype)
@@ -182,9 +183,10 @@ def index_sums(x: dict[str, Array], key: jax.Array, s: IndexSettings, dtype=jnp.
 
 
 def swarm_indices(
-    design: dict[str, Array], key: jax.Array, s: IndexSettings, dtype=jnp.float64
+    design: dict[str, Array], key: jax.Array, s: IndexSettings, dtype=None
 ) -> dict[str, Array]:
     """All indices of eq. (35)-(42) for a swarm: design values of shape (M,). Returns (M,) arrays."""
+    dtype = mc.out_dtype(dtype)
     ps_k, ps_p, ps_v = index_sums(design, key, s, dtype)
     lo, hi = s.box
     qvol = float(np.prod(hi - lo))

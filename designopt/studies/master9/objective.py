@@ -1,6 +1,7 @@
 """Study A as a problem: the 9-DOF master's composite objective (seed 000 eq. 43, SPEC §3.2).
 
 f = w_k·norm(f_k) + w_l·norm(f_l) + w_p·norm(f_p), norm(x) = (x - x_min)/(x_max - x_min),
+with ``f_se`` = Σ |w_i| se_i/(x_max − x_min) an upper bound of f's standard error,
 weights (4, 2, 1) as in eq. (43). The seed does not say where x_min/x_max come from: we
 score a space-filling (Halton) sample of ``n_norm`` designs over the design box once,
 before optimising, and keep the bounds fixed (they are returned in ``problem.info`` and
@@ -19,8 +20,10 @@ import numpy as np
 
 from designopt import montecarlo as mc
 from designopt.problems.base import Problem
+from designopt.studies.base import streams
 from designopt.studies.master9 import mechanism as m
 from designopt.studies.master9.indices import IndexSettings, swarm_indices
+from designopt.studies.master9.settings import Master9Settings
 
 SUBOBJECTIVES = ("f_k", "f_l", "f_p")
 DEFAULT_VARIABLES = {"a1": (250.0, 350.0), "a3": (250.0, 350.0), "d3": (50.0, 150.0)}
@@ -34,74 +37,85 @@ def _full_design(params: Mapping[str, Any], X, names) -> dict:
     return d
 
 
-def build_fn(names: tuple[str, ...], settings: IndexSettings, dtype, resample: bool = False):
-    """The pure swarm objective fn(params, X, key) for these design variables."""
+def build_fn(names: tuple[str, ...], settings: IndexSettings, dtype):
+    """The pure swarm objective fn(params, X, key) for these design variables; the
+    Monte-Carlo samples come from ``params["sample_key"]`` (common random numbers)."""
 
     def fn(params, X, key):
         X = X.astype(dtype)
         d = _full_design(params, X, names)
-        k = key if resample else params["sample_key"]
-        ind = swarm_indices(d, k, settings, dtype)
+        ind = swarm_indices(d, params["sample_key"], settings, dtype)
         b = params["bounds"]  # (3, 2): rows f_k, f_l, f_p; cols min, max
         w = params["weights"]
         f = sum(
             w[i] * (ind[n] - b[i, 0]) / (b[i, 1] - b[i, 0]) for i, n in enumerate(SUBOBJECTIVES)
         )
-        return f, ind
+        # the sub-objectives share samples: Σ |w_i| se_i / span_i bounds f's standard error
+        f_se = sum(
+            jnp.abs(w[i]) * ind[n + "_se"] / jnp.abs(b[i, 1] - b[i, 0])
+            for i, n in enumerate(SUBOBJECTIVES)
+        )
+        return f, ind | {"f_se": f_se}
 
     return fn
 
 
-def problem(config: Mapping[str, Any] | None = None) -> Problem:
-    """Build the study-A problem from a plain dict (the ``study`` section of a config).
+def problem(
+    settings: Master9Settings | Mapping[str, Any] | None = None,
+    keys: Mapping[str, jax.Array] | None = None,
+    dtype: Any = None,
+) -> Problem:
+    """The study-A problem (eq. 43) for the ``study:`` settings of a config.
 
-    Keys (all optional): ``variables`` {name: [lo, hi]} in mm (default a1, a3 ∈ [250, 350],
-    d3 ∈ [50, 150]); ``fixed`` {name: value} overriding ``default_design()``; ``indices``
-    (fields of IndexSettings); ``n_norm`` (designs for the normalisation bounds, 64);
-    ``dtype`` ('float32'/'float64'); ``seed`` (sample key); ``resample`` (fresh samples
-    from the optimizer's key at each call instead of one fixed set; default False).
+    ``settings`` is a :class:`Master9Settings` or a plain mapping of the same keys
+    (``variables``, ``fixed``, ``indices``, ``n_norm``; for scripts also ``dtype`` and
+    ``seed``). ``keys`` holds the named streams of ``designopt.studies.streams`` (the
+    Monte-Carlo samples from ``samples``, the Halton shift of the normalisation designs
+    from ``normalisation``); default ``streams(seed)``. ``dtype`` defaults to float64 when
+    x64 is enabled, else float32.
     """
-    config = dict(config or {})
-    variables = {
-        k: tuple(map(float, v)) for k, v in config.get("variables", DEFAULT_VARIABLES).items()
-    }
-    unknown = [k for k in variables if k not in m.DESIGN_KEYS]
-    if unknown:
-        raise ValueError(f"unknown design variable(s) {unknown}; allowed {list(m.DESIGN_KEYS)}")
-    fixed = {**m.default_design(), **{k: float(v) for k, v in config.get("fixed", {}).items()}}
+    if not isinstance(settings, Master9Settings):
+        cfg = dict(settings or {})
+        dtype = cfg.pop("dtype", dtype)
+        seed = int(cfg.pop("seed", 0))
+        keys = streams(seed) if keys is None else keys
+        settings = Master9Settings.model_validate({"name": "master9", **cfg})
+    keys = streams(0) if keys is None else keys
+    if dtype is None:
+        dtype = jnp.float64 if jax.config.jax_enable_x64 else jnp.float32
+    dtype = jnp.dtype(dtype)
+    variables = {k: tuple(map(float, v)) for k, v in settings.variables.items()}
+    fixed = {**m.default_design(), **{k: float(v) for k, v in settings.fixed.items()}}
     m.check_design(fixed)
-    ind_cfg = dict(config.get("indices", {}))
+    ind_cfg = settings.indices.model_dump()
     for k in ("backlash_deg", "weights"):
-        if k in ind_cfg and not isinstance(ind_cfg[k], (list, tuple)):
-            ind_cfg[k] = (float(ind_cfg[k]),) * 3
-        if k in ind_cfg:
-            ind_cfg[k] = tuple(float(v) for v in ind_cfg[k])
-    settings = IndexSettings(**ind_cfg)
-    dtype = jnp.dtype(config.get("dtype", "float64"))
+        v = ind_cfg[k]
+        ind_cfg[k] = tuple(float(x) for x in v) if isinstance(v, (list, tuple)) else (float(v),) * 3
+    ind = IndexSettings(**ind_cfg)
     names = tuple(variables)
     lower = np.array([variables[n][0] for n in names])
     upper = np.array([variables[n][1] for n in names])
-    sample_key = jax.random.key(int(config.get("seed", 0)))
-    fn = build_fn(names, settings, dtype, bool(config.get("resample", False)))
+    sample_key = keys["samples"]
+    fn = build_fn(names, ind, dtype)
     fixed_free = {k: v for k, v in fixed.items() if k not in names}
 
     # normalisation bounds from a Halton sample of the design box (fixed during the run)
-    n_norm = int(config.get("n_norm", 64))
-    u = mc.unit_samples(jax.random.key(12345), 0, n_norm, len(names), "halton")
-    Xn = jnp.asarray(lower) + jnp.asarray(upper - lower) * u
+    n_norm = settings.n_norm
+    u = mc.unit_samples(keys["normalisation"], 0, n_norm, len(names), "halton", dtype)
+    Xn = jnp.asarray(lower, dtype) + jnp.asarray(upper - lower, dtype) * u
     probe = {
-        "fixed": fixed_free,
+        "fixed": {k: jnp.asarray(v, dtype) for k, v in fixed_free.items()},
         "sample_key": sample_key,
-        "bounds": jnp.array([[0.0, 1.0]] * 3),
-        "weights": jnp.asarray(settings.weights),
+        "bounds": jnp.array([[0.0, 1.0]] * 3, dtype),
+        "weights": jnp.asarray(ind.weights, dtype),
     }
-    _, ind = jax.jit(fn)(probe, Xn, sample_key)
-    bounds = np.array([[float(ind[n].min()), float(ind[n].max())] for n in SUBOBJECTIVES])
-    params = {**probe, "bounds": jnp.asarray(bounds)}
+    _, sub = jax.jit(fn)(probe, Xn, sample_key)
+    bounds = np.array([[float(sub[n].min()), float(sub[n].max())] for n in SUBOBJECTIVES])
+    params = {**probe, "bounds": jnp.asarray(bounds, dtype)}
     info = {
         "study": "master9",
-        "settings": asdict(settings),
-        "n_samples_used": settings.n_used,
+        "settings": asdict(ind),
+        "n_samples_used": ind.n_used,
         "fixed": fixed_free,
         "norm_bounds": {n: bounds[i].tolist() for i, n in enumerate(SUBOBJECTIVES)},
         "n_norm": n_norm,

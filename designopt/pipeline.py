@@ -1,0 +1,506 @@
+"""What a run does, for any registered study: set-up, optimise with checkpoints, score,
+archive, figures; and the scoring-only paths ``evaluate`` and ``scan`` (docs/architecture.md).
+
+The CLI parses arguments, calls these functions and prints what they return. Everything
+here reaches studies through the registry (``designopt.studies``) and optimizers through
+``designopt.optim``; the typed config flows down unchanged. One root key ``key(seed)`` is
+split once into named streams (``designopt.studies.STREAMS``), which are archived.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import itertools
+import os
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import yaml
+
+from designopt import archive
+from designopt.config import ConfigError, load, validate
+from designopt.problems.base import Problem
+from designopt.studies import Study, get, key_data, streams
+from designopt.timing import Stopwatch
+
+Progress = Callable[[int, str], contextlib.AbstractContextManager[Callable[[int], None]]]
+
+
+class Interrupted(Exception):
+    """Ctrl-C during a run; the message says what was kept."""
+
+
+@contextlib.contextmanager
+def _no_progress(total: int, desc: str) -> Iterator[Callable[[int], None]]:
+    yield lambda n: None
+
+
+# ----------------------------------------------------------------------------- set-up
+
+
+def study_of(cfg: Any) -> Study:
+    return get(cfg.study.name)
+
+
+def dtype_of(cfg: Any) -> np.dtype:
+    """The config's precision; float64 needs JAX's x64 mode (the CLI turns it on, a script
+    must call ``jax.config.update("jax_enable_x64", True)`` itself)."""
+    if cfg.precision == "float64" and not jax.config.jax_enable_x64:
+        raise ConfigError(
+            "key 'precision': float64 needs JAX's 64-bit mode; call "
+            "jax.config.update('jax_enable_x64', True) before using designopt from Python"
+        )
+    return jnp.dtype(cfg.precision)
+
+
+def resolved_yaml(cfg: Any) -> str:
+    return yaml.safe_dump(cfg.model_dump(mode="json", by_alias=True), sort_keys=False)
+
+
+def build_problem(cfg: Any, keys: Mapping[str, jax.Array], where: str = "config") -> Problem:
+    """The study's Problem for this config; a ValueError becomes a ConfigError."""
+    try:
+        return study_of(cfg).problem(cfg.study, keys, dtype_of(cfg))
+    except ValueError as e:
+        raise ConfigError(f"{where}: study: {e}") from None
+
+
+def check_optimizer(cfg: Any, where: str) -> None:
+    from designopt import optim
+
+    o = cfg.optimizer
+    try:
+        optim.validate(o.name, dict(o.settings), o.n_particles)
+    except ValueError as e:
+        raise ConfigError(f"{where}: key 'optimizer': {e}") from None
+
+
+def check_output(path: Path) -> None:
+    """Create the output folder; ConfigError if it cannot be created or written."""
+    parent = path.parent if str(path.parent) else Path(".")
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise ConfigError(f"output '{path}': cannot create folder ({e.strerror})") from None
+    if not os.access(parent, os.W_OK):
+        raise ConfigError(f"output '{path}': folder is not writable")
+
+
+def base_attrs(kind: str, cfg: Any, text: str, keys: Mapping[str, jax.Array]) -> dict[str, Any]:
+    return {"kind": kind, "study": cfg.study.name, "config_yaml": text,
+            "config_resolved_yaml": resolved_yaml(cfg),
+            "config_resolved": cfg.model_dump_json(by_alias=True), "seed": cfg.seed,
+            "keys": key_data(keys)}  # fmt: skip
+
+
+# ------------------------------------------------------------------------ optimise
+
+
+def optimise(cfg: Any, problem: Problem, key: jax.Array,
+             members: list[dict[str, float]] | None = None,
+             progress: Callable[[int], None] | None = None,
+             checkpoint: Callable[[Any], None] | None = None,
+             resume: Any = None) -> Any:  # fmt: skip
+    """The configured optimizer on ``problem``; with ``members`` (overrides of optimizer
+    settings) one vmapped batch on common keys."""
+    from designopt import optim
+
+    o = cfg.optimizer
+    common = dict(n_particles=o.n_particles, n_iters=o.n_iters, n_runs=o.n_runs, bounds=o.bounds,
+                  dtype=dtype_of(cfg), chunk_iters=max(1, o.n_iters // 20),
+                  progress=progress, checkpoint=checkpoint, resume=resume)  # fmt: skip
+    if members is None:
+        return optim.run(o.name, problem, key, **common, **o.settings)
+    return optim.run_batch(o.name, problem, key, [o.settings | m for m in members], **common)
+
+
+def score(problem: Problem, X: np.ndarray, batch: int | None = None) -> dict[str, np.ndarray]:
+    """f and every index (with standard errors) of designs X (n, D), in vmapped batches of
+    a fixed size (the last one padded), so one compiled program serves any n."""
+    X = np.asarray(X, np.float64)
+    n = X.shape[0]
+    b = n if batch is None else max(1, min(batch, n))
+    fn = _scorer(problem.fn)
+    outs = []
+    for i in range(0, n, b):
+        Xi = X[i : i + b]
+        pad = b - Xi.shape[0]
+        if pad:
+            Xi = np.concatenate([Xi, np.repeat(Xi[-1:], pad, 0)])
+        f, sub = fn(problem.params, jnp.asarray(Xi), jax.random.key(0))
+        outs.append({"f": np.asarray(f)[: b - pad]} | {k: np.asarray(v)[: b - pad] for k, v in sub.items()})
+    return {k: np.concatenate([o[k] for o in outs]) for k in outs[0]}
+
+
+_SCORERS: dict[Any, Any] = {}
+
+
+def _scorer(fn: Callable) -> Callable:
+    if fn not in _SCORERS:
+        _SCORERS[fn] = jax.jit(fn)
+    return _SCORERS[fn]
+
+
+def result_tree(cfg: Any, problem: Problem, res: Any) -> dict[str, Any]:
+    """Archive groups of one (unbatched) run: optimizer, best_run, refine, final, problem."""
+    from designopt.refine import refine
+
+    best = int(np.argmin(res.best_f))
+    sub_hist = score(problem, res.history_x[best])
+    tree: dict[str, Any] = {
+        "optimizer": {
+            "history": res.history, "best_f": res.best_f, "best_x": res.best_x,
+            "converged_at": res.converged_at, "history_x": res.history_x,
+            "attrs": {"settings": res.settings},
+        },
+        "best_run": sub_hist | {"iteration": np.arange(res.history.shape[-1]),
+                                "attrs": {"run_index": best}},
+        "problem": {
+            "names": np.array(problem.names, dtype="S"), "lower": problem.lower,
+            "upper": problem.upper, "attrs": {"info": problem.info},
+        },
+    }  # fmt: skip
+    if isinstance(problem.params, Mapping) and "bounds" in problem.params:
+        tree["problem"]["norm_bounds"] = np.asarray(problem.params["bounds"])
+    x_final = res.best_x[best][None]
+    stage = "optimizer"
+    if cfg.refine is not None:
+        r = cfg.refine
+        order = np.argsort(res.best_f)[: r.n_best]
+        rr = refine(problem, res.best_x[order], r.steps, r.learning_rate, r.method,
+                    dtype=dtype_of(cfg))  # fmt: skip
+        tree["refine"] = {
+            "run_index": order, "x0": rr.x0, "f0": rr.f0, "x": rr.x, "f": rr.f,
+            "history": rr.history, "gain": rr.gain,
+            "attrs": {"method": r.method, "steps": r.steps, "learning_rate": r.learning_rate},
+        }  # fmt: skip
+        if rr.f.min() < res.best_f[best]:
+            x_final, stage = rr.x[np.argmin(rr.f)][None], "refine"
+    fin = {k: v[0] for k, v in score(problem, x_final).items()}
+    tree["final"] = fin | {"x": x_final[0], "attrs": {"stage": stage,
+                           "n_samples_used": problem.info.get("n_samples_used", 0)}}  # fmt: skip
+    return tree
+
+
+def _pm(name: str, v: float, se: float | None) -> str:
+    if se is None:
+        return f"  {name:<5} = {v:.5g}"
+    rel = f"({100 * se / abs(v):.2f} %)" if v else ""
+    return f"  {name:<5} = {v:.5f} ± {se:.1e} {rel}"
+
+
+def summary_lines(cfg: Any, problem: Problem, tree: dict[str, Any]) -> list[str]:
+    """The run summary: the best design, f, what the polish gained, the study's
+    sub-objectives with ± SE."""
+    st = study_of(cfg)
+    units = st.units(cfg.study)
+    fin = tree["final"]
+    best = tree["best_run"]["attrs"]["run_index"]
+    opt = tree["optimizer"]
+    lines = [f"best design (run {best} of {cfg.optimizer.n_runs}; final stage: "
+             f"{fin['attrs']['stage']}):"]  # fmt: skip
+    lines += [f"  {n} = {v:9.4f} {units.get(n, '')}".rstrip()
+              for n, v in zip(problem.names, fin["x"], strict=True)]  # fmt: skip
+    lines.append(f"  f     = {float(fin['f']):.5f}   ({cfg.optimizer.name} {opt['best_f'][best]:.5f}, "
+                 f"converged at iteration {opt['converged_at'][best]})")  # fmt: skip
+    if "refine" in tree:
+        g = tree["refine"]["gain"]
+        lines.append(f"  polish ({tree['refine']['attrs']['method']}, "
+                     f"{tree['refine']['attrs']['steps']} steps) gained Δf = {g.max():.2e}")  # fmt: skip
+    for k in st.summary(cfg.study):
+        se = fin.get(k + "_se")
+        lines.append(_pm(k, float(fin[k]), None if se is None else float(se)))
+    lines += st.extra_lines(cfg.study, fin)
+    return lines
+
+
+# ------------------------------------------------------------------------------ run
+
+
+def load_checkpoint(partial: Path, resolved: str) -> Any:
+    import h5py
+
+    from designopt.optim import Checkpoint
+
+    if not partial.is_file():
+        raise ConfigError(f"{partial}: no interrupted run to resume")
+    try:
+        with h5py.File(partial, "r") as h:
+            if h.attrs.get("config_resolved") != resolved:
+                raise ConfigError(
+                    f"{partial}: the interrupted run used a different config or seed; "
+                    "run without --resume to start afresh"
+                )
+            c = h["checkpoint"]
+            state = {k: v[()] for k, v in c["state"].items()}
+            return Checkpoint(state, c["history"][()], c["history_x"][()], int(c.attrs["done"]))
+    except (OSError, KeyError) as e:
+        raise ConfigError(f"{partial}: not a readable checkpoint ({e})") from None
+
+
+@dataclass
+class Report:
+    """What a command did: the archive written, the lines to print, timings."""
+
+    out: Path
+    lines: list[str] = field(default_factory=list)
+    attrs: dict[str, Any] = field(default_factory=dict)
+    tree: dict[str, Any] = field(default_factory=dict)
+
+
+def run(cfg: Any, text: str, where: str, out: Path, resume: bool = False,
+        progress: Progress = _no_progress, resume_hint: str = "") -> Report:  # fmt: skip
+    """One study run: problem, optimizer (checkpoint after every chunk to
+    ``<out>.partial.h5``), optional polish, final scoring, archive."""
+    if cfg.sweep is not None:
+        raise ConfigError(f"{where}: key 'sweep': this config declares a sweep; "
+                          "run it with `designopt sweep`")  # fmt: skip
+    check_output(out)
+    check_optimizer(cfg, where)
+    dtype_of(cfg)
+    keys = streams(cfg.seed)
+    resolved = cfg.model_dump_json(by_alias=True)
+    partial = archive.partial_path(out)
+    ck = load_checkpoint(partial, resolved) if resume else None
+    attrs = base_attrs("run", cfg, text, keys)
+
+    def checkpoint(c: Any) -> None:
+        tree = {"checkpoint": {"state": c.state, "history": c.history,
+                               "history_x": c.history_x, "attrs": {"done": c.done}}}  # fmt: skip
+        archive.write(partial, tree, attrs, complete=False)
+
+    o = cfg.optimizer
+    with Stopwatch() as total:
+        with Stopwatch() as setup:
+            problem = build_problem(cfg, keys, where)
+        with Stopwatch() as opt, progress(o.n_iters, f"{o.name} on {cfg.study.name}") as bar:
+            try:
+                res = optimise(cfg, problem, keys["optimizer"], progress=bar,
+                               checkpoint=checkpoint, resume=ck)  # fmt: skip
+            except KeyboardInterrupt:
+                raise Interrupted(
+                    f"finished part kept in {partial} (complete = False); continue with "
+                    f"`{resume_hint or 'designopt run CONFIG'} --resume`"
+                    if partial.is_file()
+                    else "no archive written"
+                ) from None
+        with Stopwatch() as post:
+            tree = result_tree(cfg, problem, res)
+    attrs |= {"wall_time_s": total.wall, "compile_time_s": total.compile,
+              "run_time_s": total.run, "setup_time_s": setup.wall, "optimizer_time_s": opt.wall,
+              "post_time_s": post.wall, "resumed_from": ck.done if ck else -1}  # fmt: skip
+    archive.write(out, tree, attrs)
+    partial.unlink(missing_ok=True)
+    lines = summary_lines(cfg, problem, tree)
+    lines.append(f"samples per design: {problem.info.get('n_samples_used', '-')}; wall "
+                 f"{total.wall:.1f} s = compile {total.compile:.1f} s + run {total.run:.1f} s "
+                 f"(setup {setup.wall:.1f} s, optimizer {opt.wall:.1f} s, "
+                 f"scoring/polish {post.wall:.1f} s)")  # fmt: skip
+    return Report(out, lines, attrs, tree)
+
+
+# ---------------------------------------------------------------------------- sweep
+
+
+def sweep(cfg: Any, text: str, where: str, out: Path,
+          progress: Progress = _no_progress) -> Report:  # fmt: skip
+    """Every member of the config's ``sweep:`` section; members that differ only in
+    optimizer settings run as one vmapped batch on common keys."""
+    from pydantic import ValidationError
+
+    from designopt import sweep as sw
+    from designopt.config import error_text
+
+    if cfg.sweep is None:
+        raise ConfigError(f"{where}: key 'sweep': missing; `designopt sweep` needs one "
+                          "(docs/configs.md)")  # fmt: skip
+    try:
+        members = sw.members(cfg)
+        groups: dict[str, list[tuple[int, dict]]] = {}
+        cfgs = {}
+        for i, m in enumerate(members):
+            rest, _ = sw.split(m)
+            k = repr(sorted(rest.items()))
+            cfgs.setdefault(k, sw.apply(cfg, rest))
+            groups.setdefault(k, []).append((i, m))
+    except ValidationError as e:
+        raise ConfigError(f"{where}: key 'sweep.vary' → {error_text(e)}") from None
+    except ValueError as e:
+        raise ConfigError(f"{where}: key 'sweep.vary': {e}") from None
+    check_output(out)
+    for c in cfgs.values():
+        check_optimizer(c, where)
+        dtype_of(c)
+    root_keys = streams(cfg.seed)
+    tree: dict = {"members": {}}
+    lines = []
+    rows = []
+    total_it = sum(cfgs[k].optimizer.n_iters for k in groups)
+    with Stopwatch() as total, progress(total_it, "sweep") as bar:
+        for k, mem in groups.items():
+            c = cfgs[k]
+            keys = streams(c.seed)
+            problem = build_problem(c, keys, where)
+            opt_sets = [sw.split(m)[1] for _, m in mem]
+            res = optimise(c, problem, keys["optimizer"], members=opt_sets, progress=bar)
+            for j, (i, m) in enumerate(mem):
+                sets = {a: (b[j] if isinstance(b, list) else b) for a, b in res.settings.items()}
+                one = type(res)(*(v[j] for v in res[:5]), sets)
+                t = result_tree(c, problem, one)
+                t["attrs"] = {"overrides": m,
+                              "config_resolved_yaml": resolved_yaml(sw.apply(cfg, m))}  # fmt: skip
+                tree["members"][f"{i:03d}"] = t
+                rows.append((i, m, t["final"]))
+    attrs = base_attrs("sweep", cfg, text, root_keys) | {
+        "n_members": len(members), "wall_time_s": total.wall, "compile_time_s": total.compile,
+        "run_time_s": total.run, "vmapped_batches": len(groups)}  # fmt: skip
+    archive.write(out, tree, attrs)
+    lines.append(f"{len(members)} members in {len(groups)} vmapped batch(es); wall "
+                 f"{total.wall:.1f} s (compile {total.compile:.1f} s, run {total.run:.1f} s)")  # fmt: skip
+    subs = study_of(cfg).summary(cfg.study)[:3]
+    for i, m, fin in sorted(rows, key=lambda r: r[0]):
+        keys_txt = ", ".join(f"{k} = {v:g}" for k, v in m.items())
+        vals = ", ".join(f"{s} = {float(fin[s]):.4f}" for s in subs)
+        lines.append(f"  [{i:3d}] {keys_txt}:  f = {float(fin['f']):.5f}, {vals}")
+    return Report(out, lines, attrs, tree)
+
+
+# ------------------------------------------------------------------ evaluate / scan
+
+
+def _designs(cfg: Any, problem: Problem, designs: Mapping[str, Any] | Sequence[Mapping[str, Any]],
+             where: str) -> np.ndarray:  # fmt: skip
+    """(n, D) design matrix from {name: value or array} (or a list of such dicts); a
+    variable not given takes the middle of its box."""
+    rows = [designs] if isinstance(designs, Mapping) else list(designs)
+    out = []
+    for d in rows:
+        bad = [k for k in d if k not in problem.names]
+        if bad:
+            raise ConfigError(f"{where}: design variable(s) {bad} not in this study's "
+                              f"variables {list(problem.names)}")  # fmt: skip
+        cols = [np.asarray(d.get(n, 0.5 * (lo + hi)), np.float64)
+                for n, lo, hi in zip(problem.names, problem.lower, problem.upper, strict=True)]  # fmt: skip
+        shape = np.broadcast_shapes(*[c.shape for c in cols])
+        out.append(np.stack([np.broadcast_to(c, shape).reshape(-1) for c in cols], -1))
+    return np.concatenate(out)
+
+
+def evaluate(config: Any, designs: Mapping[str, Any] | Sequence[Mapping[str, Any]],
+             where: str | None = None) -> dict[str, Any]:  # fmt: skip
+    """Every index of the given design(s) with its standard error, without optimising.
+
+    ``config`` is a config path, a parsed config dict or a validated config; ``designs``
+    maps variable names to values (scalars, or arrays that broadcast: one design per
+    element), or is a list of such dicts; unspecified variables take the middle of their
+    box. Returns {index: value, index_se: value, ...}: floats for one design, arrays
+    otherwise. float64 configs need x64 enabled (see ``dtype_of``).
+    """
+    if isinstance(config, (str, os.PathLike)):
+        where = where or str(config)
+        cfg, _ = load(config)
+    elif isinstance(config, Mapping):
+        where = where or "config"
+        cfg = validate(dict(config), where)
+    else:
+        cfg, where = config, where or "config"
+    keys = streams(cfg.seed)
+    problem = build_problem(cfg, keys, where)
+    X = _designs(cfg, problem, designs, where)
+    res = score(problem, X, batch=cfg.scan.batch if cfg.scan else 256)
+    out: dict[str, Any] = {n: X[:, i] for i, n in enumerate(problem.names)} | res
+    if X.shape[0] == 1:
+        return {k: float(v[0]) for k, v in out.items()}
+    return out
+
+
+def scan_designs(cfg: Any, problem: Problem, where: str) -> tuple[list[str], np.ndarray]:
+    """The (names varied, (n, D) designs) of the config's ``scan:`` section."""
+    sc = cfg.scan
+    if sc is None:
+        raise ConfigError(f"{where}: key 'scan': missing; `designopt scan` needs one "
+                          "(docs/configs.md)")  # fmt: skip
+    lists = sc.lists()
+    for k in list(lists) + list(sc.design):
+        if k not in problem.names:
+            sect = "vary" if k in lists else "design"
+            raise ConfigError(f"{where}: key 'scan.{sect}.{k}': not a design variable of this "
+                              f"study; variables: {list(problem.names)}")  # fmt: skip
+    names = list(lists)
+    if sc.mode == "grid":
+        combos = list(itertools.product(*lists.values()))
+    else:
+        if len({len(v) for v in lists.values()}) != 1:
+            raise ConfigError(f"{where}: key 'scan.vary': mode 'list' needs value lists of "
+                              "equal length")  # fmt: skip
+        combos = list(zip(*lists.values(), strict=True))
+    base = {n: sc.design.get(n, 0.5 * (lo + hi))
+            for n, lo, hi in zip(problem.names, problem.lower, problem.upper, strict=True)}  # fmt: skip
+    X = np.array([[dict(zip(names, c, strict=True)).get(n, base[n]) for n in problem.names]
+                  for c in combos], np.float64)  # fmt: skip
+    return names, X
+
+
+def scan(cfg: Any, text: str, where: str, out: Path,
+         progress: Progress = _no_progress) -> Report:  # fmt: skip
+    """Score the designs of the config's ``scan:`` section in vmapped batches; archive
+    ``scan/names``, ``scan/x``, ``scan/<index>`` and ``scan/<index>_se``."""
+    check_output(out)
+    dtype_of(cfg)
+    keys = streams(cfg.seed)
+    with Stopwatch() as total:
+        problem = build_problem(cfg, keys, where)
+        varied, X = scan_designs(cfg, problem, where)
+        b = cfg.scan.batch
+        parts = []
+        with progress(X.shape[0], "scan") as bar:
+            for i in range(0, X.shape[0], b):
+                parts.append(score(problem, X[i : i + b], batch=b))
+                bar(min(b, X.shape[0] - i))
+        res = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    tree = {"scan": {"names": np.array(problem.names, dtype="S"), "x": X,
+                     "varied": np.array(varied, dtype="S"), **res,
+                     "attrs": {"mode": cfg.scan.mode, "shape": [len(v) for v in cfg.scan.lists().values()]}},
+            "problem": {"names": np.array(problem.names, dtype="S"), "lower": problem.lower,
+                        "upper": problem.upper, "attrs": {"info": problem.info}}}  # fmt: skip
+    attrs = base_attrs("scan", cfg, text, keys) | {
+        "n_designs": int(X.shape[0]), "wall_time_s": total.wall,
+        "compile_time_s": total.compile, "run_time_s": total.run}  # fmt: skip
+    archive.write(out, tree, attrs)
+    i_best = int(np.nanargmin(res["f"]))
+    lines = [f"{X.shape[0]} designs over {', '.join(varied)} ({cfg.scan.mode}) in batches of "
+             f"{b}; wall {total.wall:.1f} s (compile {total.compile:.1f} s, run {total.run:.1f} s)",
+             "lowest f: " + ", ".join(f"{n} = {v:.4g}" for n, v in zip(problem.names, X[i_best], strict=True))
+             + f": f = {res['f'][i_best]:.5g}"]  # fmt: skip
+    return Report(out, lines, attrs, tree)
+
+
+# -------------------------------------------------------------------------- figures
+
+
+def draw_figures(path: Path) -> list[Path]:
+    """Draw the figures an archive supports beside it (run: the study's figures; sweep:
+    final f per member; scan: a curve or heat map; bench: Fig. 10-11)."""
+    from designopt.figures import scan as scan_figs
+    from designopt.figures import sweep as sweep_figs
+
+    a = archive.read(path)
+    kind = a["attrs"].get("kind")
+    folder = path.parent
+    stem = path.stem
+    if kind == "bench":
+        from designopt import benchsuite
+
+        return benchsuite.draw_figures(a, folder)
+    if kind == "run":
+        return get(a["attrs"]["study"]).figures(a, folder / f"{stem}_figures")
+    if kind == "sweep":
+        return sweep_figs.draw(a, folder / f"{stem}_figures")
+    if kind == "scan":
+        return scan_figs.draw(a, folder / f"{stem}_figures")
+    raise ConfigError(f"{path}: archive kind {kind!r} has no figures")

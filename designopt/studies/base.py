@@ -1,0 +1,80 @@
+"""The Study protocol: what a study folder declares so that config, pipeline and CLI can
+run it without knowing it (docs/architecture.md).
+
+A study is one folder ``designopt/studies/<name>/`` (``mechanism``, ``objective``,
+``figures``, optionally ``paper``) whose ``__init__`` builds one :class:`Study` and the
+registry (``designopt.studies``) lists it. Everything the generic layers need goes through
+these fields; the typed settings model flows down unchanged.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import jax
+import numpy as np
+from pydantic import BaseModel, ConfigDict
+
+from designopt.problems.base import Problem
+
+STREAMS = ("optimizer", "samples", "normalisation", "figures")
+"""The named PRNG streams split once from the root key ``key(seed)``."""
+
+
+class StudySettings(BaseModel):
+    """Base of every study's settings model: unknown keys are errors.
+
+    A subclass declares ``name: Literal["<study>"]`` (the config's discriminator),
+    ``variables`` {name: (lo, hi)} and whatever else the study needs.
+    """
+
+    model_config = ConfigDict(extra="forbid")
+
+    name: str
+    variables: dict[str, tuple[float, float]]
+
+
+def streams(seed: int) -> dict[str, jax.Array]:
+    """One root key ``key(seed)`` split once into the named streams of :data:`STREAMS`."""
+    keys = jax.random.split(jax.random.key(seed), len(STREAMS))
+    return dict(zip(STREAMS, keys, strict=True))
+
+
+def key_data(keys: Mapping[str, jax.Array]) -> dict[str, list[int]]:
+    """The raw key data of each stream (archived, so a run's keys can be rebuilt)."""
+    return {k: np.asarray(jax.random.key_data(v)).tolist() for k, v in keys.items()}
+
+
+@dataclass(frozen=True)
+class Study:
+    """What a study declares.
+
+    - ``settings``: its pydantic settings model (``name`` is the discriminator).
+    - ``problem(settings, keys, dtype) -> Problem``: the swarm objective; ``keys`` holds the
+      named streams (``samples``, ``normalisation``). ``Problem.fn`` returns
+      (f, aux) with every index of ``indices`` and its ``*_se`` in aux.
+    - ``summary``: the sub-objectives ``run``/``show`` print with ± SE.
+    - ``figures(archive, folder) -> [paths]``: the figures of a run archive.
+    - ``sweep_aliases(settings) -> {short path: full path}``: sweep short forms.
+    - ``indices(settings) -> names``: what ``eval``/``scan`` report (f included).
+    - ``units(settings) -> {variable: unit}``: for printing designs.
+    - ``tiny``: the ``study:`` section of a config that runs in seconds (contract tests).
+    """
+
+    name: str
+    title: str
+    settings: type[StudySettings]
+    problem: Callable[[Any, Mapping[str, jax.Array], Any], Problem]
+    summary: Callable[[Any], tuple[str, ...]]
+    indices: Callable[[Any], tuple[str, ...]]
+    figures: Callable[[dict[str, Any], Path], list[Path]]
+    sweep_aliases: Callable[[Any], dict[str, str]] = lambda s: {}
+    units: Callable[[Any], dict[str, str]] = lambda s: {}
+    extra_lines: Callable[[Any, Mapping[str, Any]], list[str]] = lambda s, fin: []
+    example_config: str = ""
+    tiny: dict[str, Any] = field(default_factory=dict)
+    """A small ``study:`` section (seconds to run), used by the contract tests."""
+    meta: dict[str, Any] = field(default_factory=dict)

@@ -1,0 +1,68 @@
+"""The generic ``serial`` study: any serial chain described in YAML (DH table, design
+variables, joint limits), scored by dexterity, manipulability and workspace volume on the
+generic frame kernel (``designopt.kinematics.kernel``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from designopt.studies.base import Study
+from designopt.studies.serial.settings import INDEX_NAMES, SerialSettings
+
+
+def _problem(settings: SerialSettings, keys, dtype):
+    from designopt.studies.serial import objective
+
+    return objective.problem(settings, keys, dtype)
+
+
+def _figures(archive: dict[str, Any], folder: Path) -> list[Path]:
+    from designopt.studies.serial import figures
+
+    return figures.draw_run(archive, folder)
+
+
+def _aliases(s: SerialSettings) -> dict[str, str]:
+    out = {f"study.{k}": f"study.indices.{k}" for k in ("n_samples", "length_scale")}
+    out |= {f"design.{k}": f"study.fixed.{k}" for k in s.fixed}
+    out |= {f"objective.{k}": f"study.objective.{k}" for k in s.weights()}
+    return out
+
+
+STUDY = Study(
+    name="serial",
+    title="any serial chain from YAML (DH table with named design variables)",
+    settings=SerialSettings,
+    problem=_problem,
+    summary=lambda s: s.index_names(),
+    indices=lambda s: ("f", *s.index_names()),
+    figures=_figures,
+    sweep_aliases=_aliases,
+    example_config="configs/planar2r.yaml",
+    tiny={
+        "name": "serial",
+        "chain": {
+            "convention": "modified",
+            "joints": [
+                {"type": "R", "a": 0, "alpha": 0, "d": 0, "theta": 0, "limits": [-150, 150]},
+                {"type": "R", "a": "l1", "alpha": 90, "d": "h", "theta": 0, "limits": [-90, 90]},
+                {"type": "P", "a": "l2", "alpha": -90, "d": 0.2, "theta": 0, "limits": [0.1, 0.5]},
+            ],
+        },
+        "variables": {"l1": [0.2, 1.0], "l2": [0.05, 0.5]},
+        "fixed": {"h": 0.1},
+        "indices": {
+            "jacobian": "position",
+            "norm": "fro",
+            "normalized": True,
+            "measure": "cartesian",
+            "n_samples": 2048,
+        },
+        "objective": {"gci": -1.0, "volume": -0.5, "normalize": True, "n_norm": 8},
+    },
+    meta={
+        "variables": "any names used in study.chain (DH a, d, alpha, theta)",
+        "indices": ", ".join(INDEX_NAMES) + " (volume for square position Jacobians)",
+    },
+)

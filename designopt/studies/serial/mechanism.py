@@ -1,0 +1,59 @@
+"""A user's serial chain from its YAML description, on the generic frame kernel
+(``designopt.kinematics.kernel``): the DH table as data, the joint box in SI-free units
+(rad for R joints, length units for P joints), and the design columns.
+
+Design columns are the variables (in config order) followed by the fixed names; angle
+entries named by a variable are given in degrees and converted by ``scale``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from designopt.kinematics.kernel import SerialModel, dh_model
+from designopt.studies.serial.settings import SerialSettings
+
+
+@dataclass(frozen=True)
+class Mechanism:
+    model: SerialModel
+    names: tuple[str, ...]  # design columns: variables then fixed
+    n_var: int
+    scale: np.ndarray  # (len(names),) deg→rad for angle names, 1 for lengths
+    fixed: np.ndarray  # (len(names) - n_var,) values of the fixed names (user units)
+    lower: np.ndarray  # (n,) joint box, rad / length units
+    upper: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return len(self.lower)
+
+
+def _entry(v: float | str, angle: bool) -> float | str:
+    if isinstance(v, str):
+        return v
+    return float(np.deg2rad(v)) if angle else float(v)
+
+
+def build(s: SerialSettings) -> Mechanism:
+    """The chain of ``s`` as a kernel model with its joint box and design columns."""
+    joints = s.chain.joints
+    names = tuple(s.variables) + tuple(s.fixed)
+    angles = s.angle_names()
+    model = dh_model(
+        convention=s.chain.convention,
+        joint_types=tuple(j.type for j in joints),
+        alpha=[_entry(j.alpha, True) for j in joints],
+        a=[_entry(j.a, False) for j in joints],
+        d=[_entry(j.d, False) for j in joints],
+        theta=[_entry(j.theta, True) for j in joints],
+        variables=names,
+    )
+    lim = np.array([j.limits for j in joints], np.float64)
+    rev = np.array([j.type == "R" for j in joints])
+    lim[rev] = np.deg2rad(lim[rev])
+    scale = np.array([np.pi / 180 if n in angles else 1.0 for n in names])
+    fixed = np.array([s.fixed[n] for n in s.fixed], np.float64)
+    return Mechanism(model, names, len(s.variables), scale, fixed, lim[:, 0], lim[:, 1])

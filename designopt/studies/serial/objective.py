@@ -1,0 +1,173 @@
+"""The serial study's indices and objective as a swarm Problem.
+
+Over the joint box Q (samples shared by the whole swarm, streamed in chunks):
+- ``gci``: mean of 1/k of the selected Jacobian rows (2-norm or Frobenius);
+- ``gcsei``: its standard deviation;
+- ``manipulability``: mean of sqrt(det J Jᵀ) (sqrt(det JᵀJ) when rows > joints);
+- ``volume``: ∫_Q sqrt(det Jv Jvᵀ) dq = ∫_Q |det Jv| dq, for a square position Jacobian.
+Means use the joint measure (w = 1) or the Cartesian one (w = |det J|, square J).
+Each comes with its delta-method standard error (``designopt.montecarlo``). The objective
+is f = Σ w_i index_i (or of the indices normalised over a Halton sample of the design box,
+as in study A); ``f_se`` is the bound Σ |w_i| se_i (the estimates share samples).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from designopt import montecarlo as mc
+from designopt.kinematics.conditioning import inv_cond_any
+from designopt.problems.base import Problem
+from designopt.studies.serial.mechanism import Mechanism, build
+from designopt.studies.serial.settings import SerialSettings
+
+
+def _det(A: jnp.ndarray) -> jnp.ndarray:
+    """det of (..., m, m) in closed form for m ≤ 3 (differentiable), LU otherwise."""
+    m = A.shape[-1]
+    if m == 1:
+        return A[..., 0, 0]
+    if m == 2:
+        return A[..., 0, 0] * A[..., 1, 1] - A[..., 0, 1] * A[..., 1, 0]
+    if m == 3:
+        a, b, c = A[..., 0, 0], A[..., 0, 1], A[..., 0, 2]
+        d, e, f = A[..., 1, 0], A[..., 1, 1], A[..., 1, 2]
+        g, h, i = A[..., 2, 0], A[..., 2, 1], A[..., 2, 2]
+        return a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
+    return jnp.linalg.det(A)
+
+
+def _sqrt0(x: jnp.ndarray) -> jnp.ndarray:
+    """sqrt(max(x, 0)) with a finite gradient at 0."""
+    ok = x > 0
+    return jnp.where(ok, jnp.sqrt(jnp.where(ok, x, 1.0)), 0.0)
+
+
+def measures(
+    J: jnp.ndarray, norm: str, normalized: bool
+) -> tuple[jnp.ndarray, jnp.ndarray, jnp.ndarray]:
+    """(1/k, manipulability, |det J| or 0 if J is not square) of (..., r, n) Jacobians."""
+    r, n = J.shape[-2:]
+    inv_k = inv_cond_any(J, norm, normalized)
+    if r == n:
+        det = _det(J)
+        return inv_k, jnp.abs(det), jnp.abs(det)
+    G = (
+        jnp.sum(J[..., :, None, :] * J[..., None, :, :], -1)
+        if r < n
+        else jnp.sum(J[..., :, :, None] * J[..., :, None, :], -3)
+    )
+    man = _sqrt0(_det(G))
+    return inv_k, man, jnp.zeros_like(man)
+
+
+def chunk_sums(mech: Mechanism, s: SerialSettings, full: jnp.ndarray, q: jnp.ndarray):
+    """Power sums of (1/k, manipulability, |det J|) for designs ``full`` (M, V) in kernel
+    units at joint samples q (C, n)."""
+    ind = s.indices
+    rows = ind.rows()
+    J = mech.model.jacobian(full, q, rows=rows)
+    if ind.length_scale != 1.0 and any(r >= 3 for r in rows):
+        sc = jnp.asarray([1.0 if r < 3 else ind.length_scale for r in rows], J.dtype)
+        J = J * sc[:, None]
+    inv_k, man, adet = measures(J, ind.norm, ind.normalized)
+    w = adet if ind.measure == "cartesian" else jnp.ones_like(inv_k)
+    return (mc.power_sums(w, inv_k), mc.power_sums(w, man),
+            mc.power_sums(adet, jnp.ones_like(adet)))  # fmt: skip
+
+
+def build_fn(mech: Mechanism, s: SerialSettings, dtype: Any):
+    """The pure swarm function fn(params, X, key) -> (f, indices with *_se)."""
+    ind = s.indices
+    names = s.index_names()
+    weights = s.weights()
+    lo = np.asarray(mech.lower)
+    hi = np.asarray(mech.upper)
+    qvol = float(np.prod(hi - lo))
+    chunk = min(ind.chunk, ind.n_samples)
+    n_chunks = -(-ind.n_samples // chunk)
+
+    def indices(params, X):
+        X = X.astype(dtype)
+        M = X.shape[0]
+        fixed = jnp.broadcast_to(params["fixed"].astype(dtype), (M, params["fixed"].shape[0]))
+        full = jnp.concatenate([X, fixed], axis=1) * params["scale"].astype(dtype)
+        lo_, hi_ = params["q_lower"].astype(dtype), params["q_upper"].astype(dtype)
+
+        def body(acc, k):
+            u = mc.unit_samples(params["sample_key"], k * chunk, chunk, mech.n, ind.sampler, dtype)
+            q = lo_ + (hi_ - lo_) * u
+            new = chunk_sums(mech, s, full, q)
+            return tuple(mc.add(a, b) for a, b in zip(acc, new, strict=True)), None
+
+        z = jnp.zeros((M, 5), dtype)
+        init = tuple(mc.PowerSums(z, z, jnp.asarray(0.0, dtype)) for _ in range(3))
+        (ps_k, ps_m, ps_v), _ = jax.lax.scan(body, init, jnp.arange(n_chunks))
+        out = {}
+        for k, est in (("gci", mc.mean(ps_k)), ("gcsei", mc.std(ps_k)),
+                       ("manipulability", mc.mean(ps_m)), ("volume", mc.box_integral(ps_v, qvol))):  # fmt: skip
+            if k in names:
+                out[k], out[k + "_se"] = est.value, est.se
+        return out
+
+    def fn(params, X, key):
+        out = indices(params, X)
+        b = params["bounds"]  # (len(weights), 2): min, max per weighted index
+        f = 0.0
+        f_se = 0.0
+        for i, (k, w) in enumerate(weights.items()):
+            span = b[i, 1] - b[i, 0]
+            f = f + w * (out[k] - b[i, 0]) / span
+            f_se = f_se + abs(w) * out[k + "_se"] / jnp.abs(span)
+        return f, out | {"f_se": f_se}
+
+    return fn
+
+
+def problem(s: SerialSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Problem:
+    """The serial study's Problem: design box from ``variables``, objective from
+    ``objective`` (normalised over ``n_norm`` Halton designs when ``normalize: true``)."""
+    dtype = jnp.dtype(dtype)
+    mech = build(s)
+    names = tuple(s.variables)
+    lower = np.array([s.variables[n][0] for n in names], np.float64)
+    upper = np.array([s.variables[n][1] for n in names], np.float64)
+    weights = s.weights()
+    fn = build_fn(mech, s, dtype)
+    params = {
+        "fixed": jnp.asarray(mech.fixed, dtype),
+        "scale": jnp.asarray(mech.scale, dtype),
+        "q_lower": jnp.asarray(mech.lower, dtype),
+        "q_upper": jnp.asarray(mech.upper, dtype),
+        "sample_key": keys["samples"],
+        "bounds": jnp.asarray([[0.0, 1.0]] * len(weights), dtype),
+    }
+    norm_bounds = None
+    if s.objective.get("normalize", False):
+        n_norm = int(s.objective.get("n_norm", 64))
+        u = mc.unit_samples(keys["normalisation"], 0, n_norm, len(names), "halton", dtype)
+        Xn = jnp.asarray(lower, dtype) + jnp.asarray(upper - lower, dtype) * u
+        _, sub = jax.jit(fn)(params, Xn, keys["samples"])
+        b = np.array([[float(sub[k].min()), float(sub[k].max())] for k in weights])
+        b[:, 1] = np.where(b[:, 1] > b[:, 0], b[:, 1], b[:, 0] + 1.0)  # flat index: no scaling
+        params["bounds"] = jnp.asarray(b, dtype)
+        norm_bounds = {k: b[i].tolist() for i, k in enumerate(weights)}
+    n_used = -(-s.indices.n_samples // min(s.indices.chunk, s.indices.n_samples)) * min(
+        s.indices.chunk, s.indices.n_samples
+    )
+    info = {
+        "study": "serial",
+        "n_samples_used": n_used,
+        "fixed": dict(s.fixed),
+        "rows": list(s.indices.rows()),
+        "measure": s.indices.measure,
+        "weights": weights,
+        "norm_bounds": norm_bounds,
+        "dtype": dtype.name,
+    }
+    return Problem(names, lower, upper, fn, params, info)

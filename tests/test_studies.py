@@ -1,0 +1,116 @@
+"""Contract tests over the study registry: every registered study, on its ``tiny`` config."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from designopt import archive, pipeline
+from designopt.config import validate
+from designopt.studies import STUDIES, get, streams
+
+NAMES = sorted(STUDIES)
+
+
+def config(name, tmp_path=None, **over):
+    raw = {
+        "study": get(name).tiny,
+        "optimizer": {"name": "ptpso", "n_particles": 6, "n_iters": 4, "n_runs": 2},
+        "precision": "float64",
+        "seed": 3,
+        "output": str((tmp_path or "results") / "a.h5") if tmp_path else None,
+    } | over
+    return validate(raw, "tiny")
+
+
+@pytest.fixture(scope="module", params=NAMES)
+def study_problem(request):
+    cfg = config(request.param)
+    return cfg, pipeline.build_problem(cfg, streams(cfg.seed))
+
+
+def _designs(problem, n, seed=0):
+    u = np.random.default_rng(seed).uniform(size=(n, problem.dim))
+    return problem.lower + (problem.upper - problem.lower) * u
+
+
+def test_every_study_declares_what_the_pipeline_needs():
+    for name, st in STUDIES.items():
+        s = st.settings.model_validate(st.tiny)
+        assert s.name == name
+        assert set(st.summary(s)) <= set(st.indices(s))
+        assert "f" in st.indices(s)
+
+
+def test_swarm_row_equals_single_design(study_problem):
+    cfg, P = study_problem
+    X = _designs(P, 5)
+    f, sub = jax.jit(P.fn)(P.params, jnp.asarray(X), jax.random.key(0))
+    for i in (0, 3):
+        f1, sub1 = jax.jit(P.fn)(P.params, jnp.asarray(X[i : i + 1]), jax.random.key(0))
+        np.testing.assert_allclose(f1[0], f[i], rtol=1e-12, atol=1e-300)
+        for k in sub:
+            np.testing.assert_allclose(sub1[k][0], sub[k][i], rtol=1e-10, atol=1e-300)  # SE: sums reassociate
+
+
+def test_every_index_has_a_standard_error(study_problem):
+    cfg, P = study_problem
+    res = pipeline.score(P, _designs(P, 2))
+    st = get(cfg.study.name)
+    for k in st.indices(cfg.study):
+        assert k in res
+    for k in st.summary(cfg.study):
+        assert k + "_se" in res and np.all(res[k + "_se"] >= 0), k
+    assert "f_se" in res
+
+
+def test_gradients_are_finite(study_problem):
+    cfg, P = study_problem
+    x = jnp.asarray(_designs(P, 1, seed=1))
+    g = jax.grad(lambda X: P.fn(P.params, X, jax.random.key(0))[0].sum())(x)
+    assert np.all(np.isfinite(np.asarray(g))) and np.any(np.asarray(g) != 0)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_run_stays_in_box_resumes_bit_exact_and_round_trips(name, tmp_path):
+    cfg = config(name, tmp_path, optimizer={"name": "ptpso", "n_particles": 6, "n_iters": 8,
+                                            "n_runs": 2})  # fmt: skip
+    P = pipeline.build_problem(cfg, streams(cfg.seed))
+    key = streams(cfg.seed)["optimizer"]
+    cks = []
+    full = pipeline.optimise(cfg, P, key, checkpoint=cks.append)
+    assert np.all(full.history_x >= P.lower - 1e-12) and np.all(full.history_x <= P.upper + 1e-12)
+    assert cks, "chunked run gave no checkpoint"
+    resumed = pipeline.optimise(cfg, P, key, resume=cks[0])
+    np.testing.assert_array_equal(resumed.history, full.history)
+    np.testing.assert_array_equal(resumed.history_x, full.history_x)
+    # config round trip through the archive
+    rep = pipeline.run(cfg, "tiny", "tiny", tmp_path / "a.h5")
+    a = archive.read(rep.out)
+    back = validate(a["attrs"]["config_resolved"], "archive")
+    assert back == cfg
+    assert set(a["attrs"]["keys"]) == {"optimizer", "samples", "normalisation", "figures"}
+    np.testing.assert_array_equal(a["optimizer"]["history"], full.history)
+    figs = get(name).figures(a, tmp_path / "figs")
+    assert figs and all(p.exists() for p in figs)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_eval_agrees_with_scan(name, tmp_path):
+    cfg = config(name, tmp_path)
+    P = pipeline.build_problem(cfg, streams(cfg.seed))
+    v0, v1 = P.names[0], P.names[-1]
+    lo, hi = P.lower[0], P.upper[0]
+    scan = {"vary": {v0: {"from": float(lo), "to": float(hi), "num": 3}}, "batch": 2}
+    cfg = config(name, tmp_path, scan=scan)
+    rep = pipeline.scan(cfg, "tiny", "tiny", tmp_path / "s.h5")
+    a = archive.read(rep.out)["scan"]
+    assert a["x"].shape == (3, P.dim)
+    one = pipeline.evaluate(cfg, {v0: float(a["x"][1, 0]), v1: float(a["x"][1, -1])})
+    for i, n in enumerate(P.names):
+        assert one[n] == a["x"][1, i]
+    for k, v in one.items():
+        if k not in P.names:
+            np.testing.assert_allclose(v, a[k][1], rtol=1e-10, err_msg=k)
+    many = pipeline.evaluate(cfg, {v0: a["x"][:, 0], v1: a["x"][:, -1]})
+    np.testing.assert_allclose(many["f"], a["f"], rtol=1e-12)
