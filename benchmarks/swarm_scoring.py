@@ -15,6 +15,8 @@ import resource
 import time
 
 import jax
+
+jax.config.update("jax_enable_x64", True)  # the float64 columns (designopt leaves it to us)
 import jax.numpy as jnp
 import numpy as np
 from _timing import best_of, compile_time, header

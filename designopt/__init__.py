@@ -1,14 +1,12 @@
 """designopt: a vectorized JAX design-space optimizer for surgical-robot mechanisms.
 
-Importing the package enables JAX's 64-bit mode so that float64 is available where
-accuracy is the point (IK, reference tests). Throughput code casts its inputs to the
-precision chosen in the config (float32 or float64); nothing is silently promoted.
+Importing the package changes no global state: JAX's 64-bit mode stays as the caller set
+it. The ``designopt`` command turns it on for configs with ``precision: float64``; a
+script that wants float64 calls ``jax.config.update("jax_enable_x64", True)`` first.
 """
 
-import jax
-
-jax.config.update("jax_enable_x64", True)
+from designopt.pipeline import evaluate
 
 __version__ = "0.1.0"
 
-__all__ = ["__version__"]
+__all__ = ["__version__", "evaluate"]

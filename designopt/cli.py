@@ -214,7 +214,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = ap.add_subparsers(dest="command", required=True)
 
     def common(p, seed=True, out=True, quiet=True, figures=True):
-        p.add_argument("config", help="config (YAML), e.g. configs/master9.yaml")
+        p.add_argument("config", help="config (YAML), e.g. configs/<study>.yaml")
         if seed:
             p.add_argument("--seed", type=int, default=None, help="override the config's seed")
         if out:

@@ -169,8 +169,10 @@ def validate(raw: Any, where: str, model: type[BaseModel] | None = None) -> Any:
     if not isinstance(raw, dict):
         raise ConfigError(f"{where}: top level must be a mapping of keys")
     if model is not None and issubclass(model, RunConfigBase) and "study" not in raw:
-        raise ConfigError(f"{where}: key 'study': missing; name a study, e.g. "
-                          f"'study: {{name: master9}}' (`designopt studies` lists them)")  # fmt: skip
+        from designopt.studies import STUDIES
+
+        raise ConfigError(f"{where}: key 'study': missing; name a study, one of "
+                          f"{sorted(STUDIES)} (`designopt studies` lists them)")  # fmt: skip
     try:
         return model.model_validate(raw)
     except ValidationError as e:

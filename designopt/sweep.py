@@ -2,7 +2,7 @@
 
 A key is a dotted path into the config. Short forms: ``optimizer.<setting>`` →
 ``optimizer.settings.<setting>`` (the chosen optimizer's numeric settings, e.g. gamma),
-plus the study's own (``Study.sweep_aliases``; master9: ``study.<index key>`` →
+plus the study's own (``Study.sweep_aliases``, e.g. ``study.<index key>`` →
 ``study.indices.<key>``, ``design.<length>`` → ``study.fixed.<length>``). Any other path
 must name a number of the config. ``grid`` takes the Cartesian product of the value
 lists, ``list`` zips them (equal lengths). Members that differ only in optimizer settings

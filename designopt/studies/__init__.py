@@ -1,7 +1,8 @@
 """The study registry: ``STUDIES[name]`` is a :class:`~designopt.studies.base.Study`.
 
-Config, pipeline and CLI reach studies only through this registry. The built-in studies
-register themselves below; a user's own study registers with :func:`register` (before
+Config, pipeline and CLI reach studies only through this registry. Every sub-package of
+this folder that defines ``STUDY`` is registered when the registry is imported (adding a
+study is adding a folder); a user's own study registers with :func:`register` (before
 loading a config that names it).
 """
 
@@ -29,10 +30,14 @@ def get(name: str) -> Study:
 
 
 def _builtins() -> None:
-    from designopt.studies import master9, serial
+    import importlib
+    import pkgutil
 
-    for mod in (master9, serial):
-        register(mod.STUDY)
+    for info in sorted(pkgutil.iter_modules(__path__), key=lambda m: m.name):
+        if info.ispkg:
+            mod = importlib.import_module(f"{__name__}.{info.name}")
+            if hasattr(mod, "STUDY"):
+                register(mod.STUDY)
 
 
 _builtins()
