@@ -171,3 +171,115 @@ def test_bad_input_raises_value_error_naming_the_problem():
         m.fk(jnp.zeros(6), d)
     with pytest.raises(ValueError, match=r"\(\.\.\., 4, 4\)"):
         m.ik(jnp.zeros((3, 3)), d)
+
+
+# --------------------------------------------------------------- IK branches and q_ref
+
+
+# jitted, and the tests below share shapes: one compile per shape instead of op-by-op
+_ik = jax.jit(m.ik, static_argnames="full_output")
+_branches = jax.jit(m.ik_branches, static_argnames="within_limits")
+_fk = jax.jit(m.fk)
+
+
+def _paper(design):
+    return {**m.default_design(), **design}
+
+
+def _wrapped_err(a, b):
+    return np.abs(np.asarray(m._wrap(jnp.asarray(a) - jnp.asarray(b))))
+
+
+@pytest.mark.parametrize("name", ["PAPER_INITIAL", "PAPER_FINAL"])
+def test_ik_q_ref_joint_round_trip_on_the_whole_joint_box(name):
+    """ik(fk(q), q_ref=q) == q for every sample of the joint box. Without q_ref (and q6
+    given), 2.8 % of the initial design's box, the det J_v < 0 part where the other elbow is
+    within limits too, came back on the other elbow; with neither, q6 is never q's own."""
+    d = _paper(getattr(m, name))
+    q = m.sample_joints(jax.random.key(12), 20_000)
+    T = _fk(q, d)
+    qi, ok = _ik(T, d, q_ref=q, full_output=True)
+    assert bool(ok.all())
+    assert _wrapped_err(qi, q).max() < 1e-8
+    np.testing.assert_allclose(_fk(qi, d), T, atol=1e-8)
+
+
+@pytest.fixture(scope="module")
+def initial_1000():
+    """1000 configurations of the initial design, their poses and their IK branches."""
+    d = _paper(m.PAPER_INITIAL)
+    q = m.sample_joints(jax.random.key(13), 1000)
+    T = _fk(q, d)
+    qb, ok = _branches(T, d, q6=q[:, 3])
+    return d, q, T, qb, np.asarray(ok)
+
+
+def test_ik_branches_other_elbow_is_a_solution_and_limits_are_applied(initial_1000):
+    d, q, T, qb, ok = initial_1000
+    assert qb.shape == (1000, 8, 7) and ok.shape == (1000, 8)
+    assert not ok[:, [1, 3, 4, 5, 6, 7]].any()  # q3 = π - asin and the flipped wrist
+    assert (ok[:, 0] | ok[:, 2]).all()
+    both = ok[:, 0] & ok[:, 2]
+    assert 0.01 < both.mean() < 0.2  # the fold of the initial design lies inside the box
+    lim = m.JOINT_LIMITS
+    qbn = np.asarray(qb)
+    inside = np.all((qbn >= lim[:, 0] - 1e-9) & (qbn <= lim[:, 1] + 1e-9), -1)
+    np.testing.assert_array_equal(inside, ok)
+    # every reachable branch solves the pose, within limits or not
+    qa, reach = _branches(T, d, q6=q[:, 3], within_limits=False)
+    reach = np.asarray(reach)
+    assert reach[:, :4].all()  # both elbows, both wrists
+    for b in range(8):
+        err = np.abs(np.asarray(_fk(qa[:, b], d) - T)).max((-1, -2))
+        assert err[reach[:, b]].max(initial=0.0) < 1e-8
+    # the two elbows are distinct and have det J_v of opposite signs where both are valid
+    det = np.asarray(m.det_jv(qb[:, [0, 2], :3], d))
+    assert np.all(det[both, 0] * det[both, 1] < 0)
+    assert _wrapped_err(qb[both, 0], qb[both, 2]).max(-1).min() > 1e-6
+
+
+def test_q_ref_picks_the_branch_closest_to_it(initial_1000):
+    d, q, T, qb, ok = initial_1000
+    both = ok[:, 0] & ok[:, 2]
+    qa, qo = qb[:, 0], qb[:, 2]
+    for src, dst in ((qa, qo), (qo, qa)):
+        step = m._wrap(dst - src)
+        got = _ik(T, d, q_ref=src + 0.6 * step)
+        np.testing.assert_allclose(got[both] - dst[both], 0, atol=1e-8)
+        got = _ik(T, d, q_ref=src + 0.4 * step)
+        np.testing.assert_allclose(got[both] - src[both], 0, atol=1e-8)
+    # with q6 given, q_ref still chooses the elbow
+    got = _ik(T, d, q6=q[:, 3], q_ref=qo)
+    np.testing.assert_allclose(got[both] - qo[both], 0, atol=1e-8)
+    # the redundant q6: a reference off the solution set gets the nearest solution, no
+    # farther than the one with q_ref's own q6, and a local minimum along the self-motion
+    q_ref = q.at[:, 3].add(0.2).at[:, 4].add(-0.1)
+    qi, oki = _ik(T, d, q_ref=q_ref, full_output=True)
+    assert bool(oki.all())
+    np.testing.assert_allclose(qi[:, :3], q[:, :3], atol=1e-8)
+    np.testing.assert_allclose(_fk(qi, d), T, atol=1e-8)
+
+    def dist(q6):  # distance of the within-limits wrist solution for q6 (inf if none)
+        qw = np.asarray(_branches(T, d, q6=q6, within_limits=False)[0][:, 0, 3:])
+        lim = m.JOINT_LIMITS[3:]
+        okw = np.all((qw >= lim[:, 0] - 1e-9) & (qw <= lim[:, 1] + 1e-9), -1)
+        return np.where(okw, np.sum(_wrapped_err(qw, q_ref[:, 3:]) ** 2, -1), np.inf)
+
+    d0 = dist(qi[:, 3])
+    assert np.all(d0 <= dist(q_ref[:, 3]) + 1e-12)
+    for h in (-1e-3, 1e-3):
+        assert np.all(d0 <= dist(qi[:, 3] + h) + 1e-12)
+
+
+def test_q_ref_broadcasts_keeps_dtype_and_checks_its_shape(initial_1000):
+    d, q, T, _, _ = initial_1000
+    # poses (2, 1) against references (1, 3): every pose with every reference
+    qs = _ik(T[:2, None], d, q_ref=q[None, :3])
+    assert qs.shape == (2, 3, 7)
+    np.testing.assert_allclose(qs[[0, 1], [0, 1]], q[:2], atol=1e-9)
+    np.testing.assert_allclose(_fk(qs, d), jnp.broadcast_to(T[:2, None], (2, 3, 4, 4)), atol=1e-8)
+    q32 = q.astype(jnp.float32)
+    out = jax.eval_shape(lambda T, r: m.ik(T, d, q_ref=r), T.astype(jnp.float32), q32)
+    assert out.dtype == jnp.float32 and out.shape == (1000, 7)
+    with pytest.raises(ValueError, match=r"q_ref must have shape \(\.\.\., 7\)"):
+        m.ik(T, d, q_ref=jnp.zeros(6))
