@@ -10,20 +10,40 @@ import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
-import numpy as np
-
-from designopt.config import ConfigError, load
+from designopt.errors import ConfigError
 
 
 def _load(args: argparse.Namespace):
+    from designopt.config import load
+
     cfg, text = load(args.config)
     if getattr(args, "seed", None) is not None:
         cfg.seed = args.seed
-    if cfg.precision == "float64":  # the CLI is the program: it may switch JAX to 64-bit
-        import jax
+    import jax
 
+    if cfg.precision == "float64":  # the CLI is the program: it may switch JAX to 64-bit
         jax.config.update("jax_enable_x64", True)
+    if cfg.compile_cache and not getattr(args, "no_cache", False):
+        folder = cache_dir()
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError:
+            return cfg, text  # an unwritable cache folder only costs compile time
+        jax.config.update("jax_compilation_cache_dir", str(folder))
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+        jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
     return cfg, text
+
+
+def cache_dir() -> Path:
+    """Where compiled programs are kept between runs: ``$DESIGNOPT_CACHE_DIR``, else
+    ``$XDG_CACHE_HOME/designopt/jax``, else ``~/.cache/designopt/jax``."""
+    import os
+
+    if os.environ.get("DESIGNOPT_CACHE_DIR"):
+        return Path(os.environ["DESIGNOPT_CACHE_DIR"])
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "designopt" / "jax"
 
 
 def _progress(quiet: bool):
@@ -158,6 +178,7 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 def cmd_show(args: argparse.Namespace) -> int:
     import h5py
+    import numpy as np
 
     p = Path(args.archive)
     if not p.is_file():
@@ -223,6 +244,8 @@ def build_parser() -> argparse.ArgumentParser:
             p.add_argument("--quiet", action="store_true", help="no progress bar")
         if figures:
             p.add_argument("--no-figures", action="store_true", help="write the archive only")
+        p.add_argument("--no-cache", action="store_true",
+                       help="do not read or write the persistent compilation cache")  # fmt: skip
 
     r = sub.add_parser("run", help="optimise one study from a YAML config")
     common(r)
@@ -256,7 +279,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from designopt.pipeline import Interrupted
+    from designopt.errors import Interrupted
 
     args = build_parser().parse_args(argv)
     try:

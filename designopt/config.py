@@ -9,9 +9,23 @@ from typing import Annotated, Any, Literal, Union
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model, field_validator
 
+from designopt.errors import ConfigError  # noqa: E402  (re-exported)
 
-class ConfigError(Exception):
-    """A user mistake in a config: the message names the file and the key."""
+
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """PyYAML's safe loader, refusing a key given twice in one mapping (PyYAML would keep
+    the last one silently)."""
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
+        seen: dict[Any, int] = {}
+        for k_node, _ in node.value:
+            k = self.construct_object(k_node, deep=deep)
+            line = k_node.start_mark.line + 1
+            if isinstance(k, (str, int, float, bool)) and k in seen:
+                raise ConfigError(f"key '{k}' is given twice (lines {seen[k]} and {line})")
+            if isinstance(k, (str, int, float, bool)):
+                seen[k] = line
+        return super().construct_mapping(node, deep=deep)
 
 
 class _Strict(BaseModel):
@@ -100,6 +114,7 @@ class RunConfigBase(_Strict):
     precision: Literal["float32", "float64"] = "float64"
     seed: int = 0
     output: str | None = None  # default results/<study>/<study>.h5
+    compile_cache: bool = True  # keep compiled programs between runs (CLI; --no-cache)
 
     def output_path(self) -> str:
         name = self.study.name  # type: ignore[attr-defined]
@@ -155,11 +170,18 @@ def load(path: str | Path, model: type[BaseModel] | None = None) -> tuple[Any, s
     p = Path(path)
     if not p.is_file():
         raise ConfigError(f"{p}: config file not found")
-    text = p.read_text()
     try:
-        raw = yaml.safe_load(text) or {}
+        text = p.read_text(encoding="utf-8")
+    except UnicodeDecodeError as e:
+        raise ConfigError(f"{p}: not a UTF-8 text file (byte {e.start}); a config is YAML text") from None
+    except OSError as e:
+        raise ConfigError(f"{p}: cannot read ({e.strerror})") from None
+    try:
+        raw = yaml.load(text, Loader=_UniqueKeyLoader) or {}
+    except ConfigError as e:
+        raise ConfigError(f"{p}: {e}") from None
     except yaml.YAMLError as e:
-        raise ConfigError(f"{p}: malformed YAML: {str(e).splitlines()[0]}") from None
+        raise ConfigError(f"{p}: malformed YAML: {' '.join(str(e).split())}") from None
     return validate(raw, str(p), model), text
 
 

@@ -24,15 +24,12 @@ import yaml
 
 from designopt import archive
 from designopt.config import ConfigError, load, validate
+from designopt.errors import Interrupted
 from designopt.problems.base import Problem
 from designopt.studies import Study, get, key_data, streams
 from designopt.timing import Stopwatch
 
 Progress = Callable[[int, str], contextlib.AbstractContextManager[Callable[[int], None]]]
-
-
-class Interrupted(Exception):
-    """Ctrl-C during a run; the message says what was kept."""
 
 
 @contextlib.contextmanager

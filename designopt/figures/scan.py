@@ -54,7 +54,7 @@ def draw(a: dict[str, Any], folder: Path) -> list[Path]:
         fig, axes = plt.subplots(1, len(show), figsize=(4.6 * len(show), 3.8), squeeze=False)
         for ax, k in zip(axes[0], show, strict=True):
             z = sc[k].reshape(n0, n1)
-            im = ax.pcolormesh(g1, g0, z, shading="auto", cmap="viridis")
+            im = ax.pcolormesh(g1, g0, z, shading="auto", cmap="viridis", rasterized=True)
             fig.colorbar(im, ax=ax, label=k)
             ax.set_xlabel(varied[1])
             ax.set_ylabel(varied[0])

@@ -41,18 +41,30 @@ def joint_grid(pair: tuple[int, int], n: int = N_GRID) -> tuple[np.ndarray, np.n
     return np.rad2deg(a), np.rad2deg(b), q
 
 
+@jax.jit
+def _inv_cond_kernel(x, q):
+    return ind.inv_cond_fro_jv(ind.jv_entries(x, ind.features(q)))[1][0]
+
+
+@jax.jit
+def _emax_kernel(x, q, delta):
+    return ind.emax(x, ind._corner_deltas(q, delta))[0]
+
+
 def inv_cond_map(x: Mapping[str, float], q: np.ndarray) -> np.ndarray:
-    """Raw Frobenius 1/k of J_v (seed 000 eq. 51-53) at joint configurations q (C, 3)."""
-    f = ind._features(jnp.asarray(q))
-    J = ind.jv_entries({k: v[:, None] for k, v in _design(x).items()}, f)
-    return np.asarray(ind.inv_cond_fro_jv(J)[1][0])
+    """Raw Frobenius 1/k of J_v (seed 000 eq. 51-53) at joint configurations q (C, 3),
+    with the index kernel, jitted (one compilation for every map of the same size)."""
+    dt = mc.out_dtype()
+    xd = {k: v[:, None].astype(dt) for k, v in _design(x).items()}
+    return np.asarray(_inv_cond_kernel(xd, jnp.asarray(q, dt)))
 
 
 def emax_map(x: Mapping[str, float], q: np.ndarray, backlash_deg) -> np.ndarray:
     """Largest tip error (mm) over the backlash box (seed 000 eq. 39) at q (C, 3)."""
-    delta = jnp.deg2rad(jnp.asarray(backlash_deg, mc.out_dtype()))
-    dP = ind._corner_deltas(jnp.asarray(q), delta)
-    return np.asarray(ind.emax({k: v[:, None] for k, v in _design(x).items()}, dP)[0])
+    dt = mc.out_dtype()
+    delta = jnp.deg2rad(jnp.asarray(backlash_deg, dt))
+    xd = {k: v[:, None].astype(dt) for k, v in _design(x).items()}
+    return np.asarray(_emax_kernel(xd, jnp.asarray(q, dt), delta))
 
 
 def _maps(fn, title: str, unit: str, designs: dict[str, Mapping[str, float]], cmap: str):
@@ -63,7 +75,7 @@ def _maps(fn, title: str, unit: str, designs: dict[str, Mapping[str, float]], cm
             a, b, q = joint_grid(pair)
             z = fn(x, q).reshape(len(b), len(a))
             ax = axes[r, c]
-            im = ax.pcolormesh(a, b, z, shading="auto", cmap=cmap)
+            im = ax.pcolormesh(a, b, z, shading="auto", cmap=cmap, rasterized=True)
             fig.colorbar(im, ax=ax, label=unit)
             ax.set_xlabel(f"{names[pair[0]]} (deg)")
             ax.set_ylabel(f"{names[pair[1]]} (deg)")
@@ -109,7 +121,8 @@ def draw(
         ax = fig.add_subplot(1, len(designs), i + 1, projection="3d")
         full = {**m.default_design(), **{k: float(x[k]) for k in m.DESIGN_KEYS if k in x}}
         P = np.asarray(m.position(jnp.asarray(q3), full))
-        ax.scatter(P[:, 0], P[:, 1], P[:, 2], s=0.5, alpha=0.4, c=P[:, 2], cmap="viridis")
+        ax.scatter(P[:, 0], P[:, 1], P[:, 2], s=0.5, alpha=0.4, c=P[:, 2], cmap="viridis",
+                   rasterized=True)
         ax.set_xlabel("x (mm)", fontsize=8)
         ax.set_ylabel("y (mm)", fontsize=8)
         ax.set_zlabel("z (mm)", fontsize=8)

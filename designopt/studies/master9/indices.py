@@ -2,7 +2,7 @@
 
 The position Jacobian J_v (eq. 34) and the backlash displacement are *linear* in the
 lengths (a1, a3, a4, d3). The kernel therefore computes each sample's trigonometry once
-(``_features``) and applies a whole swarm of designs as a few multiply-adds per sample,
+(``features``) and applies a whole swarm of designs as a few multiply-adds per sample,
 in structure-of-arrays form (one (M, C) array per matrix entry) that XLA fuses. The
 3×3 Frobenius condition number uses J_v's zero pattern (J31 = J32 = 0) in the adjugate.
 Samples are shared by every design of a swarm (common random numbers).
@@ -70,12 +70,15 @@ class IndexSettings:
         return -(-self.n_samples // c) * c
 
 
-def _features(q: Array) -> dict[str, Array]:
+def features(q: Array) -> dict[str, Array]:
     """Per-sample trigonometry (C,) arrays: everything J_v and det need."""
     q1, q2, q3 = q[:, 0], q[:, 1], q[:, 2]
     s1, c1, s12, c12 = jnp.sin(q1), jnp.cos(q1), jnp.sin(q1 + q2), jnp.cos(q1 + q2)
     s3, c3 = jnp.sin(q3), jnp.cos(q3)
     return dict(s1=s1, c1=c1, s12=s12, c12=c12, s3=s3, c3=c3, c3c12=c3 * c12, c3s12=c3 * s12)
+
+
+_features = features  # the name earlier versions used
 
 
 def _pos_features(q: Array) -> Array:
@@ -135,7 +138,7 @@ def emax(x: dict[str, Array], dP: Array) -> Array:
 
 
 def _chunk_sums(x, q, delta, s: IndexSettings):
-    f = _features(q)
+    f = features(q)
     xm = {k: v[:, None] for k, v in x.items()}
     J = jv_entries(xm, f)
     det, r = inv_cond_fro_jv(J)

@@ -77,7 +77,7 @@ def draw_run(a: dict[str, Any], folder: Path) -> list[Path]:
         fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
         for ax, (lab, x) in zip(axes, designs.items(), strict=True):
             z = inv_k(mech, s, x, q).reshape(A.shape)
-            im = ax.pcolormesh(ga * fa, gb * fb, z, shading="auto", cmap="viridis")
+            im = ax.pcolormesh(ga * fa, gb * fb, z, shading="auto", cmap="viridis", rasterized=True)
             fig.colorbar(im, ax=ax, label="1/k")
             ax.set_xlabel(f"q1 {ua}".strip())
             ax.set_ylabel(f"q2 {ub}".strip())
@@ -98,11 +98,11 @@ def draw_run(a: dict[str, Any], folder: Path) -> list[Path]:
     fig = plt.figure(figsize=(5.2, 4.6))
     if planar:
         ax = fig.add_subplot(1, 1, 1)
-        sc = ax.scatter(p[:, 0], p[:, 1], s=1, c=c, cmap="viridis")
+        sc = ax.scatter(p[:, 0], p[:, 1], s=1, c=c, cmap="viridis", rasterized=True)
         ax.set_aspect("equal")
     else:
         ax = fig.add_subplot(1, 1, 1, projection="3d")
-        sc = ax.scatter(p[:, 0], p[:, 1], p[:, 2], s=0.5, c=c, cmap="viridis")
+        sc = ax.scatter(p[:, 0], p[:, 1], p[:, 2], s=0.5, c=c, cmap="viridis", rasterized=True)
         ax.set_zlabel("z")
     ax.set_xlabel("x")
     ax.set_ylabel("y")
