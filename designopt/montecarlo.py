@@ -15,6 +15,7 @@ conservative (QMC errors are usually smaller); it is reported as such.
 
 from __future__ import annotations
 
+from functools import partial
 from typing import Literal, NamedTuple
 
 import jax
@@ -64,6 +65,15 @@ def unit_samples(
         shift = jax.random.uniform(key, (dim,), out_dtype(None))
         return jnp.mod(jnp.stack(cols, -1) + shift, 1.0).astype(dtype)
     raise ValueError(f"sampler must be 'uniform' or 'halton', got {sampler!r}")
+
+
+@partial(jax.jit, static_argnames=("n", "sampler", "dtype"))
+def box_samples(key: jax.Array, lower: Array, upper: Array, n: int, sampler: Sampler = "halton",
+                dtype=None) -> Array:  # fmt: skip
+    """n points of the box [lower, upper] (D,) from the sampler's sequence, as one compiled
+    program (used for the normalisation designs of the studies)."""
+    u = unit_samples(key, 0, n, lower.shape[0], sampler, dtype)
+    return lower.astype(u.dtype) + (upper - lower).astype(u.dtype) * u
 
 
 class PowerSums(NamedTuple):

@@ -122,7 +122,7 @@ def score(problem: Problem, X: np.ndarray, batch: int | None = None) -> dict[str
     X = np.asarray(X, np.float64)
     n = X.shape[0]
     b = n if batch is None else max(1, min(batch, n))
-    fn = _scorer(problem.fn)
+    fn = _scorer(problem.fn, problem.constraints)
     outs = []
     for i in range(0, n, b):
         Xi = X[i : i + b]
@@ -137,10 +137,22 @@ def score(problem: Problem, X: np.ndarray, batch: int | None = None) -> dict[str
 _SCORERS: dict[Any, Any] = {}
 
 
-def _scorer(fn: Callable) -> Callable:
-    if fn not in _SCORERS:
-        _SCORERS[fn] = jax.jit(fn)
-    return _SCORERS[fn]
+def _scorer(fn: Callable, constraints: Callable | None = None) -> Callable:
+    """fn jitted (cached per function); with constraints, ``violation`` (Σ max(g, 0), 0
+    when feasible) joins the indices."""
+    key = (fn, constraints)
+    if key not in _SCORERS:
+        if constraints is None:
+            _SCORERS[key] = jax.jit(fn)
+        else:
+            from designopt.problems.base import violation_of
+
+            def with_violation(params, X, k):
+                f, sub = fn(params, X, k)
+                return f, sub | {"violation": violation_of(constraints, params, X)}
+
+            _SCORERS[key] = jax.jit(with_violation)
+    return _SCORERS[key]
 
 
 def result_tree(cfg: Any, problem: Problem, res: Any) -> dict[str, Any]:
@@ -212,6 +224,9 @@ def summary_lines(cfg: Any, problem: Problem, tree: dict[str, Any]) -> list[str]
     for k in st.summary(cfg.study):
         se = fin.get(k + "_se")
         lines.append(_pm(k, float(fin[k]), None if se is None else float(se)))
+    if "violation" in fin:
+        v = float(fin["violation"])
+        lines.append(f"  constraints: {'feasible' if v <= 0 else f'violated by {v:.3g} (no feasible design found)'}")
     lines += st.extra_lines(cfg.study, fin)
     return lines
 
@@ -290,14 +305,18 @@ def run(cfg: Any, text: str, where: str, out: Path, resume: bool = False,
             tree = result_tree(cfg, problem, res)
     attrs |= {"wall_time_s": total.wall, "compile_time_s": total.compile,
               "run_time_s": total.run, "setup_time_s": setup.wall, "optimizer_time_s": opt.wall,
-              "post_time_s": post.wall, "resumed_from": ck.done if ck else -1}  # fmt: skip
+              "post_time_s": post.wall, "resumed_from": ck.done if ck else -1,
+              "compilations": total.compilations,
+              "compilations_by_stage": {"setup": setup.compilations, "optimizer": opt.compilations,
+                                        "scoring_polish": post.compilations}}  # fmt: skip
     archive.write(out, tree, attrs)
     partial.unlink(missing_ok=True)
     lines = summary_lines(cfg, problem, tree)
     lines.append(f"samples per design: {problem.info.get('n_samples_used', '-')}; wall "
                  f"{total.wall:.1f} s = compile {total.compile:.1f} s + run {total.run:.1f} s "
                  f"(setup {setup.wall:.1f} s, optimizer {opt.wall:.1f} s, "
-                 f"scoring/polish {post.wall:.1f} s)")  # fmt: skip
+                 f"scoring/polish {post.wall:.1f} s); {total.compilations} XLA compilations "
+                 f"({setup.compilations} + {opt.compilations} + {post.compilations})")  # fmt: skip
     return Report(out, lines, attrs, tree)
 
 

@@ -150,3 +150,14 @@ def test_interrupted_run_is_marked_incomplete_and_resume_matches(tmp_path, monke
             np.testing.assert_array_equal(a[k][()], r[k][()])
     # resuming with another seed is refused
     assert main(["run", str(cfg), "--quiet", "--resume", "--seed", "5"]) == 2
+
+
+def test_score_reports_the_constraint_violation():
+    from designopt import pipeline
+    from designopt.problems.constrained import sphere_linear
+
+    P = sphere_linear(3)
+    X = np.array([[0.5, 0.5, 0.5], [0.1, 0.1, 0.1], [-1.0, 0.0, 0.0]])
+    res = pipeline.score(P, X)
+    np.testing.assert_allclose(res["violation"], np.maximum(1.0 - X.sum(1), 0.0), atol=1e-12)
+    np.testing.assert_allclose(res["f"], (X * X).sum(1), atol=1e-12)

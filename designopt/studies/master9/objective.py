@@ -101,8 +101,7 @@ def problem(
 
     # normalisation bounds from a Halton sample of the design box (fixed during the run)
     n_norm = settings.n_norm
-    u = mc.unit_samples(keys["normalisation"], 0, n_norm, len(names), "halton", dtype)
-    Xn = jnp.asarray(lower, dtype) + jnp.asarray(upper - lower, dtype) * u
+    Xn = mc.box_samples(keys["normalisation"], lower, upper, n_norm, "halton", dtype)
     probe = {
         "fixed": {k: jnp.asarray(v, dtype) for k, v in fixed_free.items()},
         "sample_key": sample_key,
@@ -110,6 +109,7 @@ def problem(
         "weights": jnp.asarray(ind.weights, dtype),
     }
     _, sub = jax.jit(fn)(probe, Xn, sample_key)
+    sub = {n: np.asarray(sub[n]) for n in SUBOBJECTIVES}
     bounds = np.array([[float(sub[n].min()), float(sub[n].max())] for n in SUBOBJECTIVES])
     params = {**probe, "bounds": jnp.asarray(bounds, dtype)}
     info = {

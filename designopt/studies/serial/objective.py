@@ -150,9 +150,9 @@ def problem(s: SerialSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Pro
     norm_bounds = None
     if s.objective.get("normalize", False):
         n_norm = int(s.objective.get("n_norm", 64))
-        u = mc.unit_samples(keys["normalisation"], 0, n_norm, len(names), "halton", dtype)
-        Xn = jnp.asarray(lower, dtype) + jnp.asarray(upper - lower, dtype) * u
+        Xn = mc.box_samples(keys["normalisation"], lower, upper, n_norm, "halton", dtype)
         _, sub = jax.jit(fn)(params, Xn, keys["samples"])
+        sub = {k: np.asarray(sub[k]) for k in weights}
         b = np.array([[float(sub[k].min()), float(sub[k].max())] for k in weights])
         b[:, 1] = np.where(b[:, 1] > b[:, 0], b[:, 1], b[:, 0] + 1.0)  # flat index: no scaling
         params["bounds"] = jnp.asarray(b, dtype)
