@@ -7,10 +7,12 @@ from designopt.kinematics.conditioning import (
     det3,
     inv_cond,
     inv_cond_2,
+    inv_cond_any,
     inv_cond_fro,
     inv_cond_fro3,
 )
 from designopt.kinematics.jacobian import geometric_jacobian, position_jacobian
+from designopt.kinematics.kernel import SerialModel, dh_model, et_model
 from designopt.kinematics.transforms import (
     dh_modified,
     dh_standard,
@@ -27,14 +29,18 @@ __all__ = [
     "DHChain",
     "ET",
     "ETChain",
+    "SerialModel",
     "cond_2",
     "cond_fro",
     "det3",
+    "dh_model",
     "dh_modified",
     "dh_standard",
+    "et_model",
     "geometric_jacobian",
     "inv_cond",
     "inv_cond_2",
+    "inv_cond_any",
     "inv_cond_fro",
     "inv_cond_fro3",
     "position_jacobian",
