@@ -62,7 +62,7 @@ def main() -> None:
         P = benchmark(fname, a.dim)
         with Stopwatch() as sw:
             r = optim.run_batch("p3", P, jax.random.key(0), members, 50, a.iters, a.runs,
-                                dtype=jnp.float32, draws="splitmix")  # fmt: skip
+                                dtype=jnp.float32)  # fmt: skip
         print(f"\n{fname} ({len(members)} settings × {a.runs} runs in one batch: {sw.wall:.1f} s)")
         print(f"{'γ':>8}{'a':>6}{'ρc':>6}{'mean':>12}{'std':>12}{'median':>12}")
         for m, f in zip(members, r.best_f, strict=True):

@@ -1,26 +1,108 @@
-"""The PSO benchmark suite of seed 000 (Fig. 10-11, SPEC §3.3): variants × test functions.
+"""The benchmark suite of seed 000 (Fig. 10-11, SPEC §3.3): optimizers × test functions.
 
-Every (function, variant) pair is one ``optim.run`` (all runs vmapped, iterations scanned);
-all variants share one compiled kernel per function (the inertia rule and the penalty
-switch are array parameters), and the shifted functions share it too (the shift is an
-array parameter). Statistics per function: mean, std, median, best of the final value,
-mean and std of the convergence iteration, success rate, and Mann-Whitney U of every
-variant against the reference (PTPSO) with Holm's correction.
+Any registry entries side by side — the PSO family p1..p7 and CMA-ES by default — on the
+seed's four functions (and their shifted copies). Every (function, entry) pair is one
+``optim.run`` (all runs vmapped, iterations scanned); the PSO variants share one compiled
+kernel per function (rule and penalty are array parameters) and the shifted functions
+share it too (the shift is an array parameter). Statistics per function: mean, std,
+median, best of the final value, mean and std of the convergence iteration, success rate,
+and Mann-Whitney U of every entry against the reference (PTPSO) with Holm's correction.
+
+``command`` is what ``designopt bench CONFIG`` runs; ``draw_figures`` redraws a bench
+archive's figures (``designopt report``).
 """
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
-from typing import Any
+from pathlib import Path
+from typing import Any, Literal
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
 
 from designopt import optim, stats
-from designopt.config import DEFAULT_SUCCESS, BenchConfig
 from designopt.problems.benchmarks import benchmark
 from designopt.timing import Stopwatch
+
+BENCH_FUNCTIONS = ("griewank", "rastrigin", "ackley", "sphere", "rosenbrock", "schwefel226")
+# "acceptable" final values for the success rate (our choice, D = 30 scale)
+DEFAULT_SUCCESS = {"griewank": 0.1, "rastrigin": 100.0, "ackley": 0.1, "sphere": 0.01,
+                   "rosenbrock": 100.0, "schwefel226": 3000.0}  # fmt: skip
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class Entry(_Strict):
+    """One column of the comparison: a registry name, an optional label (to run the same
+    optimizer twice with different settings) and its settings."""
+
+    name: str
+    label: str | None = None
+    settings: dict[str, float | str] = {}
+
+
+class Bench(_Strict):
+    functions: list[Literal[BENCH_FUNCTIONS]] = ["griewank", "rastrigin", "ackley", "sphere"]  # type: ignore[valid-type]
+    dim: int = Field(30, ge=1)
+    shifted: bool = True  # also run every function with a seeded shift of its optimum
+    shift_seed: int = 1
+    variants: list[str | Entry] = ["p1", "p2", "p3", "p4", "p5", "p6", "p7", "cmaes"]
+    reference: str = "p3"  # Mann-Whitney of every other entry against this label
+    n_particles: int = Field(50, ge=2)  # population size of every entry (CMA-ES: λ)
+    n_iters: int = Field(1000, ge=1)
+    n_runs: int = Field(100, ge=2)
+    bounds: Literal["clip", "reflect", "reinit"] = "clip"
+    success: dict[str, float] = {}
+    settings: dict[
+        str, dict[str, float | str]
+    ] = {}  # per-label overrides, e.g. {p3: {gamma: 1e-5}}
+
+
+class BenchConfig(_Strict):
+    bench: Bench = Bench()
+    precision: Literal["float32", "float64"] = "float32"
+    seed: int = 0
+    output: str = "results/bench/pso_benchmark.h5"
+
+
+def entries(cfg: BenchConfig) -> list[tuple[str, str, dict[str, Any]]]:
+    """(label, registry name, settings) of every compared entry, in config order."""
+    out = []
+    for v in cfg.bench.variants:
+        e = Entry(name=v) if isinstance(v, str) else v
+        label = e.label or e.name
+        out.append((label, e.name, {**e.settings, **cfg.bench.settings.get(label, {})}))
+    return out
+
+
+def check(cfg: BenchConfig, path: str) -> None:
+    """ConfigError naming the key for an unknown optimizer, setting or label."""
+    from designopt.config import ConfigError
+
+    b = cfg.bench
+    labels = []
+    for i, (label, name, settings) in enumerate(entries(cfg)):
+        try:
+            optim.validate(name, settings, b.n_particles)
+        except ValueError as e:
+            raise ConfigError(f"{path}: key 'bench.variants.{i}': {e}") from None
+        if label in labels:
+            raise ConfigError(f"{path}: key 'bench.variants.{i}': label {label!r} used twice")
+        labels.append(label)
+    if b.reference not in labels:
+        raise ConfigError(f"{path}: key 'bench.reference': {b.reference!r} is not one of the "
+                          f"compared entries {labels}")  # fmt: skip
+    for k in b.settings:
+        if k not in labels:
+            raise ConfigError(
+                f"{path}: key 'bench.settings.{k}': not a label of bench.variants {labels}"
+            )
 
 
 def cases(cfg: BenchConfig) -> list[tuple[str, str, int | None]]:
@@ -33,24 +115,25 @@ def cases(cfg: BenchConfig) -> list[tuple[str, str, int | None]]:
 
 
 def run_suite(cfg: BenchConfig, progress: Callable[[int], None] | None = None) -> dict[str, Any]:
-    """Run every case × variant; returns {case: {variant: record}} plus statistics."""
+    """Run every case × entry; returns {"results": {case: {label: record}}, "stats": ...}."""
     b = cfg.bench
     dtype = jnp.dtype(cfg.precision)
-    for v in [*b.variants, b.reference]:
-        optim.resolve(v)
+    ents = entries(cfg)
+    for _, name, settings in ents:
+        optim.validate(name, settings, b.n_particles)
     results: dict[str, dict[str, Any]] = {}
     key = jax.random.key(cfg.seed)
     for ci, (case, fname, shift) in enumerate(cases(cfg)):
         problem = benchmark(fname, b.dim, shift)
         results[case] = {}
-        for variant in b.variants:
+        for label, name, settings in ents:
             with Stopwatch() as sw:
                 r = optim.run(
-                    variant, problem, jax.random.fold_in(key, ci), b.n_particles, b.n_iters,
+                    name, problem, jax.random.fold_in(key, ci), b.n_particles, b.n_iters,
                     b.n_runs, bounds=b.bounds, dtype=dtype, chunk_iters=max(1, b.n_iters // 5),
-                    progress=progress, draws=b.draws, **b.settings.get(variant, {}),
+                    progress=progress, **settings,
                 )  # fmt: skip
-            results[case][variant] = {
+            results[case][label] = {
                 "history": r.history.astype(np.float32),
                 "best_f": r.best_f,
                 "best_x": r.best_x,
@@ -83,14 +166,93 @@ def statistics(cfg: BenchConfig, results: dict[str, dict[str, Any]]) -> dict[str
 
 def format_table(case: str, st: dict[str, Any], reference: str) -> str:
     """A plain-text table for one case (what ``designopt bench`` prints)."""
+    w = max(8, *(len(v) + 1 for v in st["rows"]))
     head = (f"{case}  (success: final ≤ {st['threshold']:g}; U test vs {reference}, Holm)\n"
-            f"{'variant':<8}{'mean':>11}{'std':>11}{'median':>11}{'best':>11}"
+            f"{'entry':<{w}}{'mean':>11}{'std':>11}{'median':>11}{'best':>11}"
             f"{'conv it':>9}{'± std':>8}{'success':>9}{'p (Holm)':>10}")  # fmt: skip
     lines = [head]
     for v, r in st["rows"].items():
         p = f"{r['p_holm']:.1e}" if "p_holm" in r else "ref"
         lines.append(
-            f"{v:<8}{r['mean']:>11.3e}{r['std']:>11.3e}{r['median']:>11.3e}{r['best']:>11.3e}"
+            f"{v:<{w}}{r['mean']:>11.3e}{r['std']:>11.3e}{r['median']:>11.3e}{r['best']:>11.3e}"
             f"{r['conv_mean']:>9.0f}{r['conv_std']:>8.0f}{100 * r['success']:>8.0f}%{p:>10}"
         )
     return "\n".join(lines)
+
+
+def _check_output(path: Path) -> None:
+    from designopt.config import ConfigError
+
+    parent = path.parent if str(path.parent) else Path(".")
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise ConfigError(f"output '{path}': cannot create folder ({e.strerror})") from None
+    if not os.access(parent, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
+        raise ConfigError(f"output '{path}': not writable")
+
+
+def command(config_path: str, seed: int | None, out: str | None, quiet: bool) -> int:
+    """``designopt bench CONFIG [--seed N] [--out PATH] [--quiet]``: run the suite, print
+    the tables, write the archive and the figures. ConfigError for bad input (the CLI
+    prints it and exits 2) before anything runs or is written."""
+    from tqdm import tqdm
+
+    from designopt import archive
+    from designopt.config import load
+
+    cfg, text = load(config_path, BenchConfig)
+    if seed is not None:
+        cfg.seed = seed
+    check(cfg, config_path)
+    path = Path(out or cfg.output)
+    _check_output(path)
+    b = cfg.bench
+    n_ent = len(b.variants)
+    total = len(cases(cfg)) * n_ent * b.n_iters
+    with Stopwatch() as sw, tqdm(total=total, desc="bench", unit="it", disable=quiet) as bar:
+        res = run_suite(cfg, progress=bar.update)
+    st = res["stats"]
+    for case in st:
+        print(format_table(case, st[case], b.reference), end="\n\n")
+    tree: dict[str, Any] = {"bench": {}}
+    for case, per in res["results"].items():
+        tree["bench"][case] = {
+            v: {k: rec[k] for k in ("history", "best_f", "best_x", "converged_at")}
+            | {
+                "attrs": {
+                    "wall_s": rec["wall_s"],
+                    "compile_s": rec["compile_s"],
+                    "settings": rec["settings"],
+                }
+            }  # fmt: skip
+            for v, rec in per.items()
+        } | {"attrs": {"stats": st[case]}}
+    attrs = {"kind": "bench", "config_yaml": text, "config_resolved": cfg.model_dump_json(),
+             "seed": cfg.seed, "wall_time_s": sw.wall, "compile_time_s": sw.compile,
+             "run_time_s": sw.run}  # fmt: skip
+    archive.write(path, tree, attrs)
+    hist = {c: {v: rec["history"] for v, rec in per.items()} for c, per in res["results"].items()}
+    from designopt.figures import bench as bench_figs
+
+    figs = bench_figs.draw(path.parent, st, hist, b.n_runs)
+    print(f"{len(res['results'])} cases × {n_ent} optimizers × {b.n_runs} runs × {b.n_iters} "
+          f"iterations: wall {sw.wall:.1f} s (compile {sw.compile:.1f} s, run {sw.run:.1f} s)")  # fmt: skip
+    print(f"archive: {path}")
+    print(f"figures: {', '.join(p.name for p in figs if p.suffix == '.png')} in {path.parent}")
+    return 0
+
+
+def draw_figures(a: dict[str, Any], folder: str | Path) -> list[Path]:
+    """Redraw a bench archive's figures (``a`` as ``archive.read`` returns it) into folder."""
+    import json
+
+    from designopt.figures import bench as bench_figs
+
+    cfg = a["attrs"]["config_resolved"]
+    if isinstance(cfg, str):
+        cfg = json.loads(cfg)
+    groups = {c: g for c, g in a["bench"].items() if c != "attrs"}
+    st = {c: g["attrs"]["stats"] for c, g in groups.items()}
+    hist = {c: {v: g[v]["history"] for v in g if v != "attrs"} for c, g in groups.items()}
+    return bench_figs.draw(Path(folder), st, hist, cfg["bench"]["n_runs"])

@@ -1,8 +1,11 @@
 """Gradient polish after PSO (optax), projected onto the design box (SPEC §7, issue 5).
 
 Designs are mapped to the unit box u = (x − lower)/(upper − lower) so that one learning
-rate suits every variable; each optax step is followed by a projection (clip to [0, 1]).
-All polished designs run as one vmap; steps as one lax.scan.
+rate suits every variable. The update is one optax chain, ``chain(adam | sgd,
+project_box(0, 1))``: the last transform turns the step into the one that lands on the
+Euclidean projection of u + step onto the box (``optax.projections.projection_box``), so
+``optax.apply_updates`` keeps every iterate feasible. All polished designs run as one
+vmap; steps as one lax.scan.
 """
 
 from __future__ import annotations
@@ -26,12 +29,33 @@ class RefineResult(NamedTuple):
     gain: np.ndarray  # (n,) f0 − f ≥ 0
 
 
+def project_box(lower: Any, upper: Any) -> optax.GradientTransformation:
+    """A stateless optax transform ending a chain: replaces the incoming update d by
+    P(u + d) − u, P the projection onto [lower, upper] (``optax.projections.projection_box``),
+    so that ``apply_updates(u, ·)`` gives the projected iterate."""
+
+    def init(params):
+        return optax.EmptyState()
+
+    def update(updates, state, params=None):
+        if params is None:
+            raise ValueError("project_box needs the current params")
+        moved = optax.apply_updates(params, updates)
+        proj = optax.projections.projection_box(moved, lower, upper)
+        return jax.tree.map(lambda p, u: p - u, proj, params), state
+
+    return optax.GradientTransformation(init, update)
+
+
 def make_optimizer(method: str, learning_rate: float) -> optax.GradientTransformation:
+    """The polish's optax chain in unit-box coordinates: the method, then the projection."""
     if method == "adam":
-        return optax.adam(learning_rate)
-    if method == "sgd":
-        return optax.sgd(learning_rate)
-    raise ValueError(f"unknown refine method {method!r}; one of adam, sgd")
+        base = optax.adam(learning_rate)
+    elif method == "sgd":
+        base = optax.sgd(learning_rate)
+    else:
+        raise ValueError(f"unknown refine method {method!r}; one of adam, sgd")
+    return optax.chain(base, project_box(0.0, 1.0))
 
 
 def refine(
@@ -67,7 +91,7 @@ def refine(
             best_u = jnp.where(better, u, best_u)
             best_f = jnp.where(better, f, best_f)
             upd, state = opt.update(g, state, u)
-            u = jnp.clip(optax.apply_updates(u, upd), 0.0, 1.0)
+            u = optax.apply_updates(u, upd)
             return (u, state, best_u, best_f), f
 
         init = (u0, opt.init(u0), u0, jnp.asarray(jnp.inf, dtype))
@@ -77,9 +101,10 @@ def refine(
         best_f = jnp.minimum(f_last, best_f)
         return best_u, best_f, jnp.concatenate([hist, f_last[None]])
 
-    u0 = (jnp.asarray(x0, dtype) - lo) / span
-    bu, bf, hist = jax.jit(jax.vmap(one))(jnp.clip(u0, 0.0, 1.0))
-    x = np.asarray(lo + span * bu)
+    u0 = optax.projections.projection_box((jnp.asarray(x0, dtype) - lo) / span, 0.0, 1.0)
+    bu, bf, hist = jax.jit(jax.vmap(one))(u0)
+    # back to design units; the min/max only absorbs the last-ulp rounding of lo + span·u
+    x = np.asarray(jnp.minimum(jnp.maximum(lo + span * bu, lo), jnp.asarray(problem.upper, dtype)))
     f = np.asarray(bf)
     h = np.asarray(hist)
     f0 = h[:, 0]

@@ -71,17 +71,19 @@ def test_ptpso_without_penalty_is_p2_exactly():
 
 
 def test_single_run_equals_same_run_inside_batch():
+    from designopt.optim import registry, runner
+
     P = benchmark("ackley", 10)
     key = jax.random.key(11)
     batch = optim.run("p5", P, key, 30, 100, 5)
     keys = jax.random.split(key, 5)
     # run 3 alone, with the same key the batch gave it
-    alone = optim.runner._init(keys[3:4], optim.make_params("p5"), P.params,
-                               jnp.asarray(P.lower), jnp.asarray(P.upper), P.fn, 30)  # fmt: skip
-    st, (f, _) = optim.runner._advance(
-        alone, optim.make_params("p5"), P.params, jnp.asarray(P.lower), jnp.asarray(P.upper),
-        P.fn, "clip", 100, 100,
-    )  # fmt: skip
+    opt = registry.build("p5", 30, 100)
+    par = optim.make_params("p5")
+    lo, hi = jnp.asarray(P.lower), jnp.asarray(P.upper)
+    st = dict(opt=opt, fn=P.fn, cons=None)
+    alone = runner._init(keys[3:4], par, P.params, lo, hi, **st)
+    _, (_, f, _) = runner._advance(alone, par, P.params, lo, hi, length=100, **st)
     np.testing.assert_array_equal(np.asarray(f)[0], batch.history[3, 1:])
     chunked = optim.run("p5", P, key, 30, 100, 5, chunk_iters=7)
     np.testing.assert_array_equal(chunked.history, batch.history)
@@ -129,15 +131,49 @@ def test_p2_matches_numpy_reference_by_mann_whitney():
         ref.append(pf.min())
     r = optim.run("p2", benchmark("rastrigin", D), jax.random.key(0), M, T, R)
     assert mannwhitneyu(r.best_f, np.array(ref)).pvalue > 0.01
+    u = optim.run("p2", benchmark("rastrigin", D), jax.random.key(0), M, T, R, draws="uniform")
+    assert mannwhitneyu(u.best_f, np.array(ref)).pvalue > 0.01
 
 
 def test_bad_names_and_settings():
-    with pytest.raises(ValueError, match="unknown optimizer"):
-        optim.resolve("p9")
-    with pytest.raises(ValueError, match="unknown optimizer setting"):
-        optim.make_params("p1", inertia=3)
+    with pytest.raises(ValueError, match="unknown optimizer 'p9'; known: .*cmaes"):
+        optim.validate("p9", {})
+    with pytest.raises(
+        ValueError, match="unknown setting 'inertia' for optimizer 'p1'; allowed: w"
+    ):
+        optim.validate("p1", {"inertia": 3})
+    with pytest.raises(ValueError, match="unknown setting 'gamma' for optimizer 'cmaes'"):
+        optim.validate("cmaes", {"gamma": 1e-3})
+    with pytest.raises(ValueError, match="unknown setting 'rule'"):
+        optim.validate("p1", {"rule": 2})  # set by the variant, not by the user
+    with pytest.raises(ValueError, match="draws.*one of mix32"):
+        optim.validate("p3", {"draws": "mersenne"})
+    with pytest.raises(ValueError, match="must be a number"):
+        optim.validate("p3", {"gamma": "small"})
+    with pytest.raises(ValueError, match="population size .* 1 .* needs ≥ 2"):
+        optim.validate("ptpso", {}, n_particles=1)
+    with pytest.raises(ValueError, match="needs ≥ 4"):
+        optim.validate("cmaes", {}, n_particles=3)
+    with pytest.raises(ValueError, match="population size"):
+        optim.run("p1", benchmark("sphere", 2), jax.random.key(0), 1, 5, 2)
     with pytest.raises(ValueError, match="unknown benchmark"):
         benchmark("styblinski")
+    for msg in ("p9", "inertia"):
+        with pytest.raises(ValueError) as e:
+            optim.validate(msg if msg == "p9" else "p1", {} if msg == "p9" else {msg: 1})
+        assert "\n" not in str(e.value)
+    optim.validate("cmaes", {"sigma0": 0.2, "active": 0}, n_particles=8)
+    optim.validate("p3", {"gamma": 1e-5, "draws": "uniform"}, n_particles=2)
+
+
+def test_registry_names_and_settings():
+    assert {"p1", "p7", "ptpso", "cmaes"} <= set(optim.names())
+    assert set(optim.OPTIMIZERS) == set(optim.names())
+    assert "gamma" in optim.setting_names("ptpso") and "rule" not in optim.setting_names("p1")
+    assert "draws" not in optim.setting_names("p3")  # a string option, not vmappable
+    assert optim.option_names("p3")["draws"][0] == "mix32"
+    assert optim.setting_names("cmaes") == ("sigma0", "c1_scale", "cmu_scale", "cs_scale",
+                                             "cc_scale", "active")  # fmt: skip
 
 
 def test_run_batch_members_equal_single_runs():
@@ -161,25 +197,6 @@ def test_checkpoint_resume_gives_the_uninterrupted_result():
     resumed = optim.run("p6", P, key, 15, 40, 3, chunk_iters=7, resume=saved[2])
     np.testing.assert_array_equal(resumed.history, full.history)
     np.testing.assert_array_equal(resumed.history_x, full.history_x)
-
-
-def test_splitmix_draws_are_statistically_equivalent():
-    """The SplitMix64 draws give the same distribution of final values (Mann-Whitney)."""
-    from scipy.stats import mannwhitneyu
-
-    P = benchmark("rastrigin", 10)
-    a = optim.run("p2", P, jax.random.key(0), 30, 300, 60)
-    b = optim.run("p2", P, jax.random.key(1), 30, 300, 60, draws="splitmix")
-    assert mannwhitneyu(a.best_f, b.best_f).pvalue > 0.01
-    assert b.best_f.mean() < 30  # and it optimizes
-    u = optim.pso._splitmix_pair(jax.random.key(3), (200_000,), jnp.float64)
-    for r in u:
-        assert float(r.min()) >= 0 and float(r.max()) < 1
-        assert abs(float(r.mean()) - 0.5) < 0.003 and abs(float(r.var()) - 1 / 12) < 0.002
-    assert abs(np.corrcoef(np.asarray(u[0]), np.asarray(u[1]))[0, 1]) < 0.01
-    # the reference implementation's first outputs from state 0 (Vigna, splitmix64.c)
-    z = optim.pso.splitmix64(jnp.asarray(0, jnp.uint64), 3)
-    assert [int(v) for v in z] == [0xE220A8397B1DCDAF, 0x6E789E6AA1B965F4, 0x06C45D188009454F]
 
 
 def test_refine_reaches_known_minimisers_and_respects_the_box():

@@ -1,4 +1,4 @@
-"""Benchmark-suite figures: seed 000 Fig. 10 (final values, mean ± std), Fig. 11
+"""Benchmark-suite figures (one bar or curve per compared optimizer): seed 000 Fig. 10 (final values, mean ± std), Fig. 11
 (convergence iteration, mean ± std) and median/IQR convergence curves."""
 
 from __future__ import annotations
@@ -32,6 +32,7 @@ def _bars(stats: dict[str, Any], mean: str, std: str, ylabel: str, title: str, l
         ax.set_title(case.replace("_", " "), fontsize=9)
         ax.set_ylabel(ylabel, fontsize=8)
         ax.tick_params(labelsize=7)
+        ax.tick_params(axis="x", labelrotation=45)
     for ax in list(axes.flat)[len(cases) :]:
         ax.axis("off")
     fig.suptitle(title, fontsize=10)

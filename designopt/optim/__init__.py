@@ -1,24 +1,39 @@
-"""PSO family (seed 000 eq. 44-50): p1..p7 with PTPSO = p3, and the batch runner."""
+"""Optimizers behind one protocol (protocol.py): the PSO family p1..p7 (PTPSO = p3) as one
+entry, CMA-ES beside it, and the runner that vmaps runs and settings over any of them.
 
-from designopt.optim.pso import Params, State, constriction, init, penalty_coefficient, step
+The pipeline's interface: ``run``, ``run_batch``, ``validate``, ``setting_names``,
+``names``/``OPTIMIZERS``, ``RunResult``, ``Checkpoint`` (docs/optimizers.md).
+"""
+
+from designopt.optim.protocol import Best, Optimizer, Task
+from designopt.optim.pso import constriction, penalty_coefficient
+from designopt.optim.registry import (
+    OPTIMIZERS,
+    make_params,
+    names,
+    option_names,
+    resolve,
+    setting_names,
+    validate,
+)
 from designopt.optim.runner import Checkpoint, RunResult, convergence_iteration, run, run_batch
-from designopt.optim.variants import ALIASES, VARIANTS, make_params, resolve, stack_params
 
 __all__ = [
-    "ALIASES",
+    "OPTIMIZERS",
+    "Best",
     "Checkpoint",
-    "VARIANTS",
-    "Params",
+    "Optimizer",
     "RunResult",
-    "State",
+    "Task",
     "constriction",
     "convergence_iteration",
-    "init",
     "make_params",
+    "names",
+    "option_names",
     "penalty_coefficient",
     "resolve",
     "run",
     "run_batch",
-    "stack_params",
-    "step",
+    "setting_names",
+    "validate",
 ]

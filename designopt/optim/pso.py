@@ -1,95 +1,65 @@
-"""The PSO family of seed 000 (eq. 44-50) as one pure, vmappable update.
+"""The PSO family of seed 000 (eq. 44-50) as one optimizer entry: p1..p7 in one kernel.
 
-State and Params are pytrees of arrays (evosax-style split): Params can be batched to
-vmap over a grid of settings. The seven variants p1..p7 (SPEC §3.3, seed 000 Table 3,
-reconstructed from its references [32]-[37]) differ only in their inertia rule, the
-constriction factor and PTPSO's penalty term; ``VARIANTS`` says which and every default.
+The seven variants (SPEC §3.3, seed 000 Table 3, reconstructed from its references
+[32]-[37]) differ only in their inertia rule, the constriction factor and PTPSO's penalty
+term; the rule is an int32 field of ``Params`` (``lax.switch``), so one compiled kernel
+serves every variant and any vmapped batch of settings. ``VARIANTS`` holds each variant's
+preset over the class defaults.
 
 Update (eq. 44-45, per-dimension r1, r2 ~ U(0,1)):
     v ← χ·(w·v + c1 r1 (p − x) + c2 r2 (g − x)) [+ PTPSO penalty];  v ← clip(v, ±v_max);  x ← x + v
 PTPSO penalty (eq. 46-49): d_i = ‖x_i − g‖, ρ = #{d_i < γ d_max}/M, d_max = box diagonal,
 p_c = (a^{ρ−ρc} − a^{−ρc})/(1 − a^{−ρc}), term = p_c (1 − γ) v_max/√D · r3, r3 ~ U(0,1)
 (seed; one-sided) or U(−1,1) (``symmetric_r3``). It is added after the constriction.
-NaN fitness counts as +inf.
+Personal and global bests follow Deb's feasibility rules (protocol.better); NaN f = +inf.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import NamedTuple
+from dataclasses import dataclass
+from typing import ClassVar, NamedTuple
 
 import jax
 import jax.numpy as jnp
 
+from designopt.optim import draws as rng
+from designopt.optim.protocol import Best, Optimizer, Task, argbest, better
+
 Array = jnp.ndarray
 INERTIA_RULES = ("constant", "nonlinear", "linear", "adaptive", "random")
-BOUNDS = ("clip", "reflect", "reinit")
-DRAWS = ("uniform", "splitmix")  # how r1, r2, r3 are drawn (see _splitmix_pair)
 
 
 class Params(NamedTuple):
-    w: Array  # constant inertia (p1, p2, p3)
-    w_start: Array  # linear rule start (p5), nonlinear w0 (p4), adaptive w_ini (p6)
-    w_end: Array  # linear rule end (p5)
-    u: Array  # nonlinear decay base (p4): w_t = w0 · u^(−t)
-    alpha: Array  # adaptive (p6): weight of evolution speed
-    beta: Array  # adaptive (p6): weight of aggregation degree
-    c1: Array
-    c2: Array
-    chi: Array  # constriction factor (1 = none)
-    vmax_frac: Array  # v_max = vmax_frac · (upper − lower)
-    penalty: Array  # 1 = PTPSO penalty on, 0 = off
-    gamma: Array
-    a: Array
-    rho_c: Array
-    symmetric_r3: Array  # 1 = r3 ~ U(−1, 1)
-    rule: Array  # int32 index into INERTIA_RULES (an array, so one kernel serves all variants)
+    w: float = 0.7  # constant inertia (p1, p2, p3)
+    w_start: float = 0.9  # linear rule start (p5), nonlinear w0 (p4), adaptive w_ini (p6)
+    w_end: float = 0.4  # linear rule end (p5)
+    u: float = 1.0015  # nonlinear decay base (p4): w_t = w0 · u^(−t)
+    alpha: float = 0.4  # adaptive (p6): weight of evolution speed
+    beta: float = 0.2  # adaptive (p6): weight of aggregation degree
+    c1: float = 1.5
+    c2: float = 1.5
+    chi: float = 1.0  # constriction factor (1 = none)
+    vmax_frac: float = 0.2  # v_max = vmax_frac · (upper − lower)
+    penalty: float = 0.0  # 1 = PTPSO penalty on, 0 = off
+    gamma: float = 1e-7
+    a: float = 10.0
+    rho_c: float = 0.9
+    symmetric_r3: float = 0.0  # 1 = r3 ~ U(−1, 1)
+    rule: int = 0  # index into INERTIA_RULES (set by the variant, not a user setting)
 
 
 class State(NamedTuple):
     x: Array  # (M, D)
     v: Array
+    f: Array  # (M,) current fitness
     pbest_x: Array
     pbest_f: Array  # (M,)
+    pbest_v: Array  # (M,) constraint violation of the personal best
     prev_pbest_f: Array  # (M,) for the adaptive rule
     gbest_x: Array  # (D,)
     gbest_f: Array  # ()
-    f: Array  # (M,) current fitness
+    gbest_v: Array  # ()
     t: Array  # iteration counter
-    key: jax.Array
-
-
-def splitmix64(seed: Array, n: int) -> Array:
-    """The first n outputs (uint64) of SplitMix64 started at state ``seed``."""
-    u64 = jnp.uint64
-    z = seed.astype(u64) + (jnp.arange(n, dtype=u64) + u64(1)) * u64(0x9E3779B97F4A7C15)
-    z = (z ^ (z >> u64(30))) * u64(0xBF58476D1CE4E5B9)
-    z = (z ^ (z >> u64(27))) * u64(0x94D049BB133111EB)
-    return z ^ (z >> u64(31))
-
-
-def _splitmix_pair(key: jax.Array, shape: tuple[int, ...], dt) -> tuple[Array, Array]:
-    """Two U[0, 1) arrays on the 2^-24 grid from SplitMix64 (``draws="splitmix"``).
-
-    One 64-bit seed per call comes from the JAX key (threefry); the (M, D) array is the
-    SplitMix64 sequence (Steele, Lea & Flood 2014; passes BigCrush) counted from that
-    seed: z = seed + (i + 1)·0x9E3779B97F4A7C15, then its mix64 finaliser. Bits 40-63 give
-    r1 and bits 8-31 give r2. Threefry dominates a PSO step on CPU (about 85 % of p2's time on
-    Rastrigin-30); this is about 8× cheaper per number. The default stays ``"uniform"``
-    (``jax.random.uniform``); tests compare both by Mann-Whitney. Needs jax x64 (uint64),
-    which ``import designopt`` enables.
-    """
-    if not jax.config.jax_enable_x64:
-        raise RuntimeError('draws="splitmix" needs jax_enable_x64 (uint64 arithmetic)')
-    u64 = jnp.uint64
-    n = 1
-    for s in shape:
-        n *= s
-    z = splitmix64(jax.random.bits(key, (), u64), n)
-    scale = jnp.asarray(2.0**-24, dt)
-    r1 = (z >> u64(40)).astype(dt) * scale
-    r2 = ((z >> u64(8)) & u64(0xFFFFFF)).astype(dt) * scale
-    return r1.reshape(shape), r2.reshape(shape)
 
 
 def constriction(phi: float) -> float:
@@ -97,57 +67,7 @@ def constriction(phi: float) -> float:
     return 2.0 / abs(2.0 - phi - (phi * phi - 4.0 * phi) ** 0.5)
 
 
-def _clean(f: Array) -> Array:
-    return jnp.where(jnp.isnan(f), jnp.inf, f)
-
-
-def init(
-    key: jax.Array, evaluate: Callable, lower: Array, upper: Array, n_particles: int, p: Params
-) -> State:
-    """Uniform positions in the box, velocities uniform in ±v_max, first evaluation."""
-    kx, kv, ke, key = jax.random.split(key, 4)
-    D = lower.shape[0]
-    x = lower + (upper - lower) * jax.random.uniform(kx, (n_particles, D), lower.dtype)
-    vmax = p.vmax_frac * (upper - lower)
-    v = vmax * jax.random.uniform(kv, (n_particles, D), lower.dtype, -1.0, 1.0)
-    f = _clean(evaluate(x, ke))
-    i = jnp.argmin(f)
-    return State(x, v, x, f, f, x[i], f[i], f, jnp.asarray(0, jnp.int32), key)
-
-
-def inertia(s: State, p: Params, n_iters: int, key: jax.Array) -> Array:
-    """Per-particle inertia (M, 1) at iteration s.t for the rule p.rule (lax.switch)."""
-    M = s.x.shape[0]
-    dt = s.x.dtype
-    t = s.t.astype(dt)
-
-    def constant():
-        return jnp.broadcast_to(p.w, (M,)).astype(dt)
-
-    def nonlinear():  # Jiao, Lian & Gu 2008 [33]
-        return jnp.broadcast_to(p.w_start * p.u ** (-t), (M,)).astype(dt)
-
-    def linear():  # Shi & Eberhart 1999 [34]
-        w = p.w_start - (p.w_start - p.w_end) * t / max(n_iters, 1)
-        return jnp.broadcast_to(w, (M,)).astype(dt)
-
-    def adaptive():  # Yang, Yuan, Yuan & Mao 2007 [36]
-        a_, b_ = jnp.abs(s.prev_pbest_f), jnp.abs(s.pbest_f)
-        hi = jnp.maximum(a_, b_)
-        h = jnp.where(hi > 0, jnp.minimum(a_, b_) / jnp.where(hi > 0, hi, 1.0), 1.0)
-        fbest = jnp.abs(s.gbest_f)
-        fmean = jnp.abs(jnp.mean(jnp.where(jnp.isfinite(s.f), s.f, s.gbest_f)))
-        top = jnp.maximum(fbest, fmean)
-        agg = jnp.where(top > 0, jnp.minimum(fbest, fmean) / jnp.where(top > 0, top, 1.0), 1.0)
-        return (p.w_start - p.alpha * (1.0 - h) + p.beta * agg).astype(dt)
-
-    def random():  # Eberhart & Shi 2001 [37]
-        return 0.5 + 0.5 * jax.random.uniform(key, (M,), dt)
-
-    branches = {"constant": constant, "nonlinear": nonlinear, "linear": linear,
-                "adaptive": adaptive, "random": random}  # fmt: skip
-    w = jax.lax.switch(p.rule, [branches[r] for r in INERTIA_RULES])
-    return w[:, None]
+CHI_41 = constriction(4.1)  # 0.729843...
 
 
 def rule_index(rule: str) -> int:
@@ -161,71 +81,164 @@ def penalty_coefficient(rho: Array, a: Array, rho_c: Array) -> Array:
     return (a ** (rho - rho_c) - a ** (-rho_c)) / (1.0 - a ** (-rho_c))
 
 
-def step(
-    s: State,
-    p: Params,
-    evaluate: Callable,
-    lower: Array,
-    upper: Array,
-    bounds: str,
-    n_iters: int,
-    draws: str = "uniform",
-) -> State:
-    """One iteration of eq. (44)-(50) for the whole swarm."""
-    key, k1, k2, k3, kw, kb, ke = jax.random.split(s.key, 7)
-    M, D = s.x.shape
-    dt = s.x.dtype
-    if draws == "uniform":
-        r1 = jax.random.uniform(k1, (M, D), dt)
-        r2 = jax.random.uniform(k2, (M, D), dt)
-    elif draws == "splitmix":
-        r1, r2 = _splitmix_pair(k1, (M, D), dt)
-    else:
-        raise ValueError(f"unknown draws {draws!r}; one of {DRAWS}")
-    w = inertia(s, p, n_iters, kw)
-    v = p.chi * (w * s.v + p.c1 * r1 * (s.pbest_x - s.x) + p.c2 * r2 * (s.gbest_x - s.x))
-    vmax = p.vmax_frac * (upper - lower)
+# name: (preset over Params defaults, source)
+VARIANTS: dict[str, tuple[dict[str, float], str]] = {
+    "p1": (dict(w=0.7, c1=1.5, c2=1.5, rule=0), "basic PSO, seed 000 eq. (44)-(45)"),
+    "p2": (dict(w=1.0, c1=2.05, c2=2.05, chi=CHI_41, rule=0),
+           "constriction factor, Eberhart & Shi 2000 [32] (Clerc-Kennedy χ, φ = 4.1)"),
+    "p3": (dict(w=1.0, c1=2.05, c2=2.05, chi=CHI_41, penalty=1.0, rule=0),
+           "PTPSO = p2 + penalty term, seed 000 eq. (46)-(50)"),
+    "p4": (dict(w_start=0.9, u=1.0015, c1=2.0, c2=2.0, rule=1),
+           "nonlinear time-varying inertia w_t = w0·u^-t, Jiao et al. 2008 [33]"),
+    "p5": (dict(w_start=0.9, w_end=0.4, c1=2.0, c2=2.0, rule=2),
+           "linearly decreasing inertia 0.9 → 0.4, Shi & Eberhart 1999 [34], [35]"),
+    "p6": (dict(w_start=0.6, alpha=0.4, beta=0.2, c1=2.0, c2=2.0, rule=3),
+           "dynamic adaptation (evolution speed, aggregation degree), Yang et al. 2007 [36]"),
+    "p7": (dict(c1=1.494, c2=1.494, rule=4),
+           "random inertia w = 0.5 + U(0,1)/2, Eberhart & Shi 2001 [37]"),
+}  # fmt: skip
 
-    # PTPSO penalty, eq. (46)-(49); computed only when the penalty is on (a real branch
-    # unless the settings are vmapped)
-    def kick():
-        d = jnp.sqrt(jnp.sum((s.x - s.gbest_x) ** 2, axis=1))
-        dmax = jnp.sqrt(jnp.sum((upper - lower) ** 2))
-        rho = jnp.mean((d < p.gamma * dmax).astype(dt))
-        pc = penalty_coefficient(rho, p.a, p.rho_c)
-        u3 = (
-            jax.random.uniform(k3, (M, D), dt)
-            if draws == "uniform"
-            else _splitmix_pair(k3, (M, D), dt)[0]
-        )
-        r3 = jnp.where(p.symmetric_r3 > 0, 2.0 * u3 - 1.0, u3)
-        return (p.penalty * pc * (1.0 - p.gamma) * vmax / jnp.sqrt(D) * r3).astype(dt)
+ALIASES = {
+    "basic": "p1",
+    "pso": "p1",
+    "constriction": "p2",
+    "ptpso": "p3",
+    "nonlinear_inertia": "p4",
+    "linear_inertia": "p5",
+    "ldiw": "p5",
+    "adaptive": "p6",
+    "dynamic_adaptation": "p6",
+    "random_inertia": "p7",
+}
 
-    v = v + jax.lax.cond(p.penalty != 0, kick, lambda: jnp.zeros((M, D), dt))
-    v = jnp.clip(v, -vmax, vmax)
-    x = s.x + v
-    if bounds == "clip":
+# random-number streams of one step (protocol: the step key is fresh every iteration)
+_R1, _R2, _R3, _RW, _RB, _RX, _RV = range(7)
+
+
+@dataclass(frozen=True)
+class PSO(Optimizer):
+    """p1..p7 (the variant is the preset; see VARIANTS). Options: ``draws``."""
+
+    draws: str = rng.DEFAULT
+
+    Params: ClassVar[type] = Params
+    options: ClassVar[dict[str, tuple[str, ...]]] = {"draws": rng.DRAWS}
+    fixed: ClassVar[tuple[str, ...]] = ("rule",)
+    int_fields: ClassVar[tuple[str, ...]] = ("rule",)
+    min_population: ClassVar[int] = 2
+
+    def _u(self, key, slot, shape, dt):
+        return rng.uniform(self.draws, key, slot, shape, dt)
+
+    def init(self, key: jax.Array, p: Params, task: Task) -> State:
+        """Uniform positions in the box, velocities uniform in ±v_max, first evaluation."""
+        lo, hi = task.lower, task.upper
+        dt = lo.dtype
+        shape = (self.n, lo.shape[0])
+        x = lo + (hi - lo) * self._u(key, _RX, shape, dt)
+        vmax = p.vmax_frac * (hi - lo)
+        v = (vmax * (2.0 * self._u(key, _RV, shape, dt) - 1.0)).astype(dt)
+        f, viol = task.evaluate(x, jax.random.fold_in(key, 99))
+        i = argbest(f, viol)
+        return State(x, v, f, x, f, viol, f, x[i], f[i], viol[i], jnp.asarray(0, jnp.int32))
+
+    def inertia(self, s: State, p: Params, key: jax.Array) -> Array:
+        """Per-particle inertia (M, 1) at iteration s.t for the rule p.rule (lax.switch)."""
+        M = s.x.shape[0]
+        dt = s.x.dtype
+        t = s.t.astype(dt)
+        n_iters = self.n_iters
+
+        def constant():
+            return jnp.broadcast_to(p.w, (M,)).astype(dt)
+
+        def nonlinear():  # Jiao, Lian & Gu 2008 [33]
+            return jnp.broadcast_to(p.w_start * p.u ** (-t), (M,)).astype(dt)
+
+        def linear():  # Shi & Eberhart 1999 [34]
+            w = p.w_start - (p.w_start - p.w_end) * t / max(n_iters, 1)
+            return jnp.broadcast_to(w, (M,)).astype(dt)
+
+        def adaptive():  # Yang, Yuan, Yuan & Mao 2007 [36]
+            a_, b_ = jnp.abs(s.prev_pbest_f), jnp.abs(s.pbest_f)
+            hi = jnp.maximum(a_, b_)
+            h = jnp.where(hi > 0, jnp.minimum(a_, b_) / jnp.where(hi > 0, hi, 1.0), 1.0)
+            fbest = jnp.abs(s.gbest_f)
+            fmean = jnp.abs(jnp.mean(jnp.where(jnp.isfinite(s.f), s.f, s.gbest_f)))
+            top = jnp.maximum(fbest, fmean)
+            agg = jnp.where(top > 0, jnp.minimum(fbest, fmean) / jnp.where(top > 0, top, 1.0), 1.0)
+            w = p.w_start - p.alpha * (1.0 - h) + p.beta * agg
+            return jnp.where(jnp.isfinite(w), w, p.w_start).astype(dt)
+
+        def random():  # Eberhart & Shi 2001 [37]
+            return 0.5 + 0.5 * self._u(key, _RW, (M,), dt)
+
+        branches = {"constant": constant, "nonlinear": nonlinear, "linear": linear,
+                    "adaptive": adaptive, "random": random}  # fmt: skip
+        w = jax.lax.switch(p.rule, [branches[r] for r in INERTIA_RULES])
+        return w[:, None]
+
+    def step(self, key: jax.Array, s: State, p: Params, task: Task) -> State:
+        """One iteration of eq. (44)-(50) for the whole swarm."""
+        lower, upper = task.lower, task.upper
+        M, D = s.x.shape
+        dt = s.x.dtype
+        r1, r2 = rng.uniform_pair(self.draws, key, _R1, (M, D), dt)  # streams _R1, _R2
+        w = self.inertia(s, p, key)
+        v = p.chi * (w * s.v + p.c1 * r1 * (s.pbest_x - s.x) + p.c2 * r2 * (s.gbest_x - s.x))
+        vmax = p.vmax_frac * (upper - lower)
+
+        # PTPSO penalty, eq. (46)-(49); computed only when the penalty is on (a real branch
+        # unless the settings are vmapped)
+        def kick():
+            d = jnp.sqrt(jnp.sum((s.x - s.gbest_x) ** 2, axis=1))
+            dmax = jnp.sqrt(jnp.sum((upper - lower) ** 2))
+            rho = jnp.mean((d < p.gamma * dmax).astype(dt))
+            pc = penalty_coefficient(rho, p.a, p.rho_c)
+            u3 = self._u(key, _R3, (M, D), dt)
+            r3 = jnp.where(p.symmetric_r3 > 0, 2.0 * u3 - 1.0, u3)
+            return (p.penalty * pc * (1.0 - p.gamma) * vmax / jnp.sqrt(D) * r3).astype(dt)
+
+        v = v + jax.lax.cond(p.penalty != 0, kick, lambda: jnp.zeros((M, D), dt))
+        v = jnp.clip(v, -vmax, vmax)
+        # materialise v here: without the barrier XLA fuses the draws and the velocity
+        # update into each of v's consumers (position, bounds, fitness, personal best) and
+        # recomputes them there, which doubled the step's time on CPU (docs/optimizers.md)
+        v = jax.lax.optimization_barrier(v)
+        x = s.x + v
         out = (x < lower) | (x > upper)
-        x = jnp.clip(x, lower, upper)
-        v = jnp.where(out, 0.0, v)
-    elif bounds == "reflect":
-        span = upper - lower
-        y = jnp.mod(x - lower, 2 * span)
-        refl = y > span
-        x = lower + jnp.where(refl, 2 * span - y, y)
-        v = jnp.where((s.x + v < lower) | (s.x + v > upper), -v, v)
-    elif bounds == "reinit":
-        out = (x < lower) | (x > upper)
-        fresh = lower + (upper - lower) * jax.random.uniform(kb, (M, D), dt)
-        x = jnp.where(out, fresh, x)
-    else:
-        raise ValueError(f"unknown bounds handling {bounds!r}; one of {BOUNDS}")
-    f = _clean(evaluate(x, ke))
-    better = f < s.pbest_f
-    pbest_x = jnp.where(better[:, None], x, s.pbest_x)
-    pbest_f = jnp.where(better, f, s.pbest_f)
-    i = jnp.argmin(pbest_f)
-    improved = pbest_f[i] < s.gbest_f
-    gbest_x = jnp.where(improved, pbest_x[i], s.gbest_x)
-    gbest_f = jnp.where(improved, pbest_f[i], s.gbest_f)
-    return State(x, v, pbest_x, pbest_f, s.pbest_f, gbest_x, gbest_f, f, s.t + 1, key)
+        if self.bounds == "clip":
+            x = jnp.clip(x, lower, upper)
+            v = jnp.where(out, 0.0, v)
+        elif self.bounds == "reflect":
+            span = upper - lower
+            y = jnp.mod(x - lower, 2 * span)
+            x = lower + jnp.where(y > span, 2 * span - y, y)
+            v = jnp.where(out, -v, v)
+        elif self.bounds == "reinit":
+            x = jnp.where(out, lower + (upper - lower) * self._u(key, _RB, (M, D), dt), x)
+        else:
+            raise ValueError(f"unknown bounds handling {self.bounds!r}")
+        f, viol = task.evaluate(x, jax.random.fold_in(key, 99))
+        imp = better(f, viol, s.pbest_f, s.pbest_v)
+        pbest_x = jnp.where(imp[:, None], x, s.pbest_x)
+        pbest_f = jnp.where(imp, f, s.pbest_f)
+        pbest_v = jnp.where(imp, viol, s.pbest_v)
+        i = argbest(pbest_f, pbest_v)
+        g = better(pbest_f[i], pbest_v[i], s.gbest_f, s.gbest_v)
+        return State(
+            x, v, f, pbest_x, pbest_f, pbest_v, s.pbest_f,
+            jnp.where(g, pbest_x[i], s.gbest_x), jnp.where(g, pbest_f[i], s.gbest_f),
+            jnp.where(g, pbest_v[i], s.gbest_v), s.t + 1,
+        )  # fmt: skip
+
+    def best(self, s: State) -> Best:
+        return Best(s.gbest_x, s.gbest_f, s.gbest_v)
+
+    def describe(self, params: Params) -> dict:
+        import numpy as np
+
+        out = super().describe(params)
+        rule = np.asarray(params.rule).ravel()
+        out["rule"] = INERTIA_RULES[int(rule[0])] if rule.size else None
+        return out

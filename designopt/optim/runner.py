@@ -1,8 +1,12 @@
-"""Run a PSO variant on any Problem: all runs as one vmap over keys, lax.scan over iterations.
+"""Run any registered optimizer on any Problem: all runs as one vmap over keys, iterations as
+a chunked ``lax.scan``, and (``run_batch``) a second vmap over a list of settings.
 
-Iterations are scanned in chunks (``chunk_iters``); the host sees the swarm only between
-chunks (progress bar, checkpoint), which keeps the run one array program. ``run_batch``
-adds a second vmap over a list of settings (a sweep), all members on the same keys.
+The runner sees only the protocol (protocol.py): ``init``/``step``/``best`` and opaque
+state pytrees. It owns each run's PRNG key (split once per iteration, the second half is
+the step's key), records the best-so-far value, design and violation after every
+iteration, and hands the host a :class:`Checkpoint` between chunks (progress bar,
+Ctrl-C safety). A checkpoint's ``state`` is a flat dict of numpy arrays named by the
+state pytree's paths; resuming from it gives bit-for-bit the uninterrupted run.
 """
 
 from __future__ import annotations
@@ -15,9 +19,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from designopt.optim import pso
-from designopt.optim.variants import make_params, resolve, stack_params
-from designopt.problems.base import Problem
+from designopt.optim import registry
+from designopt.optim.protocol import Best, Optimizer, Task, clean
+from designopt.problems.base import Problem, violation_of
 
 CONVERGENCE_TOL = 1e-6
 
@@ -29,11 +33,14 @@ class RunResult(NamedTuple):
     converged_at: np.ndarray  # ([B,] n_runs) iteration after which no improvement > tol
     history_x: np.ndarray  # ([B,] n_runs, n_iters + 1, D) best-so-far design
     settings: dict[str, Any]
+    history_v: np.ndarray | None = None  # ([B,] n_runs, n_iters + 1) its constraint violation
+    best_v: np.ndarray | None = None  # ([B,] n_runs) 0 = feasible
 
 
 class Checkpoint(NamedTuple):
-    """Everything needed to continue a run bit-for-bit: the swarm state as numpy arrays
-    (the PRNG key as its raw key data), the histories so far and the iterations done."""
+    """Everything needed to continue a run bit-for-bit: the optimizer state and run keys
+    as a flat dict of numpy arrays (keys as raw key data), the histories so far and the
+    iterations done."""
 
     state: dict[str, np.ndarray]
     history: np.ndarray
@@ -44,7 +51,8 @@ class Checkpoint(NamedTuple):
 def convergence_iteration(history: np.ndarray, tol: float = CONVERGENCE_TOL) -> np.ndarray:
     """SPEC §3.3: the iteration after which the best value never again improves by > tol."""
     h = np.asarray(history)
-    gain = h[..., :-1] - h[..., 1:]
+    with np.errstate(invalid="ignore"):
+        gain = h[..., :-1] - h[..., 1:]
     gain = np.where(np.isfinite(gain), gain, np.inf)  # leaving +inf is an improvement
     big = gain > tol
     T = h.shape[-1] - 1
@@ -53,66 +61,113 @@ def convergence_iteration(history: np.ndarray, tol: float = CONVERGENCE_TOL) -> 
 
 
 def _over_runs(f, batched: bool):
-    """vmap f(state_or_key, params) over runs, and over settings too when ``batched``."""
+    """vmap f(run_input, params) over runs, and over settings too when ``batched``."""
     runs = lambda S, p: jax.vmap(lambda s: f(s, p))(S)  # noqa: E731
     return jax.vmap(runs) if batched else runs
 
 
-@partial(jax.jit, static_argnames=("fn", "bounds", "n_iters", "length", "batched", "draws"))
-def _advance(states, params, pparams, lower, upper, fn, bounds, n_iters, length, batched=False,
-             draws="uniform"):  # fmt: skip
-    ev = lambda X, k: fn(pparams, X, k)[0]  # noqa: E731
+def _task(fn, cons, pparams, lower, upper) -> Task:
+    def evaluate(X, key):
+        f = clean(fn(pparams, X, key)[0]).astype(X.dtype)
+        return f, violation_of(cons, pparams, X)
 
-    def one(s, p):
-        def body(s, _):
-            s = pso.step(s, p, ev, lower, upper, bounds, n_iters, draws)
-            return s, (s.gbest_f, s.gbest_x)
-
-        return jax.lax.scan(body, s, None, length=length)
-
-    return _over_runs(one, batched)(states, params)
+    return Task(evaluate, lower, upper)
 
 
-@partial(jax.jit, static_argnames=("fn", "n_particles", "batched"))
-def _init(keys, params, pparams, lower, upper, fn, n_particles, batched=False):
-    ev = lambda X, k: fn(pparams, X, k)[0]  # noqa: E731
-    one = lambda k, p: pso.init(k, ev, lower, upper, n_particles, p)  # noqa: E731
+@partial(jax.jit, static_argnames=("opt", "fn", "cons", "batched"))
+def _init(keys, params, pparams, lower, upper, opt, fn, cons, batched=False):
+    task = _task(fn, cons, pparams, lower, upper)
+
+    def one(key, p):
+        k0, k1 = jax.random.split(key)
+        return k1, opt.init(k0, p, task)
+
     return _over_runs(one, batched)(keys, params)
 
 
-def _to_numpy(states: pso.State) -> dict[str, np.ndarray]:
-    d = {k: np.asarray(v) for k, v in states._asdict().items() if k != "key"}
-    d["key"] = np.asarray(jax.random.key_data(states.key))
-    return d
+@partial(jax.jit, static_argnames=("opt", "fn", "cons", "length", "batched"))
+def _advance(carry, params, pparams, lower, upper, opt, fn, cons, length, batched=False):
+    task = _task(fn, cons, pparams, lower, upper)
+
+    def one(c, p):
+        def body(c, _):
+            key, state = c
+            key, k = jax.random.split(key)
+            state = opt.step(k, state, p, task)
+            return (key, state), tuple(opt.best(state))
+
+        return jax.lax.scan(body, c, None, length=length)
+
+    return _over_runs(one, batched)(carry, params)
 
 
-def _from_numpy(d: dict[str, np.ndarray]) -> pso.State:
-    vals = {k: jnp.asarray(v) for k, v in d.items() if k != "key"}
-    return pso.State(**vals, key=jax.random.wrap_key_data(jnp.asarray(d["key"])))
+def _best(opt: Optimizer, carry, batched: bool) -> Best:
+    f = lambda c, _: tuple(opt.best(c[1]))  # noqa: E731
+    return Best(*_over_runs(f, batched)(carry, None))
 
 
-def _drive(variant, params, problem, key, n_particles, n_iters, n_runs, bounds, dtype,
-           chunk_iters, progress, checkpoint, resume, batched, B, draws):  # fmt: skip
-    if n_particles < 2 or n_iters < 1 or n_runs < 1:
-        raise ValueError("n_particles must be ≥ 2, n_iters ≥ 1 and n_runs ≥ 1")
-    if bounds not in pso.BOUNDS:
-        raise ValueError(f"bounds must be one of {pso.BOUNDS}, got {bounds!r}")
-    if draws not in pso.DRAWS:
-        raise ValueError(f"draws must be one of {pso.DRAWS}, got {draws!r}")
+def _path_name(path) -> str:
+    parts = []
+    for k in path:
+        parts.append(str(getattr(k, "name", getattr(k, "key", getattr(k, "idx", k)))))
+    return ".".join(parts)
+
+
+def _is_key(x) -> bool:
+    return jnp.issubdtype(x.dtype, jax.dtypes.prng_key)
+
+
+def _to_numpy(carry) -> dict[str, np.ndarray]:
+    leaves, _ = jax.tree_util.tree_flatten_with_path(carry)
+    return {
+        _path_name(p): np.asarray(jax.random.key_data(v) if _is_key(v) else v) for p, v in leaves
+    }
+
+
+def _from_numpy(d: dict[str, np.ndarray], template) -> Any:
+    leaves, tree = jax.tree_util.tree_flatten_with_path(template)
+    out = []
+    for p, t in leaves:
+        name = _path_name(p)
+        if name not in d:
+            raise ValueError(f"checkpoint lacks state entry {name!r} (another optimizer?)")
+        a = jnp.asarray(d[name])
+        if _is_key(t):
+            a = jax.random.wrap_key_data(a)
+        if a.shape != t.shape or a.dtype != t.dtype:
+            raise ValueError(f"checkpoint entry {name!r} does not match this run's shape/dtype")
+        out.append(a)
+    return jax.tree_util.tree_unflatten(tree, out)
+
+
+def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress, checkpoint,
+           resume, batched, B, record):  # fmt: skip
+    n_iters = opt.n_iters
     lower = jnp.asarray(problem.lower, dtype)
     upper = jnp.asarray(problem.upper, dtype)
     keys = jax.random.split(key, n_runs)
     if batched:
         keys = jnp.broadcast_to(keys, (B, n_runs))  # common random numbers across settings
-    fn = problem.fn
+    statics = dict(opt=opt, fn=problem.fn, cons=problem.constraints, batched=batched)
     if resume is None:
-        states = _init(keys, params, problem.params, lower, upper, fn, n_particles, batched)
-        hf = [np.asarray(states.gbest_f)[..., None]]
-        hx = [np.asarray(states.gbest_x)[..., None, :]]
+        carry = _init(keys, params, problem.params, lower, upper, **statics)
+        b = _best(opt, carry, batched)
+        hf, hx, hv = (
+            [np.asarray(b.f)[..., None]],
+            [np.asarray(b.x)[..., None, :]],
+            [np.asarray(b.v)[..., None]],
+        )
         done = 0
     else:
-        states = _from_numpy(resume.state)
-        hf, hx, done = [np.asarray(resume.history)], [np.asarray(resume.history_x)], resume.done
+        template = jax.eval_shape(
+            lambda: _init(keys, params, problem.params, lower, upper, **statics)
+        )
+        st = dict(resume.state)
+        hv0 = st.pop("runner.history_v", None)
+        carry = _from_numpy(st, template)
+        done = resume.done
+        hf, hx = [np.asarray(resume.history)], [np.asarray(resume.history_x)]
+        hv = [np.zeros_like(hf[0]) if hv0 is None else np.asarray(hv0)]
         if hf[0].shape[-1] != done + 1:
             raise ValueError("checkpoint history does not match its iteration count")
         if progress is not None:
@@ -120,47 +175,51 @@ def _drive(variant, params, problem, key, n_particles, n_iters, n_runs, bounds, 
     chunk = n_iters if chunk_iters is None else max(1, min(chunk_iters, n_iters))
     while done < n_iters:
         length = min(chunk, n_iters - done)
-        states, (f, x) = _advance(
-            states,
-            params,
-            problem.params,
-            lower,
-            upper,
-            fn,
-            bounds,
-            n_iters,
-            length,
-            batched,
-            draws,
+        carry, (x, f, v) = _advance(
+            carry, params, problem.params, lower, upper, length=length, **statics
         )
         hf.append(np.asarray(f))
         hx.append(np.asarray(x))
+        hv.append(np.asarray(v))
         done += length
         if progress is not None:
             progress(length)
         if checkpoint is not None and done < n_iters:
-            hist, hist_x = np.concatenate(hf, axis=-1), np.concatenate(hx, axis=-2)
-            hf, hx = [hist], [hist_x]
-            checkpoint(Checkpoint(_to_numpy(states), hist, hist_x, done))
+            hf = [np.concatenate(hf, axis=-1)]
+            hx = [np.concatenate(hx, axis=-2)]
+            hv = [np.concatenate(hv, axis=-1)]
+            state = _to_numpy(carry) | {"runner.history_v": hv[0]}
+            checkpoint(Checkpoint(state, hf[0], hx[0], done))
     history = np.concatenate(hf, axis=-1)
     history_x = np.concatenate(hx, axis=-2)
+    history_v = np.concatenate(hv, axis=-1)
     return RunResult(
         history=history,
         best_f=history[..., -1],
         best_x=history_x[..., -1, :],
         converged_at=convergence_iteration(history),
         history_x=history_x,
-        settings=_settings_record(variant, bounds, n_particles, n_iters, n_runs, params, draws),
+        settings=record,
+        history_v=history_v,
+        best_v=history_v[..., -1],
     )
 
 
-def _settings_record(
-    variant, bounds, n_particles, n_iters, n_runs, params, draws
-) -> dict[str, Any]:
-    used = {k: np.asarray(getattr(params, k)).tolist() for k in pso.Params._fields if k != "rule"}
-    return {"variant": variant.name, "rule": variant.rule, "bounds": bounds,
-            "source": variant.source, "n_particles": n_particles, "n_iters": n_iters,
-            "n_runs": n_runs, "draws": draws, **used}  # fmt: skip
+def _prepare(name, n_particles, n_iters, n_runs, bounds, settings_list):
+    for s in settings_list:
+        registry.validate(name, s, n_particles)
+    if n_iters < 1 or n_runs < 1:
+        raise ValueError("n_iters must be ≥ 1 and n_runs ≥ 1")
+    opts = [registry.split_settings(name, s)[1] for s in settings_list]
+    if any(o != opts[0] for o in opts):
+        raise ValueError("the members of a batch must share their string options (e.g. draws)")
+    return registry.build(name, n_particles, n_iters, bounds, **opts[0])
+
+
+def _record(name, opt, params, n_runs) -> dict[str, Any]:
+    e = registry.resolve(name)
+    return {"optimizer": e.name, "name": name, "source": e.source, "n_runs": n_runs,
+            **opt.describe(params)}  # fmt: skip
 
 
 def run(
@@ -176,29 +235,28 @@ def run(
     progress: Callable[[int], None] | None = None,
     checkpoint: Callable[[Checkpoint], None] | None = None,
     resume: Checkpoint | None = None,
-    draws: str = "uniform",
     **settings: Any,
 ) -> RunResult:
-    """Run ``n_runs`` independent runs of variant ``name`` (p1..p7 or an alias) on ``problem``.
+    """Run ``n_runs`` independent runs of optimizer ``name`` (``registry.names()``) on
+    ``problem`` with population ``n_particles``.
 
-    ``settings`` override the variant's parameters (see ``designopt.optim.variants.BASE``).
-    ``draws`` picks how r1, r2, r3 are drawn: ``"uniform"`` (default) or ``"splitmix"``
-    (counter-based SplitMix64 seeded from the key, several times faster on CPU;
-    ``pso._splitmix_pair``).
-    ``checkpoint`` is called between chunks with a :class:`Checkpoint`; passing one back
-    as ``resume`` continues the run and gives exactly the uninterrupted result.
+    ``settings`` override the optimizer's numeric ``Params`` (``setting_names(name)``) or
+    set its string options (e.g. PSO's ``draws``). ``checkpoint`` is called between chunks
+    of ``chunk_iters`` iterations with a :class:`Checkpoint`; passing one back as
+    ``resume`` continues the run and gives exactly the uninterrupted result.
     """
-    variant = resolve(name)
-    params = make_params(name, dtype, **settings)
-    return _drive(variant, params, problem, key, n_particles, n_iters, n_runs, bounds, dtype,
-                  chunk_iters, progress, checkpoint, resume, False, 1, draws)  # fmt: skip
+    opt = _prepare(name, n_particles, n_iters, n_runs, bounds, [settings])
+    e = registry.resolve(name)
+    params = e.cls.make_params(dtype, e.preset, **registry.split_settings(name, settings)[0])
+    return _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress,
+                  checkpoint, resume, False, 1, _record(name, opt, params, n_runs))  # fmt: skip
 
 
 def run_batch(
     name: str,
     problem: Problem,
     key: jax.Array,
-    members: Sequence[dict[str, float]],
+    members: Sequence[dict[str, Any]],
     n_particles: int = 50,
     n_iters: int = 1000,
     n_runs: int = 100,
@@ -208,17 +266,21 @@ def run_batch(
     progress: Callable[[int], None] | None = None,
     checkpoint: Callable[[Checkpoint], None] | None = None,
     resume: Checkpoint | None = None,
-    draws: str = "uniform",
 ) -> RunResult:
-    """Run the variant once per settings dict in ``members``, all as one vmapped program.
+    """Run the optimizer once per settings dict in ``members``, all as one vmapped program.
 
     Every member uses the same run keys (common random numbers), so member i equals
     ``run(name, ..., **members[i])`` up to floating-point reassociation. Results carry a
-    leading member axis.
+    leading member axis. String options must be equal across members.
     """
     if not members:
         raise ValueError("members must hold at least one settings dict")
-    variant = resolve(name)
-    params = stack_params([make_params(name, dtype, **m) for m in members])
-    return _drive(variant, params, problem, key, n_particles, n_iters, n_runs, bounds, dtype,
-                  chunk_iters, progress, checkpoint, resume, True, len(members), draws)  # fmt: skip
+    members = [dict(m) for m in members]
+    opt = _prepare(name, n_particles, n_iters, n_runs, bounds, members)
+    e = registry.resolve(name)
+    plist = [
+        e.cls.make_params(dtype, e.preset, **registry.split_settings(name, m)[0]) for m in members
+    ]
+    params = jax.tree.map(lambda *a: jnp.stack(a), *plist)
+    return _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress,
+                  checkpoint, resume, True, len(members), _record(name, opt, params, n_runs))  # fmt: skip

@@ -5,6 +5,11 @@ scores a whole swarm X (M, D) in one call: f (M,) and named sub-objectives aux[n
 ``params`` is a pytree of arrays (fixed lengths, normalisation bounds, sample keys …),
 passed as an argument rather than baked into the trace, so one compiled kernel serves a
 swarm, a sweep, and ``jax.grad``.
+
+Constraints (optional): ``constraints(params, X) -> G (M, n_c)``; a design is feasible
+when every g ≤ 0. Optimizers see the total violation v = Σ max(g, 0) (``total_violation``)
+beside f and rank candidates by Deb's feasibility rules (docs/optimizers.md). No
+constraint function means zero constraints: v = 0 everywhere.
 """
 
 from __future__ import annotations
@@ -19,6 +24,15 @@ import numpy as np
 
 Array = jnp.ndarray
 ProblemFn = Callable[[Any, Array, jax.Array], tuple[Array, dict[str, Array]]]
+ConstraintFn = Callable[[Any, Array], Array]
+
+
+def total_violation(g: Array) -> Array:
+    """Σ_j max(g_j, 0) over the last axis of constraint values G (M, n_c) → (M,); NaN
+    counts as +inf (an unevaluable design is never feasible)."""
+    g = jnp.asarray(g)
+    v = jnp.sum(jnp.maximum(g, 0.0), axis=-1)
+    return jnp.where(jnp.isnan(v), jnp.inf, v)
 
 
 @dataclass(frozen=True, eq=False)
@@ -29,6 +43,7 @@ class Problem:
     fn: ProblemFn
     params: Any = None
     info: dict[str, Any] = field(default_factory=dict)
+    constraints: ConstraintFn | None = None  # G = constraints(params, X) (M, n_c), g ≤ 0
 
     def __post_init__(self) -> None:
         lo, hi = np.asarray(self.lower, np.float64), np.asarray(self.upper, np.float64)
@@ -53,3 +68,21 @@ class Problem:
             raise ValueError(f"X must have shape (M, {self.dim}), got {tuple(X.shape)}")
         key = jax.random.key(0) if key is None else key
         return self.fn(self.params, X, key)
+
+    def violation(self, X: Array) -> Array:
+        """Total constraint violation Σ max(g, 0) of a swarm X (M, D); zeros without
+        constraints."""
+        X = jnp.asarray(X)
+        if X.ndim != 2 or X.shape[1] != self.dim:
+            raise ValueError(f"X must have shape (M, {self.dim}), got {tuple(X.shape)}")
+        return violation_of(self.constraints, self.params, X)
+
+
+def violation_of(constraints: ConstraintFn | None, params: Any, X: Array) -> Array:
+    """Pure form of ``Problem.violation`` (for jitted code: ``constraints`` is static)."""
+    if constraints is None:
+        return jnp.zeros(X.shape[:1], X.dtype)
+    g = jnp.asarray(constraints(params, X))
+    if g.ndim == 1:
+        g = g[:, None]
+    return total_violation(g).astype(X.dtype)

@@ -82,7 +82,10 @@ def benchmark(name: str, dim: int = 30, shift: int | None = None) -> Problem:
     if shift is None:
         s = np.zeros(dim)
     else:
-        u = np.asarray(jax.random.uniform(jax.random.key(shift), (dim,), jnp.float64, -1.0, 1.0))
+        with jax.enable_x64(True):  # the same float64 shift whatever the caller's x64 setting
+            u = np.asarray(
+                jax.random.uniform(jax.random.key(shift), (dim,), jnp.float64, -1.0, 1.0)
+            )
         room = 0.8 * half - abs(xopt)
         s = u * room
     params = {"shift": jnp.asarray(s)}

@@ -1,0 +1,148 @@
+"""The optimizer protocol: what every registry entry provides and what the runner uses.
+
+An optimizer is a frozen (hashable) dataclass holding its *static* configuration — the
+population size ``n``, the iteration budget ``n_iters``, the bounds handling and any
+string options (e.g. PSO's ``draws``) — plus three pure functions, in the manner of optax
+(``GradientTransformation(init, update)``) and evosax (one file per algorithm, ``Params``
+defaults on the class):
+
+    state = opt.init(key, params, task)           # first population, evaluated
+    state = opt.step(key, state, params, task)    # one iteration
+    x, f, v = opt.best(state)                     # best design so far (Deb's rules)
+
+``params`` is the optimizer's ``Params`` NamedTuple of arrays (its numeric settings,
+defaults on the class), so one compiled kernel serves a vmapped batch of settings;
+``state`` is any pytree of arrays. ``task`` is the problem as the optimizer sees it: the
+box and ``evaluate(X, key) -> (f, v)``, the objective and the total constraint violation
+v = Σ max(g, 0) of each candidate, NaN cleaned to +inf. Candidates are compared by Deb's
+feasibility rules (``better``, ``argbest``, ``order``): a feasible candidate (v = 0) beats
+an infeasible one, two infeasible ones compare by v, two feasible ones by f.
+
+The runner (runner.py) owns the PRNG key, the scan, the vmaps, progress and checkpoints,
+and knows nothing else about an optimizer.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, ClassVar, NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+Array = jnp.ndarray
+BOUNDS = ("clip", "reflect", "reinit")
+
+
+class Task(NamedTuple):
+    """The problem as an optimizer sees it (built by the runner inside the jitted code)."""
+
+    evaluate: Callable[[Array, jax.Array], tuple[Array, Array]]  # X (M, D) → f (M,), v (M,)
+    lower: Array  # (D,)
+    upper: Array  # (D,)
+
+
+class Best(NamedTuple):
+    x: Array  # (D,)
+    f: Array  # ()
+    v: Array  # () total constraint violation (0 = feasible)
+
+
+def clean(f: Array) -> Array:
+    """NaN → +inf (an unevaluable candidate is never the best)."""
+    return jnp.where(jnp.isnan(f), jnp.inf, f)
+
+
+def better(f1: Array, v1: Array, f2: Array, v2: Array) -> Array:
+    """Deb's feasibility rules: is candidate 1 strictly better than candidate 2?"""
+    return (v1 < v2) | ((v1 == v2) & (f1 < f2))
+
+
+def argbest(f: Array, v: Array) -> Array:
+    """Index of the best candidate by Deb's rules (least violation, then least f)."""
+    vmin = jnp.min(v)
+    i = jnp.argmin(jnp.where(v == vmin, f, jnp.inf))
+    return jnp.where(v[i] == vmin, i, jnp.argmin(v))
+
+
+def order(f: Array, v: Array) -> Array:
+    """Indices sorting candidates best first by Deb's rules (ties keep their order)."""
+    return jnp.lexsort((f, v))
+
+
+def apply_bounds(
+    x: Array, lower: Array, upper: Array, mode: str, fresh: Callable[[], Array]
+) -> Array:
+    """Bring positions back into the box: ``clip``, ``reflect`` (mirror at the faces) or
+    ``reinit`` (out-of-box coordinates drawn anew by ``fresh()``, uniform in the box)."""
+    if mode == "clip":
+        return jnp.clip(x, lower, upper)
+    if mode == "reflect":
+        span = upper - lower
+        y = jnp.mod(x - lower, 2 * span)
+        return lower + jnp.where(y > span, 2 * span - y, y)
+    if mode == "reinit":
+        out = (x < lower) | (x > upper)
+        return jnp.where(out, fresh(), x)
+    raise ValueError(f"unknown bounds handling {mode!r}; one of {BOUNDS}")
+
+
+@dataclass(frozen=True)
+class Optimizer:
+    """Base of every registry entry (see the module docstring).
+
+    Subclasses set ``Params`` (a NamedTuple with defaults), ``options`` (static string
+    options: name → allowed values, the first is the default), ``min_population`` and
+    ``fixed`` (Params fields a preset sets but a user may not, e.g. PSO's inertia rule),
+    and implement ``init``, ``step`` and ``best``.
+    """
+
+    n: int  # population size
+    n_iters: int  # iteration budget (schedules such as a decreasing inertia use it)
+    bounds: str = "clip"
+
+    Params: ClassVar[type] = NamedTuple
+    options: ClassVar[dict[str, tuple[str, ...]]] = {}
+    fixed: ClassVar[tuple[str, ...]] = ()
+    min_population: ClassVar[int] = 2
+
+    def init(self, key: jax.Array, params: Any, task: Task) -> Any:
+        raise NotImplementedError
+
+    def step(self, key: jax.Array, state: Any, params: Any, task: Task) -> Any:
+        raise NotImplementedError
+
+    def best(self, state: Any) -> Best:
+        raise NotImplementedError
+
+    @classmethod
+    def setting_names(cls) -> tuple[str, ...]:
+        """The numeric (vmappable) settings a user may give."""
+        return tuple(k for k in cls.Params._fields if k not in cls.fixed)
+
+    @classmethod
+    def make_params(cls, dtype: Any, preset: dict[str, float], **settings: float) -> Any:
+        """``Params`` of arrays: class defaults ← preset ← settings (names checked by
+        ``registry.validate``). Integer-valued fields keep an int32 dtype."""
+        vals = cls.Params()._asdict() | preset | settings
+        ints = getattr(cls, "int_fields", ())
+        return cls.Params(
+            **{
+                k: jnp.asarray(vals[k], jnp.int32 if k in ints else dtype)
+                for k in cls.Params._fields
+            }
+        )
+
+    def describe(self, params: Any) -> dict[str, Any]:
+        """What the archive records about the settings used (JSON-friendly)."""
+        import numpy as np
+
+        out: dict[str, Any] = {
+            "bounds": self.bounds,
+            "n_particles": self.n,
+            "n_iters": self.n_iters,
+        }
+        out |= {k: getattr(self, k) for k in self.options}
+        out |= {k: np.asarray(getattr(params, k)).tolist() for k in params._fields}
+        return out
