@@ -1,0 +1,190 @@
+"""The ``study:`` section of a ``plas`` config (seed 004; docs/plas.md lists every key).
+
+Lengths in mm, angles in degrees. The joint ranges are the master's workspace over which
+the mismatch is averaged; the mapping of eq. (27)-(29) puts master and slave at the same
+configuration, so the ranges must lie within the slave's joint limits.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+from designopt.studies.base import StudySettings
+
+MASTER_KEYS: tuple[str, ...] = ("a2p", "a3p", "d6")
+"""Mirrors ``mechanism.MASTER_KEYS`` (kept import-light): a2', a3' (offset between the
+master's joints 3 and 4; 0 on the built master), d6."""
+BUILT = {"a2p": 138.0, "a3p": 0.0, "d6": 60.0}
+JOINTS = ("theta2", "theta3", "theta4")
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+def _range(name: str, v: tuple[float, float]) -> tuple[float, float]:
+    if not v[0] < v[1]:
+        raise ValueError(f"{name}: lower limit {v[0]} is not below upper limit {v[1]}")
+    return v
+
+
+class JointBox(_Strict):
+    """(lo, hi) in degrees for θ2, θ3, θ4."""
+
+    theta2: tuple[float, float]
+    theta3: tuple[float, float]
+    theta4: tuple[float, float]
+
+    @field_validator("theta2", "theta3", "theta4")
+    @classmethod
+    def _lo_hi(cls, v: tuple[float, float], info) -> tuple[float, float]:
+        return _range(info.field_name, v)
+
+    def rows(self) -> list[tuple[float, float]]:
+        return [getattr(self, j) for j in JOINTS]
+
+
+class Slave(_Strict):
+    """The slave lengths the mapping uses (seed 004 §3.4), mm."""
+
+    a2: float = 50.0
+    a3: float = 15.0
+    d5: float = 30.0
+
+    @field_validator("a2", "a3", "d5")
+    @classmethod
+    def _positive(cls, v: float, info) -> float:
+        if info.field_name == "a3" and v < 0 or info.field_name != "a3" and v <= 0:
+            raise ValueError(
+                f"{info.field_name}: a length must be {'≥' if info.field_name == 'a3' else '>'} 0 mm, got {v}"
+            )
+        return v
+
+
+class Mismatch(_Strict):
+    """How the workspace mismatch is estimated."""
+
+    n_samples: int = Field(4096, gt=1)
+    chunk: int = Field(4096, gt=0)
+    sampler: Literal["uniform", "halton"] = "uniform"
+    n_path: int = Field(8, ge=1, le=64)  # midpoint rule along the home → θ path
+    joint_rate_deg_s: float = Field(30.0, gt=0)  # norm of the master's joint-rate vector
+
+    def n_used(self) -> int:
+        c = min(self.chunk, self.n_samples)
+        return -(-self.n_samples // c) * c
+
+
+class Constraints(_Strict):
+    """Reach within ±tolerance of the built master; mapping factors within the range the
+    slave motors can follow (our default, docs/plas.md)."""
+
+    reach_tolerance: float = Field(0.2, gt=0, lt=1)
+    factor_range: tuple[float, float] = (0.5, 3.0)
+    n_grid: int = Field(9, ge=2, le=41)  # grid points per joint for the factor range
+
+    @field_validator("factor_range")
+    @classmethod
+    def _fr(cls, v: tuple[float, float]) -> tuple[float, float]:
+        if not 0 < v[0] < v[1]:
+            raise ValueError(f"needs 0 < lo < hi, got {list(v)}")
+        return v
+
+
+class Objective(_Strict):
+    """Weights of f = Σ w · index / (index of the built master)."""
+
+    velocity: float = Field(1.0, ge=0)
+    position: float = Field(0.0, ge=0)
+    inertia: float = Field(0.0, ge=0)
+
+    @model_validator(mode="after")
+    def _some(self) -> Objective:
+        if self.velocity + self.position + self.inertia <= 0:
+            raise ValueError("give at least one positive weight (velocity, position, inertia)")
+        return self
+
+
+class Counterbalance(_Strict):
+    """§2.1.2: M, L (links beyond joint 4 and their lever), r, l, tilt θ. ``L_per_d6``:
+    how much L grows per mm of d6 beyond the built 60 mm (our model, docs/plas.md)."""
+
+    M_g: float = Field(240.5, gt=0)
+    L_mm: float = Field(188.0, gt=0)
+    r_mm: float = Field(90.0, ge=0)
+    l_mm: float = Field(34.0, gt=0)
+    theta_deg: float = Field(25.0, gt=-90, lt=90)
+    L_per_d6: float = Field(1.0, ge=0)
+
+
+class PlasSettings(StudySettings):
+    """Study D: the PLAS all-joints master of seed 004."""
+
+    name: Literal["plas"] = "plas"
+    variables: dict[str, tuple[float, float]] = {"a2p": (80.0, 240.0), "d6": (30.0, 120.0)}
+    fixed: dict[str, float] = {}
+    slave: Slave = Slave()
+    slave_limits_deg: JointBox = JointBox(theta2=(-90, 90), theta3=(-90, 90), theta4=(-90, 90))
+    joint_ranges_deg: JointBox = JointBox(theta2=(-30, 30), theta3=(-60, 60), theta4=(-30, 30))
+    mismatch: Mismatch = Mismatch()
+    constraints: Constraints = Constraints()
+    objective: Objective = Objective()
+    counterbalance: Counterbalance = Counterbalance()
+
+    @field_validator("variables")
+    @classmethod
+    def _bounds(cls, v: dict[str, tuple[float, float]]) -> dict[str, tuple[float, float]]:
+        if not v:
+            raise ValueError("needs at least one design variable")
+        for k, (lo, hi) in v.items():
+            if k not in MASTER_KEYS:
+                raise ValueError(f"unknown design variable '{k}'; allowed {list(MASTER_KEYS)}")
+            if lo < 0 or (k != "a3p" and lo <= 0):
+                raise ValueError(
+                    f"{k}: a length must be {'≥' if k == 'a3p' else '>'} 0 mm, got lower bound {lo}"
+                )
+            if not lo < hi:
+                raise ValueError(f"{k}: lower bound {lo} is not below upper bound {hi}")
+        return v
+
+    @field_validator("fixed")
+    @classmethod
+    def _fixed(cls, v: dict[str, float]) -> dict[str, float]:
+        for k, x in v.items():
+            if k not in MASTER_KEYS:
+                raise ValueError(f"unknown master length '{k}'; allowed {list(MASTER_KEYS)}")
+            if x < 0 or (k != "a3p" and x <= 0):
+                raise ValueError(
+                    f"{k}: a length must be {'≥' if k == 'a3p' else '>'} 0 mm, got {x}"
+                )
+        return v
+
+    @model_validator(mode="after")
+    def _consistent(self) -> PlasSettings:
+        both = sorted(set(self.fixed) & set(self.variables))
+        if both:
+            raise ValueError(
+                f"fixed: {both} are design variables; a length is either variable or fixed"
+            )
+        for j, (lo, hi), (slo, shi) in zip(JOINTS, self.joint_ranges_deg.rows(),
+                                           self.slave_limits_deg.rows(), strict=True):  # fmt: skip
+            if lo < slo or hi > shi:
+                raise ValueError(
+                    f"joint_ranges_deg.{j}: [{lo:g}, {hi:g}] exceeds the slave's limits "
+                    f"[{slo:g}, {shi:g}] (slave_limits_deg.{j}); the mapping puts the slave "
+                    "at the master's configuration"
+                )
+        t2 = self.joint_ranges_deg.theta2
+        t3 = self.joint_ranges_deg.theta3
+        if max(abs(t2[0]), abs(t2[1])) >= 90 or max(abs(t2[0] + t3[0]), abs(t2[1] + t3[1])) > 90:
+            raise ValueError(
+                "joint_ranges_deg: needs |θ2| < 90° and |θ2 + θ3| ≤ 90° (beyond, the slave's "
+                "joint-2 term of v_y in eq. (27) vanishes and the factor k2 is undefined)"
+            )
+        return self
+
+    def design(self) -> dict[str, float]:
+        """The master lengths that are not varied (built values unless ``fixed``)."""
+        return {k: float(self.fixed.get(k, BUILT[k])) for k in MASTER_KEYS}
