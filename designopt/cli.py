@@ -98,7 +98,9 @@ def cmd_scan(args: argparse.Namespace) -> int:
     from designopt import pipeline
 
     cfg, text = _load(args)
-    out = Path(args.out) if args.out else _out(args, cfg).with_name(f"{_out(args, cfg).stem}_scan.h5")
+    out = (
+        Path(args.out) if args.out else _out(args, cfg).with_name(f"{_out(args, cfg).stem}_scan.h5")
+    )
     rep = pipeline.scan(cfg, text, args.config, out, _progress(args.quiet))
     return _finish(rep, args)
 
@@ -112,7 +114,9 @@ def _parse_design(items: list[str]) -> dict[str, float]:
                 raise ValueError
             out[name.strip()] = float(val)
         except ValueError:
-            raise ConfigError(f"--design '{it}': expected NAME=NUMBER, e.g. --design l1=0.5") from None
+            raise ConfigError(
+                f"--design '{it}': expected NAME=NUMBER, e.g. --design l1=0.5"
+            ) from None
     return out
 
 

@@ -173,7 +173,9 @@ def load(path: str | Path, model: type[BaseModel] | None = None) -> tuple[Any, s
     try:
         text = p.read_text(encoding="utf-8")
     except UnicodeDecodeError as e:
-        raise ConfigError(f"{p}: not a UTF-8 text file (byte {e.start}); a config is YAML text") from None
+        raise ConfigError(
+            f"{p}: not a UTF-8 text file (byte {e.start}); a config is YAML text"
+        ) from None
     except OSError as e:
         raise ConfigError(f"{p}: cannot read ({e.strerror})") from None
     try:
@@ -202,7 +204,7 @@ def validate(raw: Any, where: str, model: type[BaseModel] | None = None) -> Any:
 
 
 def error_text(e: ValidationError) -> str:
-    """"key 'a.b.c': message" for the first error (study tags dropped from the path)."""
+    """ "key 'a.b.c': message" for the first error (study tags dropped from the path)."""
     from designopt.studies import STUDIES
 
     err = e.errors()[0]
@@ -214,5 +216,6 @@ def error_text(e: ValidationError) -> str:
         name = err["input"].get("name") if isinstance(err["input"], dict) else None
         loc = ["study", "name"]
         msg = (f"unknown study {name!r}" if name is not None else "missing") + (
-            f"; known: {sorted(STUDIES)} (`designopt studies` lists them)")
+            f"; known: {sorted(STUDIES)} (`designopt studies` lists them)"
+        )
     return f"key '{'.'.join(loc) or '(top level)'}': {msg}"

@@ -71,10 +71,13 @@ def check_optimizer(cfg: Any, where: str) -> None:
     from designopt import optim
 
     o = cfg.optimizer
-    try:
-        optim.validate(o.name, dict(o.settings), o.n_particles)
-    except ValueError as e:
-        raise ConfigError(f"{where}: key 'optimizer': {e}") from None
+    for key, args in (("optimizer.name", (o.name, {})),
+                      ("optimizer.settings", (o.name, dict(o.settings))),
+                      ("optimizer.n_particles", (o.name, dict(o.settings), o.n_particles))):  # fmt: skip
+        try:
+            optim.validate(*args)
+        except ValueError as e:
+            raise ConfigError(f"{where}: key '{key}': {e}") from None
 
 
 def check_output(path: Path) -> None:
@@ -130,7 +133,9 @@ def score(problem: Problem, X: np.ndarray, batch: int | None = None) -> dict[str
         if pad:
             Xi = np.concatenate([Xi, np.repeat(Xi[-1:], pad, 0)])
         f, sub = fn(problem.params, jnp.asarray(Xi), jax.random.key(0))
-        outs.append({"f": np.asarray(f)[: b - pad]} | {k: np.asarray(v)[: b - pad] for k, v in sub.items()})
+        outs.append(
+            {"f": np.asarray(f)[: b - pad]} | {k: np.asarray(v)[: b - pad] for k, v in sub.items()}
+        )
     return {k: np.concatenate([o[k] for o in outs]) for k in outs[0]}
 
 
@@ -159,7 +164,9 @@ def result_tree(cfg: Any, problem: Problem, res: Any) -> dict[str, Any]:
     """Archive groups of one (unbatched) run: optimizer, best_run, refine, final, problem."""
     from designopt.refine import refine
 
-    best = int(np.argmin(res.best_f))
+    bv = getattr(res, "best_v", None)
+    # the best run by Deb's rules: least violation first, then the smallest f
+    best = int(np.lexsort((res.best_f, bv))[0]) if bv is not None else int(np.argmin(res.best_f))
     sub_hist = score(problem, res.history_x[best])
     tree: dict[str, Any] = {
         "optimizer": {
@@ -174,6 +181,8 @@ def result_tree(cfg: Any, problem: Problem, res: Any) -> dict[str, Any]:
             "upper": problem.upper, "attrs": {"info": problem.info},
         },
     }  # fmt: skip
+    if getattr(res, "history_v", None) is not None and problem.constraints is not None:
+        tree["optimizer"] |= {"history_v": res.history_v, "best_v": res.best_v}
     if isinstance(problem.params, Mapping) and "bounds" in problem.params:
         tree["problem"]["norm_bounds"] = np.asarray(problem.params["bounds"])
     x_final = res.best_x[best][None]
@@ -188,8 +197,12 @@ def result_tree(cfg: Any, problem: Problem, res: Any) -> dict[str, Any]:
             "history": rr.history, "gain": rr.gain,
             "attrs": {"method": r.method, "steps": r.steps, "learning_rate": r.learning_rate},
         }  # fmt: skip
-        if rr.f.min() < res.best_f[best]:
-            x_final, stage = rr.x[np.argmin(rr.f)][None], "refine"
+        i = int(np.argmin(rr.f))
+        keeps_feasible = problem.constraints is None or float(
+            np.asarray(problem.violation(rr.x[i : i + 1]))[0]
+        ) <= float(0.0 if bv is None else bv[best])
+        if rr.f[i] < res.best_f[best] and keeps_feasible:
+            x_final, stage = rr.x[i][None], "refine"
     fin = {k: v[0] for k, v in score(problem, x_final).items()}
     tree["final"] = fin | {"x": x_final[0], "attrs": {"stage": stage,
                            "n_samples_used": problem.info.get("n_samples_used", 0)}}  # fmt: skip
@@ -226,7 +239,9 @@ def summary_lines(cfg: Any, problem: Problem, tree: dict[str, Any]) -> list[str]
         lines.append(_pm(k, float(fin[k]), None if se is None else float(se)))
     if "violation" in fin:
         v = float(fin["violation"])
-        lines.append(f"  constraints: {'feasible' if v <= 0 else f'violated by {v:.3g} (no feasible design found)'}")
+        lines.append(
+            f"  constraints: {'feasible' if v <= 0 else f'violated by {v:.3g} (no feasible design found)'}"
+        )
     lines += st.extra_lines(cfg.study, fin)
     return lines
 
@@ -366,7 +381,9 @@ def sweep(cfg: Any, text: str, where: str, out: Path,
             res = optimise(c, problem, keys["optimizer"], members=opt_sets, progress=bar)
             for j, (i, m) in enumerate(mem):
                 sets = {a: (b[j] if isinstance(b, list) else b) for a, b in res.settings.items()}
-                one = type(res)(*(v[j] for v in res[:5]), sets)
+                one = res._replace(**{k: (None if v is None else v[j])
+                                      for k, v in res._asdict().items() if k != "settings"},
+                                   settings=sets)  # fmt: skip
                 t = result_tree(c, problem, one)
                 t["attrs"] = {"overrides": m,
                               "config_resolved_yaml": resolved_yaml(sw.apply(cfg, m))}  # fmt: skip

@@ -11,6 +11,7 @@ from designopt.cli import main
 from designopt.config import load, validate
 from designopt.studies import streams
 from designopt.studies.serial.mechanism import build
+from designopt.studies.serial.objective import chunking
 
 PLANAR = """
 study:
@@ -44,10 +45,11 @@ def samples(cfg, n):
     """The joint samples the study uses (same stream, same chunks)."""
     ind = cfg.study.indices
     mech = build(cfg.study)
-    chunk = min(ind.chunk, ind.n_samples)
+    n_chunks, chunk = chunking(ind.n_samples, ind.chunk)
     key = streams(cfg.seed)["samples"]
     u = np.concatenate([np.asarray(mc.unit_samples(key, k * chunk, chunk, n, ind.sampler))
-                        for k in range(-(-ind.n_samples // chunk))])  # fmt: skip
+                        for k in range(n_chunks)])  # fmt: skip
+    assert len(u) >= ind.n_samples
     return mech.lower + (mech.upper - mech.lower) * u
 
 
@@ -168,7 +170,8 @@ def test_scan_and_eval_commands(tmp_path, capsys):
         ("a: l2,", "a: l3,", "'l3' is neither a design variable"),
         ("limits: [-180, 180]}\n  variables", "limits: [180, -180]}\n  variables",
          "study.chain.joints.1.limits"),
-        ("measure: joint", "measure: cartesian, jacobian: position", "needs a square Jacobian"),
+        ("jacobian: [vx, vy], norm: \"2\", measure: joint", "jacobian: position, norm: \"2\", measure: cartesian",
+         "needs a square Jacobian"),
         ("objective: {gci: -1.0}\noptimizer", "objective: {gci: -1.0, volume: 1.0}\noptimizer",
          "square position Jacobian"),
         ("jacobian: [vx, vy]", "jacobian: [vx, vq]", "study.indices.jacobian"),

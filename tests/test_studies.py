@@ -50,7 +50,9 @@ def test_swarm_row_equals_single_design(study_problem):
         f1, sub1 = jax.jit(P.fn)(P.params, jnp.asarray(X[i : i + 1]), jax.random.key(0))
         np.testing.assert_allclose(f1[0], f[i], rtol=1e-12, atol=1e-300)
         for k in sub:
-            np.testing.assert_allclose(sub1[k][0], sub[k][i], rtol=1e-10, atol=1e-300)  # SE: sums reassociate
+            np.testing.assert_allclose(
+                sub1[k][0], sub[k][i], rtol=1e-10, atol=1e-300
+            )  # SE: sums reassociate
 
 
 def test_every_index_has_a_standard_error(study_problem):

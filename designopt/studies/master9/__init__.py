@@ -31,8 +31,8 @@ def _figures(archive: dict[str, Any], folder: Path) -> list[Path]:
 
 def _aliases(s: Master9Settings) -> dict[str, str]:
     out = {f"study.{k}": f"study.indices.{k}" for k in Indices.model_fields}
-    out |= {f"design.{k}": f"study.fixed.{k}" for k in DESIGN_KEYS if k not in s.variables}
-    out |= {f"study.fixed.{k}": f"study.fixed.{k}" for k in DESIGN_KEYS if k not in s.variables}
+    out |= {f"design.{k}": f"study.fixed.{k}" for k in DESIGN_KEYS}  # variables: refused later
+    out |= {f"study.fixed.{k}": f"study.fixed.{k}" for k in DESIGN_KEYS}
     return out
 
 

@@ -121,8 +121,9 @@ def draw(
         ax = fig.add_subplot(1, len(designs), i + 1, projection="3d")
         full = {**m.default_design(), **{k: float(x[k]) for k in m.DESIGN_KEYS if k in x}}
         P = np.asarray(m.position(jnp.asarray(q3), full))
-        ax.scatter(P[:, 0], P[:, 1], P[:, 2], s=0.5, alpha=0.4, c=P[:, 2], cmap="viridis",
-                   rasterized=True)
+        ax.scatter(
+            P[:, 0], P[:, 1], P[:, 2], s=0.5, alpha=0.4, c=P[:, 2], cmap="viridis", rasterized=True
+        )
         ax.set_xlabel("x (mm)", fontsize=8)
         ax.set_ylabel("y (mm)", fontsize=8)
         ax.set_zlabel("z (mm)", fontsize=8)

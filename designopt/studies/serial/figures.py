@@ -79,8 +79,8 @@ def draw_run(a: dict[str, Any], folder: Path) -> list[Path]:
             z = inv_k(mech, s, x, q).reshape(A.shape)
             im = ax.pcolormesh(ga * fa, gb * fb, z, shading="auto", cmap="viridis", rasterized=True)
             fig.colorbar(im, ax=ax, label="1/k")
-            ax.set_xlabel(f"q1 {ua}".strip())
-            ax.set_ylabel(f"q2 {ub}".strip())
+            ax.set_xlabel(f"q1 ({ua})" if ua else "q1")
+            ax.set_ylabel(f"q2 ({ub})" if ub else "q2")
             ax.set_title(f"{lab}: mean {z.mean():.4g}", fontsize=9)
         fig.suptitle(f"1/k ({s.indices.norm}-norm; rows {rows_txt}) over q1, q2, others at mid-range",
                      fontsize=10)  # fmt: skip

@@ -21,14 +21,15 @@ import jax.numpy as jnp
 import numpy as np
 
 from designopt import montecarlo as mc
-from designopt.kinematics.conditioning import inv_cond_any
+from designopt.kinematics.conditioning import inv_cond_any, singular_values_sq
 from designopt.problems.base import Problem
 from designopt.studies.serial.mechanism import Mechanism, build
 from designopt.studies.serial.settings import SerialSettings
 
 
 def _det(A: jnp.ndarray) -> jnp.ndarray:
-    """det of (..., m, m) in closed form for m ≤ 3 (differentiable), LU otherwise."""
+    """det of (..., m, m) in closed form for m ≤ 3 (differentiable); LU otherwise (not on
+    the scoring path, which takes |det| from the Jacobi singular values for m ≥ 4)."""
     m = A.shape[-1]
     if m == 1:
         return A[..., 0, 0]
@@ -53,6 +54,18 @@ def measures(
 ) -> tuple[jnp.ndarray, jnp.ndarray, jnp.ndarray]:
     """(1/k, manipulability, |det J| or 0 if J is not square) of (..., r, n) Jacobians."""
     r, n = J.shape[-2:]
+    if min(r, n) >= 4:  # one Jacobi SVD gives all three (no LAPACK call in the scan)
+        s2 = singular_values_sq(J)
+        man = _sqrt0(jnp.prod(s2, -1))
+        if norm == "2":
+            smax2, smin2 = jnp.max(s2, -1), jnp.min(s2, -1)
+            ok = smin2 > (max(r, n) * jnp.finfo(J.dtype).eps) ** 2 * smax2
+            inv_k = jnp.where(
+                ok, jnp.sqrt(jnp.where(ok, smin2 / jnp.where(ok, smax2, 1.0), 1.0)), 0.0
+            )
+        else:
+            inv_k = inv_cond_any(J, norm, normalized)
+        return inv_k, man, man if r == n else jnp.zeros_like(man)
     inv_k = inv_cond_any(J, norm, normalized)
     if r == n:
         det = _det(J)
@@ -81,6 +94,13 @@ def chunk_sums(mech: Mechanism, s: SerialSettings, full: jnp.ndarray, q: jnp.nda
             mc.power_sums(adet, jnp.ones_like(adet)))  # fmt: skip
 
 
+def chunking(n_samples: int, max_chunk: int) -> tuple[int, int]:
+    """(number of chunks, chunk size): the fewest chunks of at most ``max_chunk`` samples,
+    balanced so that their total exceeds ``n_samples`` by less than one per chunk."""
+    n_chunks = -(-n_samples // max_chunk)
+    return n_chunks, -(-n_samples // n_chunks)
+
+
 def build_fn(mech: Mechanism, s: SerialSettings, dtype: Any):
     """The pure swarm function fn(params, X, key) -> (f, indices with *_se)."""
     ind = s.indices
@@ -89,8 +109,7 @@ def build_fn(mech: Mechanism, s: SerialSettings, dtype: Any):
     lo = np.asarray(mech.lower)
     hi = np.asarray(mech.upper)
     qvol = float(np.prod(hi - lo))
-    chunk = min(ind.chunk, ind.n_samples)
-    n_chunks = -(-ind.n_samples // chunk)
+    n_chunks, chunk = chunking(ind.n_samples, ind.chunk)
 
     def indices(params, X):
         X = X.astype(dtype)
@@ -157,9 +176,8 @@ def problem(s: SerialSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Pro
         b[:, 1] = np.where(b[:, 1] > b[:, 0], b[:, 1], b[:, 0] + 1.0)  # flat index: no scaling
         params["bounds"] = jnp.asarray(b, dtype)
         norm_bounds = {k: b[i].tolist() for i, k in enumerate(weights)}
-    n_used = -(-s.indices.n_samples // min(s.indices.chunk, s.indices.n_samples)) * min(
-        s.indices.chunk, s.indices.n_samples
-    )
+    n_chunks, chunk = chunking(s.indices.n_samples, s.indices.chunk)
+    n_used = n_chunks * chunk
     info = {
         "study": "serial",
         "n_samples_used": n_used,
