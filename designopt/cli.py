@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import math
 import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -113,6 +114,8 @@ def _parse_design(items: list[str]) -> dict[str, float]:
             if not sep or not name:
                 raise ValueError
             out[name.strip()] = float(val)
+            if not math.isfinite(out[name.strip()]):
+                raise ValueError
         except ValueError:
             raise ConfigError(
                 f"--design '{it}': expected NAME=NUMBER, e.g. --design l1=0.5"
@@ -128,7 +131,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(res))
         return 0
-    names = [k for k in res if not k.endswith("_se") and f"{k}_se" not in res and k != "f"]
+    names = list(cfg.study.variables)
     for k, v in res.items():
         if k.endswith("_se") or k in names:
             continue
@@ -206,7 +209,14 @@ def cmd_show(args: argparse.Namespace) -> int:
                 fin = h["final"]
                 print("final design: " + ", ".join(
                     f"{n} = {v:.4f}" for n, v in zip(names, fin["x"][()], strict=True)))  # fmt: skip
+                from designopt.studies import STUDIES
+
+                cfg = json.loads(at["config_resolved"])
+                st = STUDIES.get(at.get("study", ""))
                 subs = [k for k in fin if k + "_se" in fin and k != "f"][:6]
+                if st is not None:
+                    subs = [k for k in st.summary(st.settings.model_validate(cfg["study"]))
+                            if k + "_se" in fin]  # fmt: skip
                 print(f"f = {fin['f'][()]:.5f} (stage {fin.attrs['stage']}); "
                       + "; ".join(f"{k} = {fin[k][()]:.5f} ± {fin[k + '_se'][()]:.1e}"
                                   for k in subs))  # fmt: skip

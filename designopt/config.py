@@ -135,39 +135,12 @@ def run_config_model() -> type[RunConfigBase]:
     return _run_config(tuple(s.settings for s in STUDIES.values()))
 
 
-BENCH_FUNCTIONS = ("griewank", "rastrigin", "ackley", "sphere", "rosenbrock", "schwefel226")
-# "acceptable" final values for the success rate (our choice, D = 30 scale)
-DEFAULT_SUCCESS = {"griewank": 0.1, "rastrigin": 100.0, "ackley": 0.1, "sphere": 0.01,
-                   "rosenbrock": 100.0, "schwefel226": 3000.0}  # fmt: skip
-
-
-class Bench(_Strict):
-    functions: list[Literal[BENCH_FUNCTIONS]] = ["griewank", "rastrigin", "ackley", "sphere"]  # type: ignore[valid-type]
-    dim: int = Field(30, ge=1)
-    shifted: bool = True  # also run every function with a seeded shift of its optimum
-    shift_seed: int = 1
-    variants: list[str] = ["p1", "p2", "p3", "p4", "p5", "p6", "p7"]
-    reference: str = "p3"  # Mann-Whitney of every other variant against this one
-    n_particles: int = Field(50, ge=2)
-    n_iters: int = Field(1000, ge=1)
-    n_runs: int = Field(100, ge=2)
-    bounds: Literal["clip", "reflect", "reinit"] = "clip"
-    draws: Literal["uniform", "splitmix"] = "uniform"
-    success: dict[str, float] = {}
-    settings: dict[str, dict[str, float]] = {}  # per-variant overrides
-
-
-class BenchConfig(_Strict):
-    bench: Bench = Bench()
-    precision: Literal["float32", "float64"] = "float32"
-    seed: int = 0
-    output: str = "results/bench/pso_benchmark.h5"
-
-
 def load(path: str | Path, model: type[BaseModel] | None = None) -> tuple[Any, str]:
     """Parse and validate a config file (a run config unless ``model`` says otherwise);
     returns (config, the file's text)."""
     p = Path(path)
+    if p.is_dir():
+        raise ConfigError(f"{p}: is a folder, not a config file")
     if not p.is_file():
         raise ConfigError(f"{p}: config file not found")
     try:
@@ -183,7 +156,8 @@ def load(path: str | Path, model: type[BaseModel] | None = None) -> tuple[Any, s
     except ConfigError as e:
         raise ConfigError(f"{p}: {e}") from None
     except yaml.YAMLError as e:
-        raise ConfigError(f"{p}: malformed YAML: {' '.join(str(e).split())}") from None
+        msg = " ".join(str(e).split()).replace('in "<unicode string>", ', "")
+        raise ConfigError(f"{p}: malformed YAML: {msg}") from None
     return validate(raw, str(p), model), text
 
 
@@ -211,7 +185,7 @@ def error_text(e: ValidationError) -> str:
     loc = [str(x) for x in err["loc"]]
     if len(loc) > 1 and loc[0] == "study" and loc[1] in STUDIES:
         del loc[1]
-    msg = err["msg"]
+    msg = err["msg"].removeprefix("Value error, ")
     if err["type"] in ("union_tag_invalid", "union_tag_not_found") and loc == ["study"]:
         name = err["input"].get("name") if isinstance(err["input"], dict) else None
         loc = ["study", "name"]

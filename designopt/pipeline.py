@@ -81,14 +81,31 @@ def check_optimizer(cfg: Any, where: str) -> None:
 
 
 def check_output(path: Path) -> None:
-    """Create the output folder; ConfigError if it cannot be created or written."""
+    """Create the output folder (a missing one is made) and prove it writable by writing a
+    scratch file there; ConfigError naming the output otherwise. Called after every other
+    check, so a refused config leaves no folder behind."""
+    import tempfile
+
+    if path.is_dir():
+        raise ConfigError(f"output '{path}': is a folder; give a file name such as {path / 'a.h5'}")
     parent = path.parent if str(path.parent) else Path(".")
     try:
         parent.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise ConfigError(f"output '{path}': cannot create folder ({e.strerror})") from None
-    if not os.access(parent, os.W_OK):
-        raise ConfigError(f"output '{path}': folder is not writable")
+    try:
+        with tempfile.NamedTemporaryFile(dir=parent, prefix=f".{path.name}.probe-"):
+            pass
+    except OSError as e:
+        raise ConfigError(f"output '{path}': folder is not writable ({e.strerror})") from None
+
+
+def write_archive(path: Path, tree: dict[str, Any], attrs: dict[str, Any], **kw: Any) -> None:
+    """archive.write, with a failure (disk full, folder removed) as one clear error."""
+    try:
+        archive.write(path, tree, attrs, **kw)
+    except OSError as e:
+        raise ConfigError(f"output '{path}': could not write the archive ({e})") from None
 
 
 def base_attrs(kind: str, cfg: Any, text: str, keys: Mapping[str, jax.Array]) -> dict[str, Any]:
@@ -287,7 +304,6 @@ def run(cfg: Any, text: str, where: str, out: Path, resume: bool = False,
     if cfg.sweep is not None:
         raise ConfigError(f"{where}: key 'sweep': this config declares a sweep; "
                           "run it with `designopt sweep`")  # fmt: skip
-    check_output(out)
     check_optimizer(cfg, where)
     dtype_of(cfg)
     keys = streams(cfg.seed)
@@ -299,12 +315,13 @@ def run(cfg: Any, text: str, where: str, out: Path, resume: bool = False,
     def checkpoint(c: Any) -> None:
         tree = {"checkpoint": {"state": c.state, "history": c.history,
                                "history_x": c.history_x, "attrs": {"done": c.done}}}  # fmt: skip
-        archive.write(partial, tree, attrs, complete=False)
+        write_archive(partial, tree, attrs, complete=False)
 
     o = cfg.optimizer
     with Stopwatch() as total:
         with Stopwatch() as setup:
             problem = build_problem(cfg, keys, where)
+        check_output(out)
         with Stopwatch() as opt, progress(o.n_iters, f"{o.name} on {cfg.study.name}") as bar:
             try:
                 res = optimise(cfg, problem, keys["optimizer"], progress=bar,
@@ -324,7 +341,7 @@ def run(cfg: Any, text: str, where: str, out: Path, resume: bool = False,
               "compilations": total.compilations,
               "compilations_by_stage": {"setup": setup.compilations, "optimizer": opt.compilations,
                                         "scoring_polish": post.compilations}}  # fmt: skip
-    archive.write(out, tree, attrs)
+    write_archive(out, tree, attrs)
     partial.unlink(missing_ok=True)
     lines = summary_lines(cfg, problem, tree)
     lines.append(f"samples per design: {problem.info.get('n_samples_used', '-')}; wall "
@@ -363,10 +380,10 @@ def sweep(cfg: Any, text: str, where: str, out: Path,
         raise ConfigError(f"{where}: key 'sweep.vary' → {error_text(e)}") from None
     except ValueError as e:
         raise ConfigError(f"{where}: key 'sweep.vary': {e}") from None
-    check_output(out)
     for c in cfgs.values():
         check_optimizer(c, where)
         dtype_of(c)
+    check_output(out)
     root_keys = streams(cfg.seed)
     tree: dict = {"members": {}}
     lines = []
@@ -392,7 +409,7 @@ def sweep(cfg: Any, text: str, where: str, out: Path,
     attrs = base_attrs("sweep", cfg, text, root_keys) | {
         "n_members": len(members), "wall_time_s": total.wall, "compile_time_s": total.compile,
         "run_time_s": total.run, "vmapped_batches": len(groups)}  # fmt: skip
-    archive.write(out, tree, attrs)
+    write_archive(out, tree, attrs)
     lines.append(f"{len(members)} members in {len(groups)} vmapped batch(es); wall "
                  f"{total.wall:.1f} s (compile {total.compile:.1f} s, run {total.run:.1f} s)")  # fmt: skip
     subs = study_of(cfg).summary(cfg.study)[:3]
@@ -483,12 +500,12 @@ def scan(cfg: Any, text: str, where: str, out: Path,
          progress: Progress = _no_progress) -> Report:  # fmt: skip
     """Score the designs of the config's ``scan:`` section in vmapped batches; archive
     ``scan/names``, ``scan/x``, ``scan/<index>`` and ``scan/<index>_se``."""
-    check_output(out)
     dtype_of(cfg)
     keys = streams(cfg.seed)
     with Stopwatch() as total:
         problem = build_problem(cfg, keys, where)
         varied, X = scan_designs(cfg, problem, where)
+        check_output(out)
         b = cfg.scan.batch
         parts = []
         with progress(X.shape[0], "scan") as bar:
@@ -504,7 +521,7 @@ def scan(cfg: Any, text: str, where: str, out: Path,
     attrs = base_attrs("scan", cfg, text, keys) | {
         "n_designs": int(X.shape[0]), "wall_time_s": total.wall,
         "compile_time_s": total.compile, "run_time_s": total.run}  # fmt: skip
-    archive.write(out, tree, attrs)
+    write_archive(out, tree, attrs)
     i_best = int(np.nanargmin(res["f"]))
     lines = [f"{X.shape[0]} designs over {', '.join(varied)} ({cfg.scan.mode}) in batches of "
              f"{b}; wall {total.wall:.1f} s (compile {total.compile:.1f} s, run {total.run:.1f} s)",

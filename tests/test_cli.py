@@ -68,3 +68,24 @@ def test_missing_file_and_unwritable_output(tmp_path, capsys):
     assert main(["run", str(cfg), "--quiet"]) == 2
     assert "cannot create folder" in capsys.readouterr().err
     assert blocker.read_text() == "not a folder"
+
+
+def test_output_that_is_a_folder_or_unwritable_is_refused_before_the_run(tmp_path, capsys):
+    (tmp_path / "adir").mkdir()
+    cfg = write(tmp_path, TINY)
+    assert main(["run", str(cfg), "--quiet", "--out", str(tmp_path / "adir")]) == 2
+    err = capsys.readouterr().err
+    assert "is a folder" in err and err.count("\n") == 1
+    assert main(["run", str(cfg), "--quiet", "--out", "/proc/x.h5"]) == 2
+    assert "not writable" in capsys.readouterr().err
+    assert main(["run", str(tmp_path / "adir")]) == 2
+    assert "is a folder" in capsys.readouterr().err
+    # a config refused for its optimizer creates no output folder
+    text = TINY.replace("name: ptpso", "name: ptspo")
+    bad = write(
+        tmp_path, text.replace("output: OUT", f"output: {tmp_path / 'new' / 'a.h5'}"), "b.yaml"
+    )
+    assert main(["run", str(bad), "--quiet"]) == 2
+    assert "optimizer.name" in capsys.readouterr().err
+    assert not (tmp_path / "new").exists()
+    assert not list(tmp_path.glob("adir*.h5")) and not list((tmp_path / "adir").iterdir())

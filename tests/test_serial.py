@@ -123,7 +123,7 @@ def _dh_numpy(q, a, alpha, d):
 def test_puma560_gci_against_numpy_dh_on_the_same_samples(tmp_path):
     cfg, _ = load("configs/puma560.yaml")
     raw = cfg.model_dump(by_alias=True) | {"precision": "float64"}
-    raw["study"]["indices"] |= {"n_samples": 1024, "chunk": 512}
+    raw["study"]["indices"] |= {"n_samples": 1024, "chunk": 512, "norm": "2", "normalized": False}
     raw["study"]["objective"] = {"gci": -1.0}
     cfg = validate(raw, "puma")
     a2, d4 = 0.45, 0.41
@@ -139,6 +139,11 @@ def test_puma560_gci_against_numpy_dh_on_the_same_samples(tmp_path):
     np.testing.assert_allclose(res["gci"], inv_k.mean(), rtol=1e-10)
     man = np.abs(np.linalg.det(J))
     np.testing.assert_allclose(res["manipulability"], man.mean(), rtol=1e-10)
+    # and the normalised Frobenius 1/k_F = 6 / (‖J‖_F ‖J⁻¹‖_F)
+    raw["study"]["indices"] |= {"norm": "fro", "normalized": True}
+    res_f = pipeline.evaluate(validate(raw, "puma"), {"a2": a2, "d4": d4})
+    kf = np.sqrt((J**2).sum((1, 2)) * (np.linalg.inv(J) ** 2).sum((1, 2)))
+    np.testing.assert_allclose(res_f["gci"], (6 / kf).mean(), rtol=1e-9)
     assert "volume" not in res  # full Jacobian: no position volume
 
 

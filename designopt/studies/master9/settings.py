@@ -64,4 +64,9 @@ class Master9Settings(StudySettings):
         bad = [k for k in self.fixed if k not in DESIGN_KEYS]
         if bad:
             raise ValueError(f"fixed: unknown length(s) {bad}; allowed {list(DESIGN_KEYS)}")
+        both = sorted(set(self.fixed) & set(self.variables))
+        if both:
+            raise ValueError(
+                f"fixed: {both} are design variables; a length is either variable or fixed"
+            )
         return self
