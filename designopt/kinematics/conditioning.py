@@ -280,7 +280,7 @@ def inv_cond_entries(E, norm="fro", normalized=False, dtype=None, return_det=Fal
     """1/k of a matrix given entry-wise: E[i][j] is a Python float (a structural value,
     e.g. an exact 0 of a Jacobian pattern) or an array; arrays broadcast together.
 
-    Structural zeros are folded away at trace time, so e.g. J_v of master9 (J20 = J21 = 0)
+    Structural zeros are folded away at trace time, so e.g. the 9-DOF haptic master's J_v (J20 = J21 = 0)
     costs what a hand-specialised adjugate costs. Conventions: see ``inv_cond_any``.
     With ``return_det``, also returns det J for square blocks up to 3×3 (else None).
     """

@@ -11,7 +11,7 @@ How it is built (docs/kinematics.md has the long version):
   axis, whose values are linear in the design variables and in the active joints
   (``const + Σ s_k X_k + Σ c_j q_j``; joint couplings enter through the c_j).
 - The walk along the chain happens in Python when the kernel is traced. Rotations about
-  the same axis are merged symbolically (so master9's q4 = −q3 parallelogram cancels
+  the same axis are merged symbolically (so the haptic master's q4 = −q3 parallelogram cancels
   exactly and Rz(q1)·Rz(q2 − π/2)·Rz(−q1 − q2) folds to Rz(−π/2)), constant twists that
   are multiples of π/2 become exact signed permutations, and every product with a known
   0 or ±1 is folded away (``_fold``). Trigonometry is computed once per distinct linear
@@ -468,7 +468,7 @@ class _Walk:
         """Materialise the per-sample arrays the outputs use before the (M, C) stage.
 
         Left to itself, XLA on CPU fuses the per-sample trigonometry into the (M, C)
-        loops and recomputes it for every design (measured: ~10× slower on master9), and
+        loops and recomputes it for every design (measured: ~10× slower on the haptic master's chain), and
         the result of a swarm row then depends on M in the last bit. A reduction is a
         producer XLA does not fuse into elementwise consumers, so the per-sample arrays
         pass through one (a sum with zeros, exact); ``optimization_barrier`` would not
@@ -534,7 +534,7 @@ class _Walk:
         Revolute chain joint i: v_i = z_i × (p_n − p_i), where p_n − p_i is the sum of
         the translation steps after joint i (steps along z_i itself are dropped: z × z =
         0 exactly). Chain columns combine into active ones through the coupling; chain
-        joints sharing the same axis object (e.g. master9's q1/q5 and q3/q4 pairs) are
+        joints sharing the same axis object (e.g. the haptic master's q1/q5 and q3/q4 pairs) are
         combined before the cross product, so their cancellation is exact.
         """
         m = self.model
