@@ -127,17 +127,19 @@ def cmd_eval(args: argparse.Namespace) -> int:
     from designopt import pipeline
 
     cfg, _ = _load(args)
-    res = pipeline.evaluate(cfg, _parse_design(args.design), where=args.config)
+    design = _parse_design(args.design)
+    res = pipeline.evaluate(cfg, design, where=args.config)
     if args.json:
         print(json.dumps(res))
         return 0
-    names = list(cfg.study.variables)
+    box = cfg.study.variables
+    design = {k: design.get(k, 0.5 * (lo + hi)) for k, (lo, hi) in box.items()}
     for k, v in res.items():
-        if k.endswith("_se") or k in names:
+        if k.endswith("_se"):
             continue
         se = res.get(k + "_se")
         print(f"{k:>15} = {v:.6g}" + (f" ± {se:.2g}" if se is not None else ""))
-    print("design: " + ", ".join(f"{k} = {res[k]:g}" for k in names))
+    print("design: " + ", ".join(f"{k} = {v:g}" for k, v in design.items()))
     return 0
 
 

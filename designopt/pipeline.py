@@ -463,10 +463,9 @@ def evaluate(config: Any, designs: Mapping[str, Any] | Sequence[Mapping[str, Any
     problem = build_problem(cfg, keys, where)
     X = _designs(cfg, problem, designs, where)
     res = score(problem, X, batch=cfg.scan.batch if cfg.scan else 256)
-    out: dict[str, Any] = {n: X[:, i] for i, n in enumerate(problem.names)} | res
     if X.shape[0] == 1:
-        return {k: float(v[0]) for k, v in out.items()}
-    return out
+        return {k: float(v[0]) for k, v in res.items()}
+    return res
 
 
 def scan_designs(cfg: Any, problem: Problem, where: str) -> tuple[list[str], np.ndarray]:
