@@ -282,7 +282,10 @@ def build_parser() -> argparse.ArgumentParser:
     e.set_defaults(func=cmd_eval)
     st = sub.add_parser("studies", help="list the registered studies")
     st.set_defaults(func=cmd_studies)
-    b = sub.add_parser("bench", help="run the optimizer benchmark suite (seed 000 Fig. 10-11)")
+    b = sub.add_parser(
+        "bench",
+        help="run the optimizer benchmark suite (the PTPSO paper, IEEE Access 2019, Fig. 10-11)",
+    )
     common(b, figures=False)
     b.set_defaults(func=cmd_bench)
     p = sub.add_parser("report", help="draw the figures of an archive (PNG + PDF beside it)")

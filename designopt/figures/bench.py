@@ -45,7 +45,7 @@ def draw(folder: Path, stats: dict[str, Any], histories: dict[str, dict[str, np.
     """Draw every benchmark figure into ``folder``; returns the files written."""
     out = []
     fig = _bars(stats, "mean", "std", "final best value f(x)",
-                f"Final values over {n_runs} runs (mean ± std; seed 000 Fig. 10)", log=True)  # fmt: skip
+                f"Final values over {n_runs} runs (mean ± std; IEEE Access 2019, Fig. 10)", log=True)  # fmt: skip
     out += save(fig, folder, "fig10_final_values")
     fig = _bars(stats, "conv_mean", "conv_std", "convergence iteration",
                 f"Convergence iteration over {n_runs} runs (mean ± std; Fig. 11)", log=False)  # fmt: skip

@@ -16,7 +16,7 @@ from typing import Any
 
 import jax
 import numpy as np
-from pydantic import BaseModel, ConfigDict
+from pydantic import BaseModel, ConfigDict, field_validator
 
 from designopt.problems.base import Problem
 
@@ -35,6 +35,17 @@ class StudySettings(BaseModel):
 
     name: str
     variables: dict[str, tuple[float, float]]
+
+    @field_validator("variables")
+    @classmethod
+    def _box(cls, v: dict[str, tuple[float, float]]) -> dict[str, tuple[float, float]]:
+        """Every study's design box: at least one variable, each with lo < hi."""
+        if not v:
+            raise ValueError("needs at least one design variable")
+        for k, (lo, hi) in v.items():
+            if not lo < hi:
+                raise ValueError(f"{k}: lower bound {lo} is not below upper bound {hi}")
+        return v
 
 
 def streams(seed: int) -> dict[str, jax.Array]:

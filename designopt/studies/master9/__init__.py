@@ -43,7 +43,7 @@ def _extra(s: Master9Settings, fin) -> list[str]:
 
 STUDY = Study(
     name="master9",
-    title="9-DOF haptic master of seed 000: (a1, a3, d3) by PTPSO, eq. (43)",
+    title="9-DOF haptic master for laparoscopic robots (IEEE Access 2019): (a1, a3, d3), eq. (43)",
     settings=Master9Settings,
     problem=_problem,
     summary=lambda s: SUMMARY,

@@ -105,14 +105,14 @@ def draw(
         ax.set_xlabel("iteration")
         ax.set_ylabel(lab)
         ax.grid(alpha=0.3)
-    fig.suptitle("Best run: objective and sub-objectives (seed 000 Fig. 12)", fontsize=10)
+    fig.suptitle("Best run: objective and sub-objectives (IEEE Access 2019, Fig. 12)", fontsize=10)
     fig.tight_layout()
     out += save(fig, folder, "fig12_convergence")
-    fig = _maps(inv_cond_map, "Dexterity 1/k of J_v (Frobenius; seed 000 Fig. 13)", "1/k",
+    fig = _maps(inv_cond_map, "Dexterity 1/k of J_v (Frobenius; IEEE Access 2019, Fig. 13)", "1/k",
                 designs, "viridis")  # fmt: skip
     out += save(fig, folder, "fig13_dexterity_maps")
     fig = _maps(lambda x, q: emax_map(x, q, backlash_deg),
-                f"Backlash error e_max for {tuple(backlash_deg)}° (seed 000 Fig. 14)", "e_max (mm)",
+                f"Backlash error e_max for {tuple(backlash_deg)}° (IEEE Access 2019, Fig. 14)", "e_max (mm)",
                 designs, "magma")  # fmt: skip
     out += save(fig, folder, "fig14_backlash_maps")
     fig = plt.figure(figsize=(5.2 * len(designs), 4.6))
@@ -132,7 +132,7 @@ def draw(
         vtxt = f"V = {vol:.4e} mm³, " if vol is not None else ""
         ax.set_title(f"{label}: {vtxt}L = {L:.3f} mm", fontsize=9)
         ax.tick_params(labelsize=6)
-    fig.suptitle("Workspace of the position mechanism (seed 000 Fig. 15)", fontsize=10)
+    fig.suptitle("Workspace of the position mechanism (IEEE Access 2019, Fig. 15)", fontsize=10)
     out += save(fig, folder, "fig15_workspace")
     return out
 

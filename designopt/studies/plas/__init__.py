@@ -51,7 +51,7 @@ def _extra(s: PlasSettings, fin) -> list[str]:
 
 STUDY = Study(
     name="plas",
-    title="PLAS all-joints master of seed 004: master lengths for the least tip-velocity mismatch",
+    title="PLAS all-joints master (DGIST MS thesis 2015): master lengths for the least tip-velocity mismatch",
     settings=PlasSettings,
     problem=_problem,
     summary=lambda s: SUMMARY,

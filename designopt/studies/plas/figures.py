@@ -13,7 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from designopt import montecarlo as mc
-from designopt.figures import plt, save
+from designopt.figures import convergence, plt, save
 from designopt.studies.plas import mechanism as m
 from designopt.studies.plas.objective import pointwise
 from designopt.studies.plas.settings import PlasSettings
@@ -59,19 +59,7 @@ def draw_run(a: dict[str, Any], folder: Path) -> list[Path]:
 
     br = a["best_run"]
     inds = [k for k in ("f", "vel_rel", "pos_mean") if k in br]
-    fig, axes = plt.subplots(1, len(inds), figsize=(3.4 * len(inds), 3), squeeze=False)
-    for ax, k in zip(axes[0], inds, strict=True):
-        y = br[k]
-        ax.plot(br["iteration"], y, marker=".", lw=1)
-        if k + "_se" in br:
-            se = br[k + "_se"]
-            ax.fill_between(br["iteration"], y - 2 * se, y + 2 * se, alpha=0.25, lw=0)
-        ax.set_xlabel("iteration")
-        ax.set_ylabel(k)
-        ax.grid(alpha=0.3)
-    fig.suptitle("Best run (band: ± 2 SE)", fontsize=10)
-    fig.tight_layout()
-    out += save(fig, folder, "convergence")
+    out += convergence(br, inds, folder, "Best run")
 
     designs = np.stack([np.array([m.BUILT[k] for k in m.MASTER_KEYS]), _master(s, names, x)])
     labels = ["built master (a2' = 138, d6 = 60)",

@@ -135,18 +135,14 @@ class PlasSettings(StudySettings):
 
     @field_validator("variables")
     @classmethod
-    def _bounds(cls, v: dict[str, tuple[float, float]]) -> dict[str, tuple[float, float]]:
-        if not v:
-            raise ValueError("needs at least one design variable")
-        for k, (lo, hi) in v.items():
+    def _lengths(cls, v: dict[str, tuple[float, float]]) -> dict[str, tuple[float, float]]:
+        for k, (lo, _hi) in v.items():
             if k not in MASTER_KEYS:
                 raise ValueError(f"unknown design variable '{k}'; allowed {list(MASTER_KEYS)}")
             if lo < 0 or (k != "a3p" and lo <= 0):
                 raise ValueError(
                     f"{k}: a length must be {'≥' if k == 'a3p' else '>'} 0 mm, got lower bound {lo}"
                 )
-            if not lo < hi:
-                raise ValueError(f"{k}: lower bound {lo} is not below upper bound {hi}")
         return v
 
     @field_validator("fixed")

@@ -12,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from designopt import montecarlo as mc
-from designopt.figures import plt, save
+from designopt.figures import convergence, plt, save
 from designopt.studies.serial.mechanism import Mechanism, build
 from designopt.studies.serial.objective import measures
 from designopt.studies.serial.settings import ROWS, SerialSettings
@@ -49,20 +49,7 @@ def draw_run(a: dict[str, Any], folder: Path) -> list[Path]:
         "final": a["final"]["x"],
     }
     out = []
-    inds = ["f", *s.index_names()]
-    fig, axes = plt.subplots(1, len(inds), figsize=(3.3 * len(inds), 3), squeeze=False)
-    for ax, k in zip(axes[0], inds, strict=True):
-        y = br[k]
-        ax.plot(br["iteration"], y, marker=".", lw=1)
-        if k + "_se" in br:
-            se = br[k + "_se"]
-            ax.fill_between(br["iteration"], y - 2 * se, y + 2 * se, alpha=0.25, lw=0)
-        ax.set_xlabel("iteration")
-        ax.set_ylabel(k)
-        ax.grid(alpha=0.3)
-    fig.suptitle("Best run: objective and indices (band: ± 2 SE)", fontsize=10)
-    fig.tight_layout()
-    out += save(fig, folder, "convergence")
+    out += convergence(br, ["f", *s.index_names()], folder, "Best run: objective and indices")
 
     rows_txt = ", ".join(ROWS[r] for r in s.indices.rows())
     lo, hi = mech.lower, mech.upper

@@ -85,16 +85,6 @@ class SerialSettings(StudySettings):
     indices: SerialIndices = SerialIndices()
     objective: dict[str, float | bool | int] = {"gci": -1.0}
 
-    @field_validator("variables")
-    @classmethod
-    def _bounds(cls, v: dict[str, tuple[float, float]]) -> dict[str, tuple[float, float]]:
-        if not v:
-            raise ValueError("needs at least one design variable")
-        for k, (lo, hi) in v.items():
-            if not lo < hi:
-                raise ValueError(f"{k}: lower bound {lo} is not below upper bound {hi}")
-        return v
-
     @field_validator("fixed")
     @classmethod
     def _fixed(cls, v: dict[str, float], info: ValidationInfo) -> dict[str, float]:
