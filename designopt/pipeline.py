@@ -304,6 +304,8 @@ def run(cfg: Any, text: str, where: str, out: Path, resume: bool = False,
     if cfg.sweep is not None:
         raise ConfigError(f"{where}: key 'sweep': this config declares a sweep; "
                           "run it with `designopt sweep`")  # fmt: skip
+    if study_of(cfg).replay is not None:
+        return _replay(cfg, text, where, out)
     check_optimizer(cfg, where)
     dtype_of(cfg)
     keys = streams(cfg.seed)
@@ -349,6 +351,24 @@ def run(cfg: Any, text: str, where: str, out: Path, resume: bool = False,
                  f"(setup {setup.wall:.1f} s, optimizer {opt.wall:.1f} s, "
                  f"scoring/polish {post.wall:.1f} s); {total.compilations} XLA compilations "
                  f"({setup.compilations} + {opt.compilations} + {post.compilations})")  # fmt: skip
+    return Report(out, lines, attrs, tree)
+
+
+def _replay(cfg: Any, text: str, where: str, out: Path) -> Report:
+    """A study whose run is not an optimisation (``Study.replay``): compute, archive."""
+    keys = streams(cfg.seed)
+    attrs = base_attrs("run", cfg, text, keys)
+    with Stopwatch() as total:
+        try:
+            tree, lines = study_of(cfg).replay(cfg.study, keys, dtype_of(cfg), where)
+        except ValueError as e:
+            raise ConfigError(f"{where}: study: {e}") from None
+    check_output(out)
+    attrs |= {"wall_time_s": total.wall, "compile_time_s": total.compile,
+              "run_time_s": total.run, "compilations": total.compilations}  # fmt: skip
+    write_archive(out, tree, attrs)
+    lines = [*lines, f"wall {total.wall:.1f} s = compile {total.compile:.1f} s + run "
+             f"{total.run:.1f} s; {total.compilations} XLA compilations"]  # fmt: skip
     return Report(out, lines, attrs, tree)
 
 

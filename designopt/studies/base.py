@@ -73,6 +73,9 @@ class Study:
     - ``indices(settings) -> names``: what ``eval``/``scan`` report (f included).
     - ``units(settings) -> {variable: unit}``: for printing designs.
     - ``tiny``: the ``study:`` section of a config that runs in seconds (contract tests).
+    - ``replay(settings, keys, dtype, where) -> (tree, lines)``: for a study whose ``run``
+      is not a design optimisation (e.g. replaying a teleoperation trajectory); the
+      pipeline archives ``tree`` (kind "run") and prints ``lines``. None: optimise.
     """
 
     name: str
@@ -89,3 +92,6 @@ class Study:
     tiny: dict[str, Any] = field(default_factory=dict)
     """A small ``study:`` section (seconds to run), used by the contract tests."""
     meta: dict[str, Any] = field(default_factory=dict)
+    replay: (
+        Callable[[Any, Mapping[str, jax.Array], Any, str], tuple[dict[str, Any], list[str]]] | None
+    ) = None
