@@ -32,6 +32,14 @@ class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
 
+class Constraints(_Strict):
+    """How optimizers treat a study's constraints g ≤ 0: Deb's feasibility rules
+    (default; docs/optimizers.md) or a quadratic penalty f + weight·Σ max(g, 0)²."""
+
+    method: Literal["deb", "penalty"] = "deb"
+    weight: float = Field(1000.0, gt=0, allow_inf_nan=False)
+
+
 class Optimizer(_Strict):
     name: str = "ptpso"
     n_particles: int = Field(50, ge=2)
@@ -39,6 +47,7 @@ class Optimizer(_Strict):
     n_runs: int = Field(1, ge=1)
     bounds: Literal["clip", "reflect", "reinit"] = "clip"
     settings: dict[str, float | str] = {}
+    constraints: Constraints = Constraints()
 
 
 class Refine(_Strict):

@@ -126,8 +126,11 @@ def optimise(cfg: Any, problem: Problem, key: jax.Array,
     """The configured optimizer on ``problem``; with ``members`` (overrides of optimizer
     settings) one vmapped batch on common keys."""
     from designopt import optim
+    from designopt.problems import penalty
 
     o = cfg.optimizer
+    if o.constraints.method == "penalty":
+        problem = penalty.quadratic(problem, o.constraints.weight)
     common = dict(n_particles=o.n_particles, n_iters=o.n_iters, n_runs=o.n_runs, bounds=o.bounds,
                   dtype=dtype_of(cfg), chunk_iters=max(1, o.n_iters // 20),
                   progress=progress, checkpoint=checkpoint, resume=resume)  # fmt: skip
@@ -183,6 +186,8 @@ def result_tree(cfg: Any, problem: Problem, res: Any) -> dict[str, Any]:
 
     bv = getattr(res, "best_v", None)
     # the best run by Deb's rules: least violation first, then the smallest f
+    if cfg.optimizer.constraints.method != "deb":
+        bv = None
     best = int(np.lexsort((res.best_f, bv))[0]) if bv is not None else int(np.argmin(res.best_f))
     sub_hist = score(problem, res.history_x[best])
     tree: dict[str, Any] = {
@@ -198,7 +203,8 @@ def result_tree(cfg: Any, problem: Problem, res: Any) -> dict[str, Any]:
             "upper": problem.upper, "attrs": {"info": problem.info},
         },
     }  # fmt: skip
-    if getattr(res, "history_v", None) is not None and problem.constraints is not None:
+    deb = cfg.optimizer.constraints.method == "deb"  # a penalty run tracks no violation
+    if deb and getattr(res, "history_v", None) is not None and problem.constraints is not None:
         tree["optimizer"] |= {"history_v": res.history_v, "best_v": res.best_v}
     if isinstance(problem.params, Mapping) and "bounds" in problem.params:
         tree["problem"]["norm_bounds"] = np.asarray(problem.params["bounds"])
