@@ -1,7 +1,7 @@
 """The study registry: ``STUDIES[name]`` is a :class:`~designopt.studies.base.Study`.
 
 Config, pipeline and CLI reach studies only through this registry. Every sub-package of
-this folder that defines ``STUDY`` is registered when the registry is imported (adding a
+this folder that defines ``STUDY`` (one Study, or a tuple of them) is registered when the registry is imported (adding a
 study is adding a folder); a user's own study registers with :func:`register` (before
 loading a config that names it).
 """
@@ -36,8 +36,9 @@ def _builtins() -> None:
     for info in sorted(pkgutil.iter_modules(__path__), key=lambda m: m.name):
         if info.ispkg:
             mod = importlib.import_module(f"{__name__}.{info.name}")
-            if hasattr(mod, "STUDY"):
-                register(mod.STUDY)
+            found = getattr(mod, "STUDY", ())
+            for st in found if isinstance(found, tuple) else (found,):
+                register(st)
 
 
 _builtins()

@@ -1,0 +1,182 @@
+"""The ``study:`` section of an ``rcm`` config (the planar RCM mechanism paper, Sensors
+2023; docs/rcm.md lists every key). Lengths in mm, angles in degrees."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+from designopt.studies.base import StudySettings
+
+DESIGN_KEYS = ("a", "c")
+"""What the design can vary; b only moves R and changes neither η nor reach (eq. 17-18)."""
+WORKSPACES = ("box", "cone", "reach")
+BUILT = {"a": 120.0, "b": 260.0, "c": 250.0}
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+def _lo_hi(name: str, v: tuple[float, float]) -> tuple[float, float]:
+    if not v[0] < v[1]:
+        raise ValueError(f"{name}: lower limit {v[0]} is not below upper limit {v[1]}")
+    return v
+
+
+class Joints(_Strict):
+    """Joint ranges (Table 2): θ1 in degrees, d1 and d2 in mm."""
+
+    theta1_deg: tuple[float, float] = (-38.0, 38.0)
+    d1: tuple[float, float] = (22.0, 215.0)
+    d2: tuple[float, float] = (35.0, 200.0)
+
+    @field_validator("theta1_deg", "d1", "d2")
+    @classmethod
+    def _range(cls, v: tuple[float, float], info) -> tuple[float, float]:
+        return _lo_hi(info.field_name, v)
+
+    @field_validator("d2")
+    @classmethod
+    def _d2_positive(cls, v: tuple[float, float]) -> tuple[float, float]:
+        if v[0] <= 0:
+            raise ValueError(f"d2: the range must lie above 0 (the rod direction is undefined "
+                             f"at d2 = 0), got {list(v)}")  # fmt: skip
+        return v
+
+
+class Cone(_Strict):
+    """The task cone at R: full apex angle and insertion-depth range (seed 003 §2.4:
+    60°, 50-200 mm). ``dim`` 2 is its section in the mechanism's plane (a sector), 3 the
+    cone of the 3-DOF arm around the instrument's home direction."""
+
+    apex_deg: float = Field(60.0, gt=0, lt=180)
+    depth: tuple[float, float] = (50.0, 200.0)
+    dim: Literal[2, 3] = 2
+
+    @field_validator("depth")
+    @classmethod
+    def _depth(cls, v: tuple[float, float]) -> tuple[float, float]:
+        _lo_hi("depth", v)
+        if v[0] <= 0:
+            raise ValueError(f"depth: must be > 0 (the tip beyond R), got {list(v)}")
+        return v
+
+
+class Eta(_Strict):
+    """The global conditioning index η = mean of 1/k over a workspace (eq. 12).
+
+    ``workspace``: ``box`` (the joint box), ``cone`` (the task cone, sampled uniformly in
+    Cartesian space and mapped by IK) or ``reach`` (the part of the cone the joint box
+    reaches). ``measure``: ``cartesian`` (uniform in the tip's space) or ``joint``
+    (uniform in (d1, d2)); the other is the change of variables by |det J|.
+    """
+
+    workspace: Literal["box", "cone", "reach"] = "cone"
+    measure: Literal["cartesian", "joint"] = "cartesian"
+    n_samples: int = Field(65_536, ge=2)
+    sampler: Literal["uniform", "halton"] = "uniform"
+
+
+class Constraints(_Strict):
+    """Design constraints g ≤ 0: eq. (19) a ≥ sin(apex/2)·(c − depth_min), and the joint
+    box reaching at least ``reach_min`` of the task cone's samples."""
+
+    eq19: bool = True
+    reach_min: float | None = Field(0.99, gt=0, le=1)
+
+
+class RcmSettings(StudySettings):
+    """The planar RCM mechanism: design variables among (a, c); the rest fixed."""
+
+    name: Literal["rcm"] = "rcm"
+    variables: dict[str, tuple[float, float]] = {"a": (60.0, 200.0), "c": (200.0, 400.0)}
+    fixed: dict[str, float] = {}
+    joints: Joints = Joints()
+    cone: Cone = Cone()
+    eta: Eta = Eta()
+    constraints: Constraints = Constraints()
+
+    @field_validator("variables")
+    @classmethod
+    def _known(cls, v: dict[str, tuple[float, float]]) -> dict[str, tuple[float, float]]:
+        bad = sorted(set(v) - set(DESIGN_KEYS))
+        if bad:
+            raise ValueError(f"unknown design variable(s) {bad}; the design is {list(DESIGN_KEYS)} "
+                             "(b only moves R and changes neither η nor reach)")  # fmt: skip
+        for k, (lo, _) in v.items():
+            if lo <= 0:
+                raise ValueError(f"{k}: lengths must be > 0, got lower bound {lo}")
+        return v
+
+    @field_validator("fixed")
+    @classmethod
+    def _fixed(cls, v: dict[str, float]) -> dict[str, float]:
+        bad = sorted(set(v) - set(BUILT))
+        if bad:
+            raise ValueError(f"unknown key(s) {bad}; fixed values may name {list(BUILT)}")
+        for k, x in v.items():
+            if not x > 0:
+                raise ValueError(f"{k}: lengths must be > 0, got {x}")
+        return v
+
+    @model_validator(mode="after")
+    def _consistent(self) -> RcmSettings:
+        both = sorted(set(self.variables) & set(self.fixed))
+        if both:
+            raise ValueError(
+                f"fixed: {both} are design variables; a name is either variable or fixed"
+            )
+        return self
+
+    def design(self) -> dict[str, float]:
+        """Fixed values: ``fixed`` over the built design (Table 1)."""
+        return BUILT | self.fixed
+
+
+class Arm(_Strict):
+    """The 3-DOF arm's lengths, mm: a, b, c (Table 1) and L, the height of R above the
+    base frame (Table 3; not printed in the paper, 0 puts R at the origin)."""
+
+    a: float = Field(120.0, gt=0)
+    b: float = Field(260.0, gt=0)
+    c: float = Field(250.0, gt=0)
+    L: float = 0.0
+
+
+class TeleopSettings(StudySettings):
+    """A master trajectory replayed through the incremental mapping (eq. 33; docs/rcm.md).
+
+    ``trajectory``: a CSV ``t,x,y,z,clutch`` (s, mm, 0/1), relative paths from the
+    config's folder. ``scale``: s for an s:1 master-to-slave ratio. ``master_to_slave_deg``:
+    fixed-axis angles (x, y, z) of the rotation R_SG⁻¹·R_MG. ``q0``: the slave's start
+    (θ1 in degrees, d1, d2 in mm). ``delay_ms``: the servo delay (the paper measured
+    60-80 ms).
+    """
+
+    name: Literal["rcm_teleop"] = "rcm_teleop"
+    variables: dict[str, tuple[float, float]] = {}
+    arm: Arm = Arm()
+    joints: Joints = Joints()
+    trajectory: str
+    scale: float = Field(2.0, gt=0, allow_inf_nan=False)
+    master_to_slave_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    q0: tuple[float, float, float] = (0.0, 120.0, 130.0)
+    delay_ms: float = Field(70.0, ge=0, le=10_000)
+
+    @field_validator("variables")
+    @classmethod
+    def _box(cls, v: dict[str, tuple[float, float]]) -> dict[str, tuple[float, float]]:
+        if v:
+            raise ValueError("a replay has no design variables; give the lengths under 'arm'")
+        return v
+
+    @model_validator(mode="after")
+    def _start(self) -> TeleopSettings:
+        j = self.joints
+        for name, x, (lo, hi) in zip(("theta1", "d1", "d2"), self.q0,
+                                     (j.theta1_deg, j.d1, j.d2), strict=True):  # fmt: skip
+            if not lo <= x <= hi:
+                raise ValueError(f"q0: {name} = {x} lies outside its range [{lo}, {hi}]")
+        return self
