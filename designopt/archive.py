@@ -1,4 +1,5 @@
-"""HDF5 archives (schema: docs/archive.md), written atomically: a temporary file, then rename.
+"""HDF5 archives (schema: docs/archive.md), built in memory and written atomically by the one
+writer (``designopt.output``: a temporary file, fsync, rename).
 
 ``write(path, tree, attrs)`` stores a nested dict: dict values become groups, everything
 else a dataset; a group's ``"attrs"`` entry becomes its HDF5 attributes (non-scalars as
@@ -8,8 +9,8 @@ with ``complete = False`` — and removes it once the final archive is in place.
 
 from __future__ import annotations
 
+import io
 import json
-import os
 import platform
 from importlib import metadata
 from pathlib import Path
@@ -18,6 +19,8 @@ from typing import Any
 import h5py
 import jax
 import numpy as np
+
+from designopt import output
 
 SCHEMA_VERSION = 1
 
@@ -54,26 +57,29 @@ def _put(grp: h5py.Group, tree: dict[str, Any]) -> None:
             grp.create_dataset(name, data=arr, compression="gzip" if arr.size > 4096 else None)
 
 
+def image(tree: dict[str, Any], attrs: dict[str, Any], complete: bool = True) -> bytes:
+    """The bytes of an HDF5 archive holding ``tree`` and root ``attrs``, built in memory
+    (so a disk fault can never leave HDF5 half-written or open: ``output.write_file``
+    writes the bytes)."""
+    buf = io.BytesIO()
+    with h5py.File(buf, "w") as h:
+        _put(h, {"attrs": attrs})
+        h.attrs["schema_version"] = SCHEMA_VERSION
+        h.attrs["versions"] = json.dumps(versions())
+        h.attrs["jax_backend"] = jax.default_backend()
+        h.attrs["jax_devices"] = json.dumps([str(d) for d in jax.devices()])
+        h.attrs["complete"] = complete
+        _put(h, tree)
+    return buf.getvalue()
+
+
 def write(
     path: str | Path, tree: dict[str, Any], attrs: dict[str, Any], complete: bool = True
 ) -> Path:
-    """Write the nested dict ``tree`` and root ``attrs`` to ``path`` atomically."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    try:
-        with h5py.File(tmp, "w") as h:
-            _put(h, {"attrs": attrs})
-            h.attrs["schema_version"] = SCHEMA_VERSION
-            h.attrs["versions"] = json.dumps(versions())
-            h.attrs["jax_backend"] = jax.default_backend()
-            h.attrs["jax_devices"] = json.dumps([str(d) for d in jax.devices()])
-            h.attrs["complete"] = complete
-            _put(h, tree)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
-    return path
+    """Write the nested dict ``tree`` and root ``attrs`` to ``path`` atomically through
+    the one writer (``designopt.output``); WriteError (one line) on a disk fault."""
+    what = "archive" if complete else "checkpoint"
+    return output.write_file(path, image(tree, attrs, complete), what)
 
 
 def partial_path(path: str | Path) -> Path:

@@ -14,7 +14,6 @@ archive's figures (``designopt report``).
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Literal
@@ -180,25 +179,13 @@ def format_table(case: str, st: dict[str, Any], reference: str) -> str:
     return "\n".join(lines)
 
 
-def _check_output(path: Path) -> None:
-    from designopt.config import ConfigError
-
-    parent = path.parent if str(path.parent) else Path(".")
-    try:
-        parent.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise ConfigError(f"output '{path}': cannot create folder ({e.strerror})") from None
-    if not os.access(parent, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
-        raise ConfigError(f"output '{path}': not writable")
-
-
-def command(config_path: str, seed: int | None, out: str | None, quiet: bool) -> int:
-    """``designopt bench CONFIG [--seed N] [--out PATH] [--quiet]``: run the suite, print
-    the tables, write the archive and the figures. ConfigError for bad input (the CLI
-    prints it and exits 2) before anything runs or is written."""
-    from tqdm import tqdm
-
-    from designopt import archive
+def command(config_path: str, seed: int | None, out: str | None, quiet: bool,
+            overwrite: bool = False) -> int:  # fmt: skip
+    """``designopt bench CONFIG [--seed N] [--out PATH] [--quiet] [--overwrite]``: run the
+    suite, print the tables, write the archive and the figures through the one writer
+    (``designopt.output``). ConfigError for bad input (the CLI prints it and exits 2)
+    before anything runs or is written; an existing archive needs ``overwrite``."""
+    from designopt import output
     from designopt.config import load
 
     cfg, text = load(config_path, BenchConfig)
@@ -206,7 +193,17 @@ def command(config_path: str, seed: int | None, out: str | None, quiet: bool) ->
         cfg.seed = seed
     check(cfg, config_path)
     path = Path(out or cfg.output)
-    _check_output(path)
+    with output.session():
+        output.claim(path, overwrite)
+        return _command(cfg, text, path, quiet)
+
+
+def _command(cfg: BenchConfig, text: str, path: Path, quiet: bool) -> int:
+    """The suite, its tables, archive and figures, once the output is claimed."""
+    from tqdm import tqdm
+
+    from designopt import archive, output
+
     b = cfg.bench
     n_ent = len(b.variants)
     total = len(cases(cfg)) * n_ent * b.n_iters
@@ -235,7 +232,8 @@ def command(config_path: str, seed: int | None, out: str | None, quiet: bool) ->
     hist = {c: {v: rec["history"] for v, rec in per.items()} for c, per in res["results"].items()}
     from designopt.figures import bench as bench_figs
 
-    figs = bench_figs.draw(path.parent, st, hist, b.n_runs)
+    figs = output.publish_figures(lambda d: bench_figs.draw(d, st, hist, b.n_runs), path.parent,
+                                  swap=False)  # fmt: skip
     print(f"{len(res['results'])} cases × {n_ent} optimizers × {b.n_runs} runs × {b.n_iters} "
           f"iterations: wall {sw.wall:.1f} s (compile {sw.compile:.1f} s, run {sw.run:.1f} s)")  # fmt: skip
     print(f"archive: {path}")

@@ -1,5 +1,9 @@
 """The ``designopt`` command line: parse arguments, call ``designopt.pipeline``, print.
-User mistakes print one line and exit with status 2."""
+
+Exit statuses (docs/faults.md): 0 done; 1 a runtime fault (a disk full or unwritable
+while writing), one line naming the path and the OS reason; 2 bad input or an output
+refused before the run, one line; 130 (SIGINT) or 143 (SIGTERM, SIGHUP, --max-minutes)
+interrupted, with the checkpoint kept and the command that resumes printed."""
 
 from __future__ import annotations
 
@@ -11,15 +15,31 @@ import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
-from designopt.errors import ConfigError
+from designopt.errors import ConfigError, Interrupted, WriteError
+
+WRITERS = ("run", "sweep", "scan", "bench", "report")
+"""Commands that write files: they run in the writer's session with signal handling."""
 
 
 def _load(args: argparse.Namespace):
+    import time
+
+    from designopt import output
     from designopt.config import load
 
+    t0 = time.monotonic()
     cfg, text = load(args.config)
     if getattr(args, "seed", None) is not None:
         cfg.seed = args.seed
+    if getattr(args, "overwrite", False):
+        cfg.overwrite = True
+    if getattr(args, "max_minutes", None) is not None:
+        if not (math.isfinite(args.max_minutes) and args.max_minutes > 0):
+            raise ConfigError(f"--max-minutes {args.max_minutes}: give a positive number")
+        cfg.max_minutes = args.max_minutes
+    ses = output.current()
+    if ses is not None and cfg.max_minutes is not None:
+        ses.set_deadline(cfg.max_minutes, t0)
     import jax
 
     if cfg.precision == "float64":  # the CLI is the program: it may switch JAX to 64-bit
@@ -47,13 +67,49 @@ def cache_dir() -> Path:
     return Path(base) / "designopt" / "jax"
 
 
+ETA_AFTER_S = 60.0
+"""A job whose optimizer is estimated to need longer than this prints its ETA once."""
+
+
+def _eta_text(seconds: float) -> str:
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.0f} min"
+    if seconds < 2 * 86400:
+        return f"{seconds / 3600:.1f} h"
+    return f"{seconds / 86400:.3g} days"
+
+
 def _progress(quiet: bool):
+    """A tqdm bar (none with --quiet) that prints, once, an estimated time when the job
+    is long: after the first timed chunk (the first one includes compilation)."""
+
     @contextlib.contextmanager
     def bar(total: int, desc: str) -> Iterator[Callable[[int], None]]:
+        import time
+
         from tqdm import tqdm
 
+        seen = {"n": 0, "t": None, "told": False}
+
+        def update(n: int) -> None:
+            t.update(n)
+            now = time.monotonic()
+            if seen["t"] is not None and not seen["told"] and n > 0:
+                left = (now - seen["t"]) / n * (total - seen["n"] - n)
+                seen["told"] = True
+                if left > ETA_AFTER_S:
+                    msg = (f"designopt: {desc}: about {_eta_text(left)} left "
+                           f"({total - seen['n'] - n} of {total} iterations at "
+                           f"{_eta_text((now - seen['t']) / n)} each); --max-minutes N stops "
+                           "cleanly with a checkpoint")  # fmt: skip
+                    t.write(msg, file=sys.stderr)
+            seen["n"] += n
+            seen["t"] = now
+
         with tqdm(total=total, desc=desc, unit="it", disable=quiet) as t:
-            yield t.update
+            yield update
 
     return bar
 
@@ -63,27 +119,50 @@ def _out(args: argparse.Namespace, cfg) -> Path:
 
 
 def _finish(rep, args: argparse.Namespace) -> int:
-    """Print the report's lines, the archive path and draw the figures unless --no-figures."""
-    from designopt import pipeline
+    """Print the report's lines, the archive path and draw the figures unless --no-figures
+    (a figure write fault: exit 1, the archive kept)."""
+    from designopt import output, pipeline
 
     for line in rep.lines:
         print(line)
+    if getattr(args, "dry_run", False):
+        return 0
     print(f"archive: {rep.out}")
     if not getattr(args, "no_figures", False):
-        figs = pipeline.draw_figures(rep.out)
+        ses = output.current()
+        kept = f"the archive {rep.out} is complete (`designopt report {rep.out}` draws its figures)"
+        if ses is not None:
+            ses.kept = lambda: kept
+        try:
+            figs = pipeline.draw_figures(rep.out)
+        except WriteError as e:
+            raise WriteError(f"{e}; {kept}") from None
         print(f"figures: {len(figs) // 2} (PNG + PDF) in {figs[0].parent}")
     return 0
+
+
+def resume_command(args: argparse.Namespace, cfg) -> str:
+    """The exact command that resumes this run: the same config, output, seed and every
+    other option given (without --resume, which the caller appends)."""
+    import shlex
+
+    parts = ["designopt", "run", args.config, "--out", str(_out(args, cfg)),
+             "--seed", str(cfg.seed)]  # fmt: skip
+    for flag in ("quiet", "no_figures", "no_cache", "overwrite"):
+        if getattr(args, flag, False):
+            parts.append("--" + flag.replace("_", "-"))
+    if args.max_minutes is not None:
+        parts += ["--max-minutes", f"{args.max_minutes:g}"]
+    return shlex.join(parts)
 
 
 def cmd_run(args: argparse.Namespace) -> int:
     from designopt import pipeline
 
     cfg, text = _load(args)
-    hint = f"designopt run {args.config}"
-    hint += f" --seed {args.seed}" if args.seed is not None else ""
-    hint += f" --out {args.out}" if args.out else ""
     rep = pipeline.run(cfg, text, args.config, _out(args, cfg), resume=args.resume,
-                       progress=_progress(args.quiet), resume_hint=hint)  # fmt: skip
+                       progress=_progress(args.quiet), resume_hint=resume_command(args, cfg),
+                       dry_run=args.dry_run)  # fmt: skip
     return _finish(rep, args)
 
 
@@ -91,7 +170,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     from designopt import pipeline
 
     cfg, text = _load(args)
-    rep = pipeline.sweep(cfg, text, args.config, _out(args, cfg), _progress(args.quiet))
+    rep = pipeline.sweep(cfg, text, args.config, _out(args, cfg), _progress(args.quiet),
+                         dry_run=args.dry_run)  # fmt: skip
     return _finish(rep, args)
 
 
@@ -102,7 +182,7 @@ def cmd_scan(args: argparse.Namespace) -> int:
     out = (
         Path(args.out) if args.out else _out(args, cfg).with_name(f"{_out(args, cfg).stem}_scan.h5")
     )
-    rep = pipeline.scan(cfg, text, args.config, out, _progress(args.quiet))
+    rep = pipeline.scan(cfg, text, args.config, out, _progress(args.quiet), dry_run=args.dry_run)
     return _finish(rep, args)
 
 
@@ -158,7 +238,7 @@ def cmd_studies(args: argparse.Namespace) -> int:
 def cmd_bench(args: argparse.Namespace) -> int:
     from designopt import benchsuite
 
-    return benchsuite.command(args.config, args.seed, args.out, args.quiet)
+    return benchsuite.command(args.config, args.seed, args.out, args.quiet, args.overwrite)
 
 
 def _readable(p: Path) -> None:
@@ -250,12 +330,18 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = ap.add_subparsers(dest="command", required=True)
 
-    def common(p, seed=True, out=True, quiet=True, figures=True):
+    def common(p, seed=True, out=True, quiet=True, figures=True, dry=True):
         p.add_argument("config", help="config (YAML), e.g. configs/<study>.yaml")
         if seed:
             p.add_argument("--seed", type=int, default=None, help="override the config's seed")
         if out:
             p.add_argument("--out", default=None, help="override the archive path")
+            p.add_argument("--overwrite", action="store_true",
+                           help="replace an existing archive (else refused, exit 2)")  # fmt: skip
+        if dry:
+            p.add_argument("--dry-run", action="store_true",
+                           help="perform every check (config, optimizer, memory and disk "
+                                "estimate, output) and write nothing")  # fmt: skip
         if quiet:
             p.add_argument("--quiet", action="store_true", help="no progress bar")
         if figures:
@@ -267,6 +353,9 @@ def build_parser() -> argparse.ArgumentParser:
     common(r)
     r.add_argument("--resume", action="store_true",
                    help="continue the interrupted run kept in <output>.partial.h5")  # fmt: skip
+    r.add_argument("--max-minutes", type=float, default=None, metavar="M",
+                   help="stop cleanly after M minutes, keeping a checkpoint to --resume "
+                        "(exit 143)")  # fmt: skip
     r.set_defaults(func=cmd_run)
     w = sub.add_parser("sweep", help="run every member of a config's sweep section")
     common(w)
@@ -275,7 +364,7 @@ def build_parser() -> argparse.ArgumentParser:
     common(sc)
     sc.set_defaults(func=cmd_scan)
     e = sub.add_parser("eval", help="print every index of one design with its standard error")
-    common(e, out=False, quiet=False, figures=False)
+    common(e, out=False, quiet=False, figures=False, dry=False)
     e.add_argument("--design", action="append", default=[], metavar="NAME=VALUE",
                    help="a design variable's value (repeat; others: middle of their box)")  # fmt: skip
     e.add_argument("--json", action="store_true", help="print one JSON object on stdout")
@@ -286,7 +375,7 @@ def build_parser() -> argparse.ArgumentParser:
         "bench",
         help="run the optimizer benchmark suite (the PTPSO paper, IEEE Access 2019, Fig. 10-11)",
     )
-    common(b, figures=False)
+    common(b, figures=False, dry=False)
     b.set_defaults(func=cmd_bench)
     p = sub.add_parser("report", help="draw the figures of an archive (PNG + PDF beside it)")
     p.add_argument("archive")
@@ -298,19 +387,26 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from designopt.errors import Interrupted
-
+    """Run one command; its exit status (module docstring, docs/faults.md)."""
     args = build_parser().parse_args(argv)
     try:
+        if args.command in WRITERS and not getattr(args, "dry_run", False):
+            from designopt import output
+
+            with output.session(signals=True):
+                return args.func(args)
         return args.func(args)
     except ConfigError as e:
         print(f"designopt: error: {e}", file=sys.stderr)
         return 2
+    except WriteError as e:
+        print(f"designopt: error: {e}", file=sys.stderr)
+        return 1
     except Interrupted as e:
-        print(f"designopt: interrupted; {e}", file=sys.stderr)
-        return 130
+        print(f"designopt: {e}", file=sys.stderr)
+        return e.code
     except KeyboardInterrupt:
-        print("designopt: interrupted; no archive written", file=sys.stderr)
+        print("designopt: interrupted (SIGINT); nothing written", file=sys.stderr)
         return 130
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import functools
 from pathlib import Path
-from typing import Annotated, Any, Literal, Union
+from typing import Annotated, Any, ClassVar, Literal, Union
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model, field_validator
@@ -124,6 +124,20 @@ class RunConfigBase(_Strict):
     seed: int = 0
     output: str | None = None  # default results/<study>/<study>.h5
     compile_cache: bool = True  # keep compiled programs between runs (CLI; --no-cache)
+    overwrite: bool = False  # replace an existing archive at the output (CLI; --overwrite)
+    max_minutes: float | None = Field(
+        None, gt=0, allow_inf_nan=False
+    )  # stop cleanly (--max-minutes)
+    checkpoint_every_s: float = Field(10.0, ge=0, allow_inf_nan=False)  # checkpoint cadence
+
+    CONTROL_KEYS: ClassVar[tuple[str, ...]] = (
+        "output",
+        "compile_cache",
+        "overwrite",
+        "max_minutes",
+        "checkpoint_every_s",
+    )
+    """Keys that steer how a run is carried out, not what it computes: a resume may change them."""
 
     def output_path(self) -> str:
         name = self.study.name  # type: ignore[attr-defined]

@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import contextlib
 import itertools
+import math
 import os
+import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,7 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 import yaml
 
-from designopt import archive
+from designopt import archive, output
 from designopt.config import ConfigError, load, validate
 from designopt.errors import Interrupted
 from designopt.problems.base import Problem
@@ -80,32 +82,115 @@ def check_optimizer(cfg: Any, where: str) -> None:
             raise ConfigError(f"{where}: key '{key}': {e}") from None
 
 
-def check_output(path: Path) -> None:
-    """Create the output folder (a missing one is made) and prove it writable by writing a
-    scratch file there; ConfigError naming the output otherwise. Called after every other
-    check, so a refused config leaves no folder behind."""
-    import tempfile
-
-    if path.is_dir():
-        raise ConfigError(f"output '{path}': is a folder; give a file name such as {path / 'a.h5'}")
-    parent = path.parent if str(path.parent) else Path(".")
-    try:
-        parent.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise ConfigError(f"output '{path}': cannot create folder ({e.strerror})") from None
-    try:
-        with tempfile.NamedTemporaryFile(dir=parent, prefix=f".{path.name}.probe-"):
-            pass
-    except OSError as e:
-        raise ConfigError(f"output '{path}': folder is not writable ({e.strerror})") from None
+def check_output(path: Path, overwrite: bool = False, need_bytes: int = 0) -> None:
+    """Claim the output for this command (``output.claim``): the folder made (a missing one
+    is created) and proved writable, an existing archive refused unless ``overwrite``,
+    enough free space, and a lock so that no second process writes there. ConfigError
+    naming the output otherwise. Called after the config's own checks, so a refused
+    config leaves no folder behind."""
+    output.claim(path, overwrite, need_bytes)
 
 
 def write_archive(path: Path, tree: dict[str, Any], attrs: dict[str, Any], **kw: Any) -> None:
-    """archive.write, with a failure (disk full, folder removed) as one clear error."""
-    try:
-        archive.write(path, tree, attrs, **kw)
-    except OSError as e:
-        raise ConfigError(f"output '{path}': could not write the archive ({e})") from None
+    """archive.write through the one writer (``designopt.output``): atomic, the output
+    claimed first if this command has not (``overwrite=True`` to replace an archive), and a
+    disk fault one WriteError line (exit 1) that keeps what was there."""
+    path = Path(path)
+    overwrite = kw.pop("overwrite", False)
+    ses = output.current()
+    if ses is None or not ses.covers(path):
+        check_output(path, overwrite)
+    archive.write(path, tree, attrs, **kw)
+
+
+# ---------------------------------------------------------------------- pre-flight
+
+BYTES_PER_DESIGN_SAMPLE = 512
+"""Peak memory per (design × Monte-Carlo sample in flight), conservative: master9 measures
+80-280 B in float64 and float32 on CPU (XLA's buffers of one sample chunk)."""
+BASE_BYTES = 1 << 30  # JAX, XLA and the compiled programs
+DESIGN_SAMPLES_PER_CHUNK = 20_000_000
+"""Work per optimizer chunk (designs × samples × iterations): ≈ 0.2-0.5 s on 2 CPU cores,
+so a stop request meets an iteration boundary promptly (docs/faults.md)."""
+
+
+def _numbers(tree: Any, key: str, path: str = "study") -> list[tuple[str, dict]]:
+    """(path, the dict holding it) of every ``key`` in a settings dump."""
+    out = []
+    if isinstance(tree, dict):
+        if isinstance(tree.get(key), (int, float)) and not isinstance(tree.get(key), bool):
+            out.append((f"{path}.{key}", tree))
+        for k, v in tree.items():
+            out += _numbers(v, key, f"{path}.{k}")
+    return out
+
+
+@dataclass
+class Estimate:
+    """The pre-flight estimate of a job: peak memory, disk for archive + checkpoint, and
+    the Monte-Carlo work per optimizer iteration (designs × samples)."""
+
+    memory: int
+    disk: int
+    work_per_iter: int
+    lower: str
+    lines: list[str] = field(default_factory=list)
+
+    def check(self, where: str) -> None:
+        """ConfigError (exit 2) when the memory estimate exceeds what is available."""
+        avail = available_memory()
+        if self.memory > avail:
+            raise ConfigError(f"{where}: key '{self.lower}': the job needs about "
+                              f"{output.human(self.memory)} of memory, {output.human(avail)} "
+                              f"available; lower {self.lower}")  # fmt: skip
+
+
+def available_memory() -> int:
+    """Memory the job can use: the accelerator's when JAX runs on one, else the host's."""
+    if jax.default_backend() != "cpu":
+        with contextlib.suppress(Exception):
+            return int(jax.devices()[0].memory_stats()["bytes_limit"])
+    return output.available_memory()
+
+
+def estimate(cfg: Any, n_designs: int = 0, members: int = 1) -> Estimate:
+    """Peak memory and archive size of a run (``n_designs`` > 0: a scan of that many
+    designs; ``members``: a sweep) from the config alone, before anything compiles."""
+    st = cfg.study.model_dump(mode="json", by_alias=True)
+    D = max(1, len(cfg.study.variables))
+    samples, per_chunk, lower_chunk = 1, 1, "study"
+    for path, d in _numbers(st, "n_samples"):
+        c = min(int(d["n_samples"]), int(d.get("chunk") or d["n_samples"]))
+        samples = max(samples, int(d["n_samples"]))
+        if c >= per_chunk:
+            per_chunk = c
+            lower_chunk = path.rsplit(".", 1)[0] + (".chunk" if "chunk" in d else ".n_samples")
+    n_norm = max([int(d["n_norm"]) for _, d in _numbers(st, "n_norm")] + [1])
+    o = cfg.optimizer
+    swarm = o.n_particles * o.n_runs * members
+    T = o.n_iters + 1
+    if n_designs:
+        batch = cfg.scan.batch if cfg.scan else 256
+        flight = {"scan.batch": min(batch, n_designs), "study.n_norm": n_norm}
+        host = 8 * n_designs * (D + 48)
+        disk = host + (1 << 18)
+    else:
+        who = "optimizer.n_runs" if o.n_runs > o.n_particles else "optimizer.n_particles"
+        flight = {who: swarm, "optimizer.n_iters": T, "study.n_norm": n_norm}
+        host = 8 * members * (o.n_runs * T * (D + 3) * 3 + swarm * D * 8)
+        disk = 2 * (8 * members * (o.n_runs * T * (D + 3) + T * 48 + swarm * D * 8) + (1 << 18))
+    key, designs = max(flight.items(), key=lambda kv: kv[1])
+    device = BYTES_PER_DESIGN_SAMPLE * designs * per_chunk
+    memory = BASE_BYTES + device + host
+    lower = key if device >= host else ("scan.vary" if n_designs else "optimizer.n_iters")
+    if key == "study.n_norm":
+        lower = next((p for p, _ in _numbers(st, "n_norm")), lower)
+    if device >= host and per_chunk > 4096 and designs * per_chunk > 1e10:
+        lower += f" (or {lower_chunk})"
+    return Estimate(memory, 2 * disk, swarm * samples, lower,
+                    [f"pre-flight: about {output.human(memory)} of memory "
+                     f"({output.human(available_memory())} available), "
+                     f"{output.human(2 * disk)} of disk"])  # fmt: skip
 
 
 def base_attrs(kind: str, cfg: Any, text: str, keys: Mapping[str, jax.Array]) -> dict[str, Any]:
@@ -124,15 +209,18 @@ def optimise(cfg: Any, problem: Problem, key: jax.Array,
              checkpoint: Callable[[Any], None] | None = None,
              resume: Any = None) -> Any:  # fmt: skip
     """The configured optimizer on ``problem``; with ``members`` (overrides of optimizer
-    settings) one vmapped batch on common keys."""
+    settings) one vmapped batch on common keys. Chunks are small (≤ 5 % of the run and
+    about DESIGN_SAMPLES_PER_CHUNK of work), so a stop meets an iteration boundary soon."""
     from designopt import optim
     from designopt.problems import penalty
 
     o = cfg.optimizer
     if o.constraints.method == "penalty":
         problem = penalty.quadratic(problem, o.constraints.weight)
+    work = estimate(cfg, members=len(members or [None])).work_per_iter
+    chunk = max(1, min(o.n_iters // 20, DESIGN_SAMPLES_PER_CHUNK // max(work, 1)))
     common = dict(n_particles=o.n_particles, n_iters=o.n_iters, n_runs=o.n_runs, bounds=o.bounds,
-                  dtype=dtype_of(cfg), chunk_iters=max(1, o.n_iters // 20),
+                  dtype=dtype_of(cfg), chunk_iters=chunk,
                   progress=progress, checkpoint=checkpoint, resume=resume)  # fmt: skip
     if members is None:
         return optim.run(o.name, problem, key, **common, **o.settings)
@@ -272,7 +360,15 @@ def summary_lines(cfg: Any, problem: Problem, tree: dict[str, Any]) -> list[str]
 # ------------------------------------------------------------------------------ run
 
 
+def resume_key(cfg: Any) -> str:
+    """What a checkpoint must match to be resumed: the config without its control keys
+    (output, overwrite, max_minutes, ...), which a resumed run may change."""
+    return cfg.model_dump_json(by_alias=True, exclude=set(cfg.CONTROL_KEYS))
+
+
 def load_checkpoint(partial: Path, resolved: str) -> Any:
+    """The checkpoint kept in ``partial`` (ConfigError if absent, unreadable or of
+    another config)."""
     import h5py
 
     from designopt.optim import Checkpoint
@@ -281,7 +377,7 @@ def load_checkpoint(partial: Path, resolved: str) -> Any:
         raise ConfigError(f"{partial}: no interrupted run to resume")
     try:
         with h5py.File(partial, "r") as h:
-            if h.attrs.get("config_resolved") != resolved:
+            if h.attrs.get("resume_key") != resolved:
                 raise ConfigError(
                     f"{partial}: the interrupted run used a different config or seed; "
                     "run without --resume to start afresh"
@@ -303,54 +399,106 @@ class Report:
     tree: dict[str, Any] = field(default_factory=dict)
 
 
+def _dry(out: Path, cfg: Any, est: Estimate) -> Report:
+    """A dry run's report: every check passed, nothing written."""
+    output.check(out, cfg.overwrite, est.disk, make=False)
+    return Report(out, [f"checks passed; nothing written; {est.lines[0]}"])
+
+
 def run(cfg: Any, text: str, where: str, out: Path, resume: bool = False,
-        progress: Progress = _no_progress, resume_hint: str = "") -> Report:  # fmt: skip
-    """One study run: problem, optimizer (checkpoint after every chunk to
-    ``<out>.partial.h5``), optional polish, final scoring, archive."""
+        progress: Progress = _no_progress, resume_hint: str = "",
+        dry_run: bool = False) -> Report:  # fmt: skip
+    """One study run: problem, optimizer (checkpoint to ``<out>.partial.h5`` every
+    ``checkpoint_every_s`` and when stopped), optional polish, final scoring, archive.
+
+    Under the CLI's session (``output.session(signals=True)``) a signal or the time limit
+    stops the loop at the next iteration boundary with the checkpoint written
+    (``Interrupted``); ``dry_run`` performs every check and writes nothing."""
     if cfg.sweep is not None:
         raise ConfigError(f"{where}: key 'sweep': this config declares a sweep; "
                           "run it with `designopt sweep`")  # fmt: skip
     if study_of(cfg).replay is not None:
-        return _replay(cfg, text, where, out)
+        return _replay(cfg, text, where, out, dry_run)
     check_optimizer(cfg, where)
     dtype_of(cfg)
-    keys = streams(cfg.seed)
-    resolved = cfg.model_dump_json(by_alias=True)
-    partial = archive.partial_path(out)
-    ck = load_checkpoint(partial, resolved) if resume else None
-    attrs = base_attrs("run", cfg, text, keys)
-
-    def checkpoint(c: Any) -> None:
-        tree = {"checkpoint": {"state": c.state, "history": c.history,
-                               "history_x": c.history_x, "attrs": {"done": c.done}}}  # fmt: skip
-        write_archive(partial, tree, attrs, complete=False)
-
+    est = estimate(cfg)
+    est.check(where)
+    if dry_run:
+        return _dry(out, cfg, est)
     o = cfg.optimizer
-    with Stopwatch() as total:
-        with Stopwatch() as setup:
-            problem = build_problem(cfg, keys, where)
-        check_output(out)
-        with Stopwatch() as opt, progress(o.n_iters, f"{o.name} on {cfg.study.name}") as bar:
-            try:
-                res = optimise(cfg, problem, keys["optimizer"], progress=bar,
-                               checkpoint=checkpoint, resume=ck)  # fmt: skip
-            except KeyboardInterrupt:
-                raise Interrupted(
-                    f"finished part kept in {partial} (complete = False); continue with "
-                    f"`{resume_hint or 'designopt run CONFIG'} --resume`"
-                    if partial.is_file()
-                    else "no archive written"
-                ) from None
-        with Stopwatch() as post:
-            tree = result_tree(cfg, problem, res)
-    attrs |= {"wall_time_s": total.wall, "compile_time_s": total.compile,
-              "run_time_s": total.run, "setup_time_s": setup.wall, "optimizer_time_s": opt.wall,
-              "post_time_s": post.wall, "resumed_from": ck.done if ck else -1,
-              "compilations": total.compilations,
-              "compilations_by_stage": {"setup": setup.compilations, "optimizer": opt.compilations,
-                                        "scoring_polish": post.compilations}}  # fmt: skip
-    write_archive(out, tree, attrs)
-    partial.unlink(missing_ok=True)
+    partial = archive.partial_path(out)
+    hint = resume_hint or f"designopt run CONFIG --out {out}"
+    with output.session() as ses:
+        if ses.deadline is None:
+            ses.set_deadline(cfg.max_minutes)
+        check_output(out, cfg.overwrite, est.disk)
+        ses.covered.add(partial)
+        keys = streams(cfg.seed)
+        resolved = resume_key(cfg)
+        ck = load_checkpoint(partial, resolved) if resume else None
+        attrs = base_attrs("run", cfg, text, keys) | {"resume_key": resolved}
+        kept = {"latest": ck, "written": ck.done if ck else -1, "at": time.monotonic()}
+
+        def write_checkpoint(c: Any) -> None:
+            tree = {"checkpoint": {"state": c.state, "history": c.history,
+                                   "history_x": c.history_x, "attrs": {"done": c.done}}}  # fmt: skip
+            write_archive(partial, tree, attrs, complete=False)
+            kept["written"], kept["at"] = c.done, time.monotonic()
+
+        def flush() -> None:
+            c = kept["latest"]
+            if c is not None and c.done > kept["written"]:
+                write_checkpoint(c)
+
+        def what_is_kept() -> str:
+            if kept["written"] < 0 or not partial.is_file():
+                return "nothing written"
+            return (f"finished part ({kept['written']} of {o.n_iters} iterations) kept in "
+                    f"{partial}; resume with `{hint} --resume`")  # fmt: skip
+
+        def checkpoint(c: Any) -> None:
+            kept["latest"] = c
+            ses.set_phase("loop")
+            if ses.stop_requested():
+                with ses.io:
+                    flush()
+                    raise ses.interrupted(what_is_kept())
+            if time.monotonic() - kept["at"] >= cfg.checkpoint_every_s:
+                write_checkpoint(c)
+
+        ses.flush, ses.kept = flush, what_is_kept
+        with Stopwatch() as total:
+            with Stopwatch() as setup:
+                problem = build_problem(cfg, keys, where)
+            with Stopwatch() as opt, progress(o.n_iters, f"{o.name} on {cfg.study.name}") as bar:
+                try:
+                    res = optimise(cfg, problem, keys["optimizer"], progress=bar,
+                                   checkpoint=checkpoint, resume=ck)  # fmt: skip
+                except KeyboardInterrupt:  # library use: no signal handling installed
+                    with ses.io:
+                        flush()
+                        raise Interrupted(what_is_kept()) from None
+            ses.set_phase("prompt")
+            if ses.stop_requested():
+                with ses.io:
+                    flush()
+                    raise ses.interrupted(what_is_kept())
+            with Stopwatch() as post:
+                tree = result_tree(cfg, problem, res)
+        attrs |= {"wall_time_s": total.wall, "compile_time_s": total.compile,
+                  "run_time_s": total.run, "setup_time_s": setup.wall,
+                  "optimizer_time_s": opt.wall, "post_time_s": post.wall,
+                  "resumed_from": ck.done if ck else -1, "compilations": total.compilations,
+                  "compilations_by_stage": {"setup": setup.compilations,
+                                            "optimizer": opt.compilations,
+                                            "scoring_polish": post.compilations}}  # fmt: skip
+        with ses.io:
+            write_archive(out, tree, attrs)
+            output.remove(partial)
+            ses.flush = None
+            ses.kept = lambda: (
+                f"the archive {out} is complete (`designopt report {out}` draws its figures)"
+            )
     lines = summary_lines(cfg, problem, tree)
     lines.append(f"samples per design: {problem.info.get('n_samples_used', '-')}; wall "
                  f"{total.wall:.1f} s = compile {total.compile:.1f} s + run {total.run:.1f} s "
@@ -360,19 +508,23 @@ def run(cfg: Any, text: str, where: str, out: Path, resume: bool = False,
     return Report(out, lines, attrs, tree)
 
 
-def _replay(cfg: Any, text: str, where: str, out: Path) -> Report:
+def _replay(cfg: Any, text: str, where: str, out: Path, dry_run: bool = False) -> Report:
     """A study whose run is not an optimisation (``Study.replay``): compute, archive."""
+    est = Estimate(0, 1 << 22, 0, "study", ["pre-flight: a replay, no optimizer"])
+    if dry_run:
+        return _dry(out, cfg, est)
     keys = streams(cfg.seed)
     attrs = base_attrs("run", cfg, text, keys)
-    with Stopwatch() as total:
-        try:
-            tree, lines = study_of(cfg).replay(cfg.study, keys, dtype_of(cfg), where)
-        except ValueError as e:
-            raise ConfigError(f"{where}: study: {e}") from None
-    check_output(out)
-    attrs |= {"wall_time_s": total.wall, "compile_time_s": total.compile,
-              "run_time_s": total.run, "compilations": total.compilations}  # fmt: skip
-    write_archive(out, tree, attrs)
+    with output.session():
+        check_output(out, cfg.overwrite, est.disk)
+        with Stopwatch() as total:
+            try:
+                tree, lines = study_of(cfg).replay(cfg.study, keys, dtype_of(cfg), where)
+            except ValueError as e:
+                raise ConfigError(f"{where}: study: {e}") from None
+        attrs |= {"wall_time_s": total.wall, "compile_time_s": total.compile,
+                  "run_time_s": total.run, "compilations": total.compilations}  # fmt: skip
+        write_archive(out, tree, attrs)
     lines = [*lines, f"wall {total.wall:.1f} s = compile {total.compile:.1f} s + run "
              f"{total.run:.1f} s; {total.compilations} XLA compilations"]  # fmt: skip
     return Report(out, lines, attrs, tree)
@@ -382,9 +534,10 @@ def _replay(cfg: Any, text: str, where: str, out: Path) -> Report:
 
 
 def sweep(cfg: Any, text: str, where: str, out: Path,
-          progress: Progress = _no_progress) -> Report:  # fmt: skip
+          progress: Progress = _no_progress, dry_run: bool = False) -> Report:  # fmt: skip
     """Every member of the config's ``sweep:`` section; members that differ only in
-    optimizer settings run as one vmapped batch on common keys."""
+    optimizer settings run as one vmapped batch on common keys. No checkpoint: a stop
+    writes nothing."""
     from pydantic import ValidationError
 
     from designopt import sweep as sw
@@ -406,36 +559,46 @@ def sweep(cfg: Any, text: str, where: str, out: Path,
         raise ConfigError(f"{where}: key 'sweep.vary' → {error_text(e)}") from None
     except ValueError as e:
         raise ConfigError(f"{where}: key 'sweep.vary': {e}") from None
-    for c in cfgs.values():
+    ests = []
+    for k, c in cfgs.items():
         check_optimizer(c, where)
         dtype_of(c)
-    check_output(out)
-    root_keys = streams(cfg.seed)
-    tree: dict = {"members": {}}
-    lines = []
-    rows = []
-    total_it = sum(cfgs[k].optimizer.n_iters for k in groups)
-    with Stopwatch() as total, progress(total_it, "sweep") as bar:
-        for k, mem in groups.items():
-            c = cfgs[k]
-            keys = streams(c.seed)
-            problem = build_problem(c, keys, where)
-            opt_sets = [sw.split(m)[1] for _, m in mem]
-            res = optimise(c, problem, keys["optimizer"], members=opt_sets, progress=bar)
-            for j, (i, m) in enumerate(mem):
-                sets = {a: (b[j] if isinstance(b, list) else b) for a, b in res.settings.items()}
-                one = res._replace(**{k: (None if v is None else v[j])
-                                      for k, v in res._asdict().items() if k != "settings"},
-                                   settings=sets)  # fmt: skip
-                t = result_tree(c, problem, one)
-                t["attrs"] = {"overrides": m,
-                              "config_resolved_yaml": resolved_yaml(sw.apply(cfg, m))}  # fmt: skip
-                tree["members"][f"{i:03d}"] = t
-                rows.append((i, m, t["final"]))
-    attrs = base_attrs("sweep", cfg, text, root_keys) | {
-        "n_members": len(members), "wall_time_s": total.wall, "compile_time_s": total.compile,
-        "run_time_s": total.run, "vmapped_batches": len(groups)}  # fmt: skip
-    write_archive(out, tree, attrs)
+        ests.append(estimate(c, members=len(groups[k])))
+    est = max(ests, key=lambda e: e.memory)
+    est.disk = sum(e.disk for e in ests)
+    est.check(where)
+    if dry_run:
+        return _dry(out, cfg, est)
+    with output.session():
+        check_output(out, cfg.overwrite, est.disk)
+        root_keys = streams(cfg.seed)
+        tree: dict = {"members": {}}
+        lines = []
+        rows = []
+        total_it = sum(cfgs[k].optimizer.n_iters for k in groups)
+        with Stopwatch() as total, progress(total_it, "sweep") as bar:
+            for k, mem in groups.items():
+                c = cfgs[k]
+                keys = streams(c.seed)
+                problem = build_problem(c, keys, where)
+                opt_sets = [sw.split(m)[1] for _, m in mem]
+                res = optimise(c, problem, keys["optimizer"], members=opt_sets, progress=bar)
+                for j, (i, m) in enumerate(mem):
+                    sets = {
+                        a: (b[j] if isinstance(b, list) else b) for a, b in res.settings.items()
+                    }
+                    one = res._replace(**{k: (None if v is None else v[j])
+                                          for k, v in res._asdict().items() if k != "settings"},
+                                       settings=sets)  # fmt: skip
+                    t = result_tree(c, problem, one)
+                    t["attrs"] = {"overrides": m,
+                                  "config_resolved_yaml": resolved_yaml(sw.apply(cfg, m))}  # fmt: skip
+                    tree["members"][f"{i:03d}"] = t
+                    rows.append((i, m, t["final"]))
+        attrs = base_attrs("sweep", cfg, text, root_keys) | {
+            "n_members": len(members), "wall_time_s": total.wall, "compile_time_s": total.compile,
+            "run_time_s": total.run, "vmapped_batches": len(groups)}  # fmt: skip
+        write_archive(out, tree, attrs)
     lines.append(f"{len(members)} members in {len(groups)} vmapped batch(es); wall "
                  f"{total.wall:.1f} s (compile {total.compile:.1f} s, run {total.run:.1f} s)")  # fmt: skip
     subs = study_of(cfg).summary(cfg.study)[:3]
@@ -522,31 +685,40 @@ def scan_designs(cfg: Any, problem: Problem, where: str) -> tuple[list[str], np.
 
 
 def scan(cfg: Any, text: str, where: str, out: Path,
-         progress: Progress = _no_progress) -> Report:  # fmt: skip
+         progress: Progress = _no_progress, dry_run: bool = False) -> Report:  # fmt: skip
     """Score the designs of the config's ``scan:`` section in vmapped batches; archive
     ``scan/names``, ``scan/x``, ``scan/<index>`` and ``scan/<index>_se``."""
     dtype_of(cfg)
+    if cfg.scan is None:
+        raise ConfigError(f"{where}: key 'scan': missing; `designopt scan` needs one "
+                          "(docs/configs.md)")  # fmt: skip
+    sizes = [len(v) for v in cfg.scan.lists().values()]
+    est = estimate(cfg, n_designs=math.prod(sizes) if cfg.scan.mode == "grid" else max(sizes))
+    est.check(where)
+    if dry_run:
+        return _dry(out, cfg, est)
     keys = streams(cfg.seed)
-    with Stopwatch() as total:
-        problem = build_problem(cfg, keys, where)
-        varied, X = scan_designs(cfg, problem, where)
-        check_output(out)
-        b = cfg.scan.batch
-        parts = []
-        with progress(X.shape[0], "scan") as bar:
-            for i in range(0, X.shape[0], b):
-                parts.append(score(problem, X[i : i + b], batch=b))
-                bar(min(b, X.shape[0] - i))
-        res = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
-    tree = {"scan": {"names": np.array(problem.names, dtype="S"), "x": X,
-                     "varied": np.array(varied, dtype="S"), **res,
-                     "attrs": {"mode": cfg.scan.mode, "shape": [len(v) for v in cfg.scan.lists().values()]}},
-            "problem": {"names": np.array(problem.names, dtype="S"), "lower": problem.lower,
-                        "upper": problem.upper, "attrs": {"info": problem.info}}}  # fmt: skip
-    attrs = base_attrs("scan", cfg, text, keys) | {
-        "n_designs": int(X.shape[0]), "wall_time_s": total.wall,
-        "compile_time_s": total.compile, "run_time_s": total.run}  # fmt: skip
-    write_archive(out, tree, attrs)
+    with output.session():
+        check_output(out, cfg.overwrite, est.disk)
+        with Stopwatch() as total:
+            problem = build_problem(cfg, keys, where)
+            varied, X = scan_designs(cfg, problem, where)
+            b = cfg.scan.batch
+            parts = []
+            with progress(X.shape[0], "scan") as bar:
+                for i in range(0, X.shape[0], b):
+                    parts.append(score(problem, X[i : i + b], batch=b))
+                    bar(min(b, X.shape[0] - i))
+            res = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+        tree = {"scan": {"names": np.array(problem.names, dtype="S"), "x": X,
+                         "varied": np.array(varied, dtype="S"), **res,
+                         "attrs": {"mode": cfg.scan.mode, "shape": sizes}},
+                "problem": {"names": np.array(problem.names, dtype="S"), "lower": problem.lower,
+                            "upper": problem.upper, "attrs": {"info": problem.info}}}  # fmt: skip
+        attrs = base_attrs("scan", cfg, text, keys) | {
+            "n_designs": int(X.shape[0]), "wall_time_s": total.wall,
+            "compile_time_s": total.compile, "run_time_s": total.run}  # fmt: skip
+        write_archive(out, tree, attrs)
     i_best = int(np.nanargmin(res["f"]))
     lines = [f"{X.shape[0]} designs over {', '.join(varied)} ({cfg.scan.mode}) in batches of "
              f"{b}; wall {total.wall:.1f} s (compile {total.compile:.1f} s, run {total.run:.1f} s)",
@@ -560,22 +732,31 @@ def scan(cfg: Any, text: str, where: str, out: Path,
 
 def draw_figures(path: Path) -> list[Path]:
     """Draw the figures an archive supports beside it (run: the study's figures; sweep:
-    final f per member; scan: a curve or heat map; bench: Fig. 10-11)."""
+    final f per member; scan: a curve or heat map; bench: Fig. 10-11), through the one
+    writer: drawn into a temporary folder, then moved into place (a disk fault: one
+    WriteError line, the archive and any earlier figures kept)."""
     from designopt.figures import scan as scan_figs
     from designopt.figures import sweep as sweep_figs
 
+    path = Path(path)
     a = archive.read(path)
     kind = a["attrs"].get("kind")
     folder = path.parent
-    stem = path.stem
-    if kind == "bench":
-        from designopt import benchsuite
+    figs = folder / f"{path.stem}_figures"
+    with output.session() as ses:
+        if not ses.covers(path):
+            check_output(path, overwrite=True)  # lock: no run may write it meanwhile
+        if kind == "bench":
+            from designopt import benchsuite
 
-        return benchsuite.draw_figures(a, folder)
-    if kind == "run":
-        return get(a["attrs"]["study"]).figures(a, folder / f"{stem}_figures")
-    if kind == "sweep":
-        return sweep_figs.draw(a, folder / f"{stem}_figures")
-    if kind == "scan":
-        return scan_figs.draw(a, folder / f"{stem}_figures")
-    raise ConfigError(f"{path}: archive kind {kind!r} has no figures")
+            return output.publish_figures(lambda d: benchsuite.draw_figures(a, d), folder,
+                                          swap=False)  # fmt: skip
+        if kind == "run":
+            draw = get(a["attrs"]["study"]).figures
+        elif kind == "sweep":
+            draw = sweep_figs.draw
+        elif kind == "scan":
+            draw = scan_figs.draw
+        else:
+            raise ConfigError(f"{path}: archive kind {kind!r} has no figures")
+        return output.publish_figures(lambda d: draw(a, d), figs)

@@ -116,7 +116,31 @@ def test_bad_sweep_and_refine_input(tmp_path, capsys, text, cmd, needle):
     assert not (tmp_path / "a.h5").exists()
 
 
+def _signal_at(monkeypatch, iteration, signum):
+    """The CLI's progress bar raises ``signum`` in this process once ``iteration``
+    iterations are done (a real signal, through the CLI's handlers)."""
+    import contextlib
+    import signal
+
+    from designopt import cli
+
+    @contextlib.contextmanager
+    def bar(total, desc):
+        done = [0]
+
+        def update(n):
+            done[0] += n
+            if done[0] >= iteration > done[0] - n:
+                signal.raise_signal(signum)
+
+        yield update
+
+    monkeypatch.setattr(cli, "_progress", lambda quiet: bar)
+
+
 def test_interrupted_run_is_marked_incomplete_and_resume_matches(tmp_path, monkeypatch, capsys):
+    import signal
+
     cfg = write(tmp_path, TINY.replace("n_iters: 6", "n_iters: 20"))
     assert (
         main(["run", str(cfg), "--quiet", "--no-figures", "--out", str(tmp_path / "ref.h5")]) == 0
@@ -124,32 +148,36 @@ def test_interrupted_run_is_marked_incomplete_and_resume_matches(tmp_path, monke
     # an existing good archive at the target must survive the interruption untouched
     (tmp_path / "a.h5").write_bytes((tmp_path / "ref.h5").read_bytes())
     before = (tmp_path / "a.h5").read_bytes()
-    real_write, calls = archive.write, []
-
-    def flaky(path, tree, attrs, complete=True):
-        real_write(path, tree, attrs, complete)
-        calls.append(path)
-        if len(calls) == 3:
-            raise KeyboardInterrupt
-
-    monkeypatch.setattr(archive, "write", flaky)
-    assert main(["run", str(cfg), "--quiet", "--no-figures"]) == 130
-    assert "--resume" in capsys.readouterr().err
-    monkeypatch.setattr(archive, "write", real_write)
+    assert main(["run", str(cfg), "--quiet", "--no-figures"]) == 2  # exists: refused
+    assert "--overwrite" in capsys.readouterr().err
+    _signal_at(monkeypatch, 3, signal.SIGTERM)
+    assert main(["run", str(cfg), "--quiet", "--no-figures", "--overwrite"]) == 143
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "SIGTERM" in err
+    resume = err.split("`")[1].split()
+    assert resume[:3] == ["designopt", "run", str(cfg)] and resume[-1] == "--resume"
+    assert "--overwrite" in resume and resume[resume.index("--seed") + 1] == "1"
     partial = archive.partial_path(tmp_path / "a.h5")
     with h5py.File(partial) as h:
         assert not h.attrs["complete"] and h["checkpoint"].attrs["done"] == 3
     assert (tmp_path / "a.h5").read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "a.h5",
+        "a.partial.h5",
+        "c.yaml",
+        "ref.h5",
+    ]
     assert main(["show", str(partial)]) == 0
     assert main(["report", str(partial)]) == 2  # incomplete: says so, draws nothing
-    assert main(["run", str(cfg), "--quiet", "--no-figures", "--resume"]) == 0
+    monkeypatch.undo()
+    assert main(resume[1:]) == 0  # the printed command, as given
     assert not partial.exists()
     with h5py.File(tmp_path / "a.h5") as a, h5py.File(tmp_path / "ref.h5") as r:
         assert a.attrs["resumed_from"] == 3
         for k in ("optimizer/history", "optimizer/history_x", "final/x", "final/f"):
             np.testing.assert_array_equal(a[k][()], r[k][()])
     # resuming with another seed is refused
-    assert main(["run", str(cfg), "--quiet", "--resume", "--seed", "5"]) == 2
+    assert main(["run", str(cfg), "--quiet", "--resume", "--seed", "5", "--overwrite"]) == 2
 
 
 def test_score_reports_the_constraint_violation():
