@@ -1,4 +1,9 @@
-"""Figures (matplotlib, Agg backend), written as PNG and PDF beside an archive."""
+"""Figures (matplotlib, Agg backend), written as PNG and PDF beside an archive.
+
+Drawing is kept cheap: each file is drawn once (the layout is the figure's own, no
+``bbox_inches="tight"`` second pass), dense artists are rasterised in the PDF, and PNGs
+are written at ``DPI`` with fast compression.
+"""
 
 from __future__ import annotations
 
@@ -9,17 +14,19 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
+DPI = 110  # PNG resolution (dots per inch); rasterised artists in PDFs use the same
+MAP_RESOLUTION = 121  # grid points per axis of the studies' index maps
 
-def save(fig: plt.Figure, folder: Path, name: str) -> list[Path]:
+
+def save(fig: plt.Figure, folder: Path, name: str, dpi: int | None = None) -> list[Path]:
     """Save ``fig`` as ``folder/name.png`` and ``.pdf``, close it, return both paths."""
     folder.mkdir(parents=True, exist_ok=True)
-    out = []
-    for ext in ("png", "pdf"):
-        p = folder / f"{name}.{ext}"
-        fig.savefig(p, dpi=150 if ext == "png" else None, bbox_inches="tight")
-        out.append(p)
+    dpi = dpi or DPI
+    png, pdf = folder / f"{name}.png", folder / f"{name}.pdf"
+    fig.savefig(png, dpi=dpi, pil_kwargs={"compress_level": 1})
+    fig.savefig(pdf, dpi=dpi)
     plt.close(fig)
-    return out
+    return [png, pdf]
 
 
 def convergence(best_run: dict, indices: list[str], folder: Path, title: str) -> list[Path]:

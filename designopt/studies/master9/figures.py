@@ -1,8 +1,10 @@
-"""Study-A figures (seed 000 Fig. 12-15) for the initial and final design of a run.
+"""Figures of the 9-DOF haptic master (IEEE Access 2019, Fig. 12-15) for the initial and
+final design of a run.
 
 Fig. 12: f and the sub-objectives f_k, f_l, f_p along the best run; Fig. 13: 1/k of J_v
 over pairs of (q1, q2, q3), the third joint at mid-range; Fig. 14: e_max (backlash
-error) over the same pairs; Fig. 15: workspace point clouds with volume and L.
+error) over the same pairs; Fig. 15: workspace point clouds with volume and L. Every map
+and cloud comes from one jitted call of the index kernels (one XLA program per run).
 """
 
 from __future__ import annotations
@@ -12,23 +14,17 @@ from pathlib import Path
 from typing import Any
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from designopt import montecarlo as mc
-from designopt.figures import plt, save
+from designopt.figures import MAP_RESOLUTION, plt, save
 from designopt.studies.master9 import indices as ind
 from designopt.studies.master9 import mechanism as m
 
 PAIRS = ((0, 1), (0, 2), (1, 2))
-N_GRID = 121
 
 
-def _design(x: Mapping[str, float]) -> dict[str, jnp.ndarray]:
-    return {k: jnp.asarray([float(x[k])]) for k in ind.LINEAR_KEYS}
-
-
-def joint_grid(pair: tuple[int, int], n: int = N_GRID) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def joint_grid(pair: tuple[int, int], n: int = MAP_RESOLUTION):
     """An n×n grid over two of (q1, q2, q3) within their limits, the third at mid-range.
     Returns (axis i in deg, axis j in deg, q (n·n, 3) in rad)."""
     lim = m.POSITION_LIMITS
@@ -42,46 +38,61 @@ def joint_grid(pair: tuple[int, int], n: int = N_GRID) -> tuple[np.ndarray, np.n
 
 
 @jax.jit
-def _inv_cond_kernel(x, q):
-    return ind.inv_cond_fro_jv(ind.jv_entries(x, ind.features(q)))[1][0]
+def _kernel(x, q, delta, q_cloud):
+    """Raw Frobenius 1/k of J_v (eq. 51-53) and e_max (eq. 39; backlash delta) at q (C, 3)
+    for designs x {k: (M,)} → (M, C) each; tip positions (M, N, 3) of q_cloud (N, 3)."""
+    xm = {k: v[:, None] for k, v in x.items()}  # (M, 1) against samples (C,)
+    inv = ind.inv_cond_fro_jv(ind.jv_entries(xm, ind.features(q)))[1]
+    e = ind.emax(xm, ind._corner_deltas(q, delta))
+    return inv, e, m.position(q_cloud, xm)
 
 
-@jax.jit
-def _emax_kernel(x, q, delta):
-    return ind.emax(x, ind._corner_deltas(q, delta))[0]
-
-
-def inv_cond_map(x: Mapping[str, float], q: np.ndarray) -> np.ndarray:
-    """Raw Frobenius 1/k of J_v (seed 000 eq. 51-53) at joint configurations q (C, 3),
-    with the index kernel, jitted (one compilation for every map of the same size)."""
+def figure_data(designs: Mapping[str, Mapping[str, float]], backlash_deg, key_data: np.ndarray,
+                n: int = MAP_RESOLUTION, n_cloud: int = 6000) -> dict[str, Any]:  # fmt: skip
+    """Maps over the n×n grids of ``PAIRS`` and workspace clouds (``key_data``: the raw
+    key of their joint samples) for every design, in one jitted call. Returns {"axes":
+    [(deg, deg)] per pair, "designs": full design dicts, "inv_cond", "emax": (M, pairs, n,
+    n), "cloud": (M, n_cloud, 3)}."""
     dt = mc.out_dtype()
-    xd = {k: v[:, None].astype(dt) for k, v in _design(x).items()}
-    return np.asarray(_inv_cond_kernel(xd, jnp.asarray(q, dt)))
+    grids = [joint_grid(p, n) for p in PAIRS]
+    q = np.concatenate([g[2] for g in grids])
+    full = [{**m.default_design(), **{k: float(v) for k, v in x.items() if k in m.DESIGN_KEYS}}
+            for x in designs.values()]  # fmt: skip
+    x = {k: np.asarray([d[k] for d in full], dt) for k in m.DESIGN_KEYS}
+    delta = np.deg2rad(np.asarray(backlash_deg, np.float64)).astype(dt)
+    lim = m.JOINT_LIMITS[:3]  # uniform joints, drawn with NumPy (threefry compiles slowly)
+    q_cloud = np.random.default_rng(np.asarray(key_data)).uniform(
+        lim[:, 0], lim[:, 1], (n_cloud, 3)
+    )
+    inv, e, P = _kernel(x, q.astype(dt), delta, q_cloud.astype(dt))
+    M = len(full)
+    return {"axes": [g[:2] for g in grids], "designs": full,
+            "inv_cond": np.asarray(inv).reshape(M, len(PAIRS), n, n),
+            "emax": np.asarray(e).reshape(M, len(PAIRS), n, n), "cloud": np.asarray(P)}  # fmt: skip
 
 
-def emax_map(x: Mapping[str, float], q: np.ndarray, backlash_deg) -> np.ndarray:
-    """Largest tip error (mm) over the backlash box (seed 000 eq. 39) at q (C, 3)."""
-    dt = mc.out_dtype()
-    delta = jnp.deg2rad(jnp.asarray(backlash_deg, dt))
-    xd = {k: v[:, None].astype(dt) for k, v in _design(x).items()}
-    return np.asarray(_emax_kernel(xd, jnp.asarray(q, dt), delta))
+def _extent(a: np.ndarray, b: np.ndarray) -> tuple[float, float, float, float]:
+    """imshow extent of cells centred on the uniform grid points a × b."""
+    da, db = (a[-1] - a[0]) / (2 * (len(a) - 1)), (b[-1] - b[0]) / (2 * (len(b) - 1))
+    return a[0] - da, a[-1] + da, b[0] - db, b[-1] + db
 
 
-def _maps(fn, title: str, unit: str, designs: dict[str, Mapping[str, float]], cmap: str):
-    fig, axes = plt.subplots(len(designs), 3, figsize=(11, 3.3 * len(designs)), squeeze=False)
+def _maps(z_all, axes_deg, title: str, unit: str, labels: list[str], cmap: str):
+    fig, axes = plt.subplots(len(labels), 3, figsize=(11, 3.3 * len(labels)), squeeze=False)
     names = ("q1", "q2", "q3")
-    for r, (label, x) in enumerate(designs.items()):
+    for r, label in enumerate(labels):
         for c, pair in enumerate(PAIRS):
-            a, b, q = joint_grid(pair)
-            z = fn(x, q).reshape(len(b), len(a))
+            a, b = axes_deg[c]
+            z = z_all[r, c]
             ax = axes[r, c]
-            im = ax.pcolormesh(a, b, z, shading="auto", cmap=cmap, rasterized=True)
+            im = ax.imshow(z, origin="lower", extent=_extent(a, b), aspect="auto",
+                           interpolation="nearest", cmap=cmap, rasterized=True)  # fmt: skip
             fig.colorbar(im, ax=ax, label=unit)
             ax.set_xlabel(f"{names[pair[0]]} (deg)")
             ax.set_ylabel(f"{names[pair[1]]} (deg)")
             ax.set_title(f"{label}: mean {z.mean():.4g}", fontsize=9)
     fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
+    fig.subplots_adjust(left=0.06, right=0.95, bottom=0.09, top=0.89, wspace=0.45, hspace=0.5)
     return fig
 
 
@@ -91,11 +102,13 @@ def draw(
     sub_history: Mapping[str, np.ndarray],
     designs: dict[str, Mapping[str, float]],
     backlash_deg,
-    key: jax.Array,
+    key_data: np.ndarray,
     n_cloud: int = 6000,
+    resolution: int = MAP_RESOLUTION,
 ) -> list[Path]:
     """Write Fig. 12-15 into ``folder``. ``designs`` maps a label ('initial', 'final', …)
-    to a full design dict; ``sub_history`` holds f, f_k, f_l, f_p, volume, L per iteration."""
+    to a full design dict; ``sub_history`` holds f, f_k, f_l, f_p, volume, L per iteration;
+    the maps have ``resolution`` × ``resolution`` points."""
     out = []
     fig, axes = plt.subplots(2, 2, figsize=(9, 6))
     for ax, k, lab in zip(axes.flat, ("f", "f_k", "f_l", "f_p"),
@@ -106,21 +119,20 @@ def draw(
         ax.set_ylabel(lab)
         ax.grid(alpha=0.3)
     fig.suptitle("Best run: objective and sub-objectives (IEEE Access 2019, Fig. 12)", fontsize=10)
-    fig.tight_layout()
+    fig.subplots_adjust(left=0.09, right=0.98, bottom=0.09, top=0.92, wspace=0.3, hspace=0.35)
     out += save(fig, folder, "fig12_convergence")
-    fig = _maps(inv_cond_map, "Dexterity 1/k of J_v (Frobenius; IEEE Access 2019, Fig. 13)", "1/k",
-                designs, "viridis")  # fmt: skip
+    d = figure_data(designs, backlash_deg, key_data, resolution, n_cloud)
+    labels = list(designs)
+    fig = _maps(d["inv_cond"], d["axes"], "Dexterity 1/k of J_v (Frobenius; IEEE Access 2019, "
+                "Fig. 13)", "1/k", labels, "viridis")  # fmt: skip
     out += save(fig, folder, "fig13_dexterity_maps")
-    fig = _maps(lambda x, q: emax_map(x, q, backlash_deg),
-                f"Backlash error e_max for {tuple(backlash_deg)}° (IEEE Access 2019, Fig. 14)", "e_max (mm)",
-                designs, "magma")  # fmt: skip
+    fig = _maps(d["emax"], d["axes"], f"Backlash error e_max for {tuple(backlash_deg)}° (IEEE "
+                "Access 2019, Fig. 14)", "e_max (mm)", labels, "magma")  # fmt: skip
     out += save(fig, folder, "fig14_backlash_maps")
     fig = plt.figure(figsize=(5.2 * len(designs), 4.6))
-    q3 = np.asarray(m.sample_joints(key, n_cloud, mc.out_dtype()))[:, :3]
     for i, (label, x) in enumerate(designs.items()):
         ax = fig.add_subplot(1, len(designs), i + 1, projection="3d")
-        full = {**m.default_design(), **{k: float(x[k]) for k in m.DESIGN_KEYS if k in x}}
-        P = np.asarray(m.position(jnp.asarray(q3), full))
+        full, P = d["designs"][i], d["cloud"][i]
         ax.scatter(
             P[:, 0], P[:, 1], P[:, 2], s=0.5, alpha=0.4, c=P[:, 2], cmap="viridis", rasterized=True
         )
@@ -132,12 +144,14 @@ def draw(
         vtxt = f"V = {vol:.4e} mm³, " if vol is not None else ""
         ax.set_title(f"{label}: {vtxt}L = {L:.3f} mm", fontsize=9)
         ax.tick_params(labelsize=6)
-    fig.suptitle("Workspace of the position mechanism (IEEE Access 2019, Fig. 15)", fontsize=10)
+    fig.suptitle(f"Workspace of the position mechanism ({n_cloud} uniform joint samples; IEEE "
+                 "Access 2019, Fig. 15)", fontsize=10)  # fmt: skip
+    fig.subplots_adjust(left=0.02, right=0.98, bottom=0.04, top=0.88, wspace=0.08)
     out += save(fig, folder, "fig15_workspace")
     return out
 
 
-def draw_run(a: dict[str, Any], folder: Path) -> list[Path]:
+def draw_run(a: dict[str, Any], folder: Path, resolution: int = MAP_RESOLUTION) -> list[Path]:
     """Fig. 12-15 of a run archive (read by ``designopt.archive.read``) into ``folder``:
     the initial design of the best run (iteration 0) against the final design."""
     cfg = a["attrs"]["config_resolved"]
@@ -155,5 +169,5 @@ def draw_run(a: dict[str, Any], folder: Path) -> list[Path]:
     }  # fmt: skip
     bl = cfg["study"]["indices"]["backlash_deg"]
     bl = bl if isinstance(bl, list) else [bl] * 3
-    key = jax.random.wrap_key_data(np.asarray(a["attrs"]["keys"]["figures"], np.uint32))
-    return draw(folder, br["iteration"], br, designs, bl, key)
+    key_data = np.asarray(a["attrs"]["keys"]["figures"], np.uint32)
+    return draw(folder, br["iteration"], br, designs, bl, key_data, resolution=resolution)

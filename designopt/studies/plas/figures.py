@@ -18,7 +18,7 @@ from designopt.studies.plas import mechanism as m
 from designopt.studies.plas.objective import pointwise
 from designopt.studies.plas.settings import PlasSettings
 
-N_GRID = 81
+N_GRID = 81  # default map resolution: each point solves the slave's tip (dearer than 1/k)
 
 
 @jax.jit
@@ -50,7 +50,8 @@ def _master(s: PlasSettings, names: list[str], x: np.ndarray) -> np.ndarray:
     return np.array([d[k] for k in m.MASTER_KEYS])
 
 
-def draw_run(a: dict[str, Any], folder: Path) -> list[Path]:
+def draw_run(a: dict[str, Any], folder: Path, resolution: int = N_GRID) -> list[Path]:
+    """Convergence, mismatch maps (``resolution``² points) and counterbalance of a run."""
     cfg = a["attrs"]["config_resolved"]
     s = PlasSettings.model_validate(cfg["study"])
     names = [n.decode() if isinstance(n, bytes) else str(n) for n in a["problem"]["names"]]
@@ -64,15 +65,15 @@ def draw_run(a: dict[str, Any], folder: Path) -> list[Path]:
     designs = np.stack([np.array([m.BUILT[k] for k in m.MASTER_KEYS]), _master(s, names, x)])
     labels = ["built master (a2' = 138, d6 = 60)",
               "final: " + ", ".join(f"{n} = {v:.1f}" for n, v in zip(names, x, strict=True))]  # fmt: skip
-    out += draw_maps(s, designs, labels, folder)
+    out += draw_maps(s, designs, labels, folder, resolution=resolution)
 
     out += draw_counterbalance(s, [60.0, float(designs[1, 2])], folder)
     return out
 
 
 def draw_maps(s: PlasSettings, designs: np.ndarray, labels: list[str], folder: Path,
-              name: str = "mismatch_map") -> list[Path]:  # fmt: skip
-    g2, g3, rel, dp = mismatch_maps(s, designs)
+              name: str = "mismatch_map", resolution: int = N_GRID) -> list[Path]:  # fmt: skip
+    g2, g3, rel, dp = mismatch_maps(s, designs, resolution)
     M = designs.shape[0]
     fig, axes = plt.subplots(2, M, figsize=(4.6 * M, 7.0), squeeze=False)
     vmax = [max(100 * rel.max(), 1e-9), max(dp.max(), 1e-9)]
@@ -107,7 +108,7 @@ def draw_counterbalance(s: PlasSettings, d6s: list[float], folder: Path) -> list
         ax.axvline(cb.theta_deg, color="k", lw=0.6, ls=":")
         ax.set_xlabel("tilt θ of joint 4 (deg)")
         ax.grid(alpha=0.3)
-    axes[0].axhline(460, color="r", lw=0.6, ls="--", label="seed: about 460 g at 25°")
+    axes[0].axhline(460, color="r", lw=0.6, ls="--", label="thesis: about 460 g at 25°")
     axes[0].set_ylabel("counterweight m (g)")
     axes[1].set_ylabel("I = M L² + m l² (kg·cm²)")
     axes[0].legend(fontsize=7)
