@@ -1,0 +1,173 @@
+"""The README's main job, timed as a new user meets it: cold compilation cache, then warm.
+
+Each repeat runs ``designopt run configs/master9.yaml --out <tmp>`` (figures included)
+twice as a subprocess with ``DESIGNOPT_CACHE_DIR`` set to a fresh, empty folder: first cold,
+then warm (same folder). It prints the stages (start-up, setup, optimizer, scoring/polish,
+archive, figures, exit; compile time and XLA compilations from the run's summary line),
+the end-to-end wall time, the figures redrawn by ``designopt report`` (whole process, and
+after imports in-process), and the ratio of end-to-end time to the arithmetic-only time
+(optimizer + scoring/polish with compile time excluded, from the archive's attributes).
+
+    python benchmarks/main_job.py [--repeat 2] [--config configs/master9.yaml]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+TARGETS = {"cold": 20.0, "warm": 10.0, "report": 3.0}  # seconds, on 2 cores (issue #14)
+SUMMARY = re.compile(
+    r"wall (?P<wall>[\d.]+) s = compile (?P<compile>[\d.]+) s \+ run (?P<run>[\d.]+) s "
+    r"\(setup (?P<setup>[\d.]+) s, optimizer (?P<optimizer>[\d.]+) s, "
+    r"scoring/polish (?P<post>[\d.]+) s\); (?P<n>\d+) XLA compilations"
+)
+REPORT_AFTER_IMPORTS = """
+import sys, time
+from pathlib import Path
+from designopt import pipeline
+from designopt.timing import Stopwatch
+import designopt.figures, designopt.studies.master9.figures  # noqa: F401 (imports first)
+with Stopwatch() as sw:
+    pipeline.draw_figures(Path(sys.argv[1]))
+print(f"{sw.wall} {sw.compile} {sw.compilations}")
+"""
+
+
+def _cli() -> list[str]:
+    exe = Path(sys.executable).with_name("designopt")
+    return [str(exe)] if exe.exists() else [sys.executable, "-m", "designopt.cli"]
+
+
+def _timed_lines(cmd: list[str], env: dict[str, str]) -> tuple[float, list[tuple[float, str]]]:
+    """Run cmd; return (wall s, [(seconds since start, line)]) of its stdout and stderr."""
+    t0 = time.perf_counter()
+    p = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE,
+                         stderr=subprocess.STDOUT, text=True)  # fmt: skip
+    lines = [(time.perf_counter() - t0, ln.rstrip("\n")) for ln in p.stdout]
+    rc = p.wait()
+    wall = time.perf_counter() - t0
+    if rc != 0:
+        sys.exit(f"{' '.join(cmd)} failed ({rc}):\n" + "\n".join(ln for _, ln in lines[-20:]))
+    return wall, lines
+
+
+def _at(lines: list[tuple[float, str]], prefix: str) -> float:
+    return next(t for t, ln in lines if ln.startswith(prefix))
+
+
+def one_run(config: str, out: Path, cache: Path) -> dict[str, float]:
+    """The main job once, figures included, with the given compilation cache folder."""
+    from designopt import archive
+
+    env = os.environ | {"DESIGNOPT_CACHE_DIR": str(cache), "PYTHONUNBUFFERED": "1"}
+    e2e, lines = _timed_lines([*_cli(), "run", config, "--out", str(out), "--quiet"], env)
+    m = next((SUMMARY.search(ln) for _, ln in lines if SUMMARY.search(ln)), None)
+    if m is None:
+        sys.exit("no summary line in the run's output:\n" + "\n".join(ln for _, ln in lines))
+    s = {k: float(v) for k, v in m.groupdict().items()}
+    t_arch, t_figs = _at(lines, "archive:"), _at(lines, "figures:")
+    at = archive.read(out)["attrs"]
+    by_stage = at.get("compile_time_by_stage")  # per-stage compile time, where archived
+    pso_post_compile = (by_stage["optimizer"] + by_stage["scoring_polish"] if by_stage
+                        else at["compile_time_s"])  # else all of it: a lower bound  # fmt: skip
+    arith = max(at["optimizer_time_s"] + at["post_time_s"] - pso_post_compile, 1e-9)
+    return {
+        "end_to_end": e2e,
+        "startup": t_arch - s["wall"],  # imports, config, archive write, summary
+        "setup": s["setup"],
+        "optimizer": s["optimizer"],
+        "scoring_polish": s["post"],
+        "compile": s["compile"],
+        "compilations": s["n"],
+        "figures": t_figs - t_arch,
+        "exit": e2e - t_figs,
+        "arithmetic": arith,
+        "ratio": e2e / arith,
+        "exact_arithmetic": float(by_stage is not None),
+    }
+
+
+def report_times(out: Path, cache: Path) -> dict[str, float]:
+    """``designopt report`` on the archive: whole process, and after imports in-process."""
+    env = os.environ | {"DESIGNOPT_CACHE_DIR": str(cache)}
+    whole, _ = _timed_lines([*_cli(), "report", str(out)], env)
+    r = subprocess.run([sys.executable, "-c", REPORT_AFTER_IMPORTS, str(out)], cwd=ROOT,
+                       env=env, capture_output=True, text=True, check=True)  # fmt: skip
+    wall, comp, n = r.stdout.split()[-3:]
+    return {"report_process": whole, "report": float(wall), "report_compile": float(comp),
+            "report_compilations": float(n)}  # fmt: skip
+
+
+def _spread(vals: list[float]) -> str:
+    if len(vals) == 1:
+        return f"{vals[0]:7.2f}"
+    return f"{statistics.median(vals):7.2f} (min {min(vals):.2f}, max {max(vals):.2f})"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--config", default="configs/master9.yaml")
+    ap.add_argument("--repeat", type=int, default=2, help="cold + warm pairs (default 2)")
+    ap.add_argument("--keep", action="store_true", help="keep the temp folder")
+    args = ap.parse_args()
+    tmp = Path(tempfile.mkdtemp(prefix="designopt_main_job_"))
+    res: dict[str, list[dict[str, float]]] = {"cold": [], "warm": []}
+    try:
+        for r in range(args.repeat):
+            cache = tmp / f"cache{r}"  # fresh and empty: the first run is cold
+            cache.mkdir()
+            for phase in ("cold", "warm"):
+                out = tmp / f"{phase}{r}" / "m9.h5"
+                d = one_run(args.config, out, cache)
+                d |= report_times(out, cache)
+                d["cache_mb"] = sum(f.stat().st_size for f in cache.rglob("*") if f.is_file()) / 1e6
+                res[phase].append(d)
+                print(f"[{r + 1}/{args.repeat}] {phase}: end to end {d['end_to_end']:.1f} s, "
+                      f"compile {d['compile']:.1f} s ({d['compilations']:.0f} programs), figures "
+                      f"{d['figures']:.1f} s, report {d['report']:.2f} s", flush=True)  # fmt: skip
+    finally:
+        if not args.keep:
+            shutil.rmtree(tmp, ignore_errors=True)
+    print(f"\n{args.config}, {os.cpu_count()} CPU cores, {args.repeat} repeat(s); "
+          "seconds, median (min, max)")  # fmt: skip
+    rows = [("start-up (imports, config, archive write)", "startup"), ("setup", "setup"),
+            ("optimizer", "optimizer"), ("scoring/polish", "scoring_polish"),
+            ("  of which compile (all stages)", "compile"), ("XLA compilations", "compilations"),
+            ("figures (in the run)", "figures"), ("exit", "exit"),
+            ("END TO END", "end_to_end"), ("arithmetic only (PSO + scoring)", "arithmetic"),
+            ("ratio end to end / arithmetic", "ratio"),
+            ("report: whole process", "report_process"),
+            ("report: after imports", "report"), ("  of which compile", "report_compile"),
+            ("compilation cache (MB)", "cache_mb")]  # fmt: skip
+    print(f"{'stage':<44}{'cold':<34}{'warm':<34}")
+    for label, k in rows:
+        print(f"{label:<44}" + "".join(f"{_spread([d[k] for d in res[p]]):<34}"
+                                       for p in ("cold", "warm")))  # fmt: skip
+    if not all(d["exact_arithmetic"] for d in res["cold"]):
+        print("(arithmetic = optimizer + scoring/polish − the run's whole compile time: the "
+              "archive has no per-stage compile time, so this is a lower bound)")  # fmt: skip
+    print("\ntargets (2 cores): cold ≤ 20 s, warm ≤ 10 s end to end, report ≤ 3 s after imports")
+    for phase, key, tgt in (("cold", "end_to_end", "cold"), ("warm", "end_to_end", "warm"),
+                            ("warm", "report", "report")):  # fmt: skip
+        med = statistics.median(d[key] for d in res[phase])
+        ok = "met" if med <= TARGETS[tgt] else "MISSED"
+        stages = {k: statistics.median(d[k] for d in res[phase])
+                  for k in ("startup", "setup", "optimizer", "scoring_polish", "figures")}  # fmt: skip
+        worst = max(stages, key=stages.get)
+        print(f"  {tgt:<6} {med:6.2f} s vs ≤ {TARGETS[tgt]:.0f} s: {ok}"
+              + (f"; largest stage: {worst} ({stages[worst]:.1f} s)" if ok == "MISSED" and
+                 key == "end_to_end" else ""))  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
