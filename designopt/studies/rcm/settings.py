@@ -49,11 +49,12 @@ class Joints(_Strict):
 class Cone(_Strict):
     """The task cone at R: full apex angle and insertion-depth range (seed 003 §2.4:
     60°, 50-200 mm). ``dim`` 2 is its section in the mechanism's plane (a sector), 3 the
-    cone of the 3-DOF arm around the instrument's home direction."""
+    cone of the 3-DOF arm around the instrument's home direction, 1 its axis alone (depth
+    uniform along the rod; the reading that reproduces the paper's Fig. 4a, docs/rcm.md)."""
 
     apex_deg: float = Field(60.0, gt=0, lt=180)
     depth: tuple[float, float] = (50.0, 200.0)
-    dim: Literal[2, 3] = 2
+    dim: Literal[1, 2, 3] = 2
 
     @field_validator("depth")
     @classmethod
