@@ -1,5 +1,6 @@
-"""Benchmark-suite figures (one bar or curve per compared optimizer): seed 000 Fig. 10 (final values, mean ± std), Fig. 11
-(convergence iteration, mean ± std) and median/IQR convergence curves."""
+"""Benchmark-suite figures (one bar or curve per compared optimizer) of the haptic master
+paper (IEEE Access 2019): Fig. 10 (final values, mean ± std), Fig. 11 (convergence
+iteration, mean ± std) and median/IQR convergence curves."""
 
 from __future__ import annotations
 
