@@ -206,3 +206,48 @@ def test_bad_design_on_the_command_line(tmp_path, capsys):
     assert "l9" in capsys.readouterr().err
     assert main(["eval", str(cfg), "--design", "l1"]) == 2
     assert "NAME=NUMBER" in capsys.readouterr().err
+
+
+def test_linear_constraints_from_yaml_bind_the_optimum(tmp_path):
+    """max workspace area ∫|det J| dq = 8π·l1·l2 of a planar 2R s.t. l1 + l2 ≤ 1: the
+    optimum is l1 = l2 = 0.5 on the constraint (Deb's rules and the quadratic penalty)."""
+    from designopt import pipeline
+    from designopt.config import validate
+
+    base = {
+        "study": {
+            "name": "serial",
+            "chain": {"joints": [{"type": "R", "a": "l1", "limits": [-180, 180]},
+                                 {"type": "R", "a": "l2", "limits": [-180, 180]}]},
+            "variables": {"l1": [0.1, 1.0], "l2": [0.1, 1.0]},
+            "indices": {"jacobian": ["vx", "vy"], "n_samples": 4096},
+            "objective": {"volume": -1.0},
+            "constraints": [{"terms": {"l1": 1, "l2": 1}, "le": 1.0}],
+        },
+        "optimizer": {"name": "cmaes", "n_particles": 12, "n_iters": 60, "n_runs": 2},
+        "precision": "float64", "seed": 2,
+    }  # fmt: skip
+    for method, tol in (("deb", 1e-3), ("penalty", 2e-2)):
+        raw = base | {
+            "optimizer": base["optimizer"] | {"constraints": {"method": method, "weight": 1e4}}
+        }
+        rep = pipeline.run(validate(raw, "t"), "t", "t", tmp_path / f"{method}.h5")
+        x = rep.tree["final"]["x"]
+        np.testing.assert_allclose(x, [0.5, 0.5], atol=0.05)
+        assert x.sum() <= 1.0 + tol
+        if method == "deb":
+            assert float(rep.tree["final"]["violation"]) == 0.0
+
+
+def test_linear_constraint_names_must_be_design_variables():
+    from designopt.config import ConfigError, validate
+
+    raw = {"study": {"name": "serial",
+                     "chain": {"joints": [{"type": "R", "a": "l1", "limits": [-90, 90]}]},
+                     "variables": {"l1": [0.1, 1.0]},
+                     "constraints": [{"terms": {"l9": 1}, "le": 1.0}]}}  # fmt: skip
+    with pytest.raises(ConfigError, match="constraints.0.terms: \\['l9'\\]"):
+        validate(raw, "t")
+    raw["study"]["constraints"] = [{"terms": {"l1": 1}, "le": 1.0, "ge": 0.0}]
+    with pytest.raises(ConfigError, match="exactly one of 'le' and 'ge'"):
+        validate(raw, "t")

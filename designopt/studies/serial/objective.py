@@ -188,4 +188,21 @@ def problem(s: SerialSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Pro
         "norm_bounds": norm_bounds,
         "dtype": dtype.name,
     }
-    return Problem(names, lower, upper, fn, params, info)
+    cons = None
+    if s.constraints:
+        A = np.zeros((len(s.constraints), len(names)))
+        rhs = np.zeros(len(s.constraints))
+        for i, c in enumerate(s.constraints):
+            sign = 1.0 if c.le is not None else -1.0  # ≥ ge becomes −Σ ≤ −ge
+            for k, v in c.terms.items():
+                A[i, names.index(k)] = sign * v
+            rhs[i] = sign * (c.le if c.le is not None else c.ge)
+        params["lin_A"] = jnp.asarray(A, dtype)
+        params["lin_b"] = jnp.asarray(rhs, dtype)
+        info["constraints"] = [c.model_dump(exclude_none=True) for c in s.constraints]
+
+        def cons(p, X):
+            """G = A x − b (M, n_c): the linear constraints, feasible when ≤ 0."""
+            return X @ p["lin_A"].astype(X.dtype).T - p["lin_b"].astype(X.dtype)
+
+    return Problem(names, lower, upper, fn, params, info, cons)

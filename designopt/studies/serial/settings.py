@@ -75,6 +75,21 @@ class SerialIndices(_Strict):
         return tuple(sorted(ROWS.index(r) for r in self.jacobian))
 
 
+class LinearConstraint(_Strict):
+    """A linear constraint on the design variables: Σ terms[name]·x[name] ≤ le (or ≥ ge),
+    e.g. ``{terms: {l1: 1, l2: 1}, le: 1.2}`` bounds the total reach."""
+
+    terms: dict[str, float] = Field(min_length=1)
+    le: float | None = Field(None, allow_inf_nan=False)
+    ge: float | None = Field(None, allow_inf_nan=False)
+
+    @model_validator(mode="after")
+    def _one_side(self) -> LinearConstraint:
+        if (self.le is None) == (self.ge is None):
+            raise ValueError("give exactly one of 'le' and 'ge'")
+        return self
+
+
 class SerialSettings(StudySettings):
     """A user's serial mechanism: chain, design variables, indices, objective."""
 
@@ -84,6 +99,7 @@ class SerialSettings(StudySettings):
     chain: Chain
     indices: SerialIndices = SerialIndices()
     objective: dict[str, float | bool | int] = {"gci": -1.0}
+    constraints: list[LinearConstraint] = []
 
     @field_validator("fixed")
     @classmethod
@@ -146,6 +162,13 @@ class SerialSettings(StudySettings):
                 raise ValueError(f"objective.{k}: a weight must be a number")
         if not any(k in INDEX_NAMES for k in obj):
             raise ValueError(f"objective: give at least one weight for {list(INDEX_NAMES)}")
+        for i, c in enumerate(self.constraints):
+            bad = sorted(set(c.terms) - set(self.variables))
+            if bad:
+                raise ValueError(
+                    f"constraints.{i}.terms: {bad} are not design variables "
+                    f"(variables: {sorted(self.variables)})"
+                )
         if "volume" in obj and not self.has_volume():
             raise ValueError(
                 "objective.volume: the workspace volume ∫ sqrt(det Jv Jvᵀ) dq needs a square "
