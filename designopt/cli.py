@@ -393,8 +393,14 @@ def main(argv: list[str] | None = None) -> int:
         if args.command in WRITERS and not getattr(args, "dry_run", False):
             from designopt import output
 
-            with output.session(signals=True):
-                return args.func(args)
+            with output.session(signals=True) as ses:
+                try:
+                    return args.func(args)
+                except KeyboardInterrupt:  # a signal outside the loop: keep what is done
+                    with ses.writing():
+                        if ses.flush is not None:
+                            ses.flush()
+                        raise ses.interrupted() from None
         return args.func(args)
     except ConfigError as e:
         print(f"designopt: error: {e}", file=sys.stderr)

@@ -33,9 +33,10 @@ from pathlib import Path
 
 from designopt.errors import ConfigError, Interrupted, WriteError
 
-GRACE_S = 5.0
-"""How long a stop request waits for the optimisation loop's next iteration boundary
-before the watcher stops the process with the last checkpoint written."""
+GRACE_S = {"loop": 5.0, "prompt": 0.25}
+"""How long a stop request waits for the main thread (in the optimisation loop: for the
+next iteration boundary; elsewhere: for Python code to notice) before the watcher thread
+stops the process itself, with the newest checkpoint written."""
 
 EXIT_CODES = {signal.SIGINT: 130, signal.SIGTERM: 143, signal.SIGHUP: 143}
 TIME_LIMIT = -1  # a stop request from --max-minutes (exit 143, like a scheduler's SIGTERM)
@@ -91,6 +92,7 @@ class Session:
         self.made: list[Path] = []
         self.covered: set[Path] = set()
         self.phase = "prompt"
+        self.busy = 0
         self.stop = threading.Event()
         self.signum: int | None = None
         self.handled = False
@@ -125,6 +127,22 @@ class Session:
             self.stop.set()
         return self.stop.is_set()
 
+    @contextlib.contextmanager
+    def writing(self) -> Iterator[None]:
+        """Hold the writer's lock: a stop waits until the block is done."""
+        with self.io:
+            self.busy += 1
+            try:
+                yield
+            finally:
+                self.busy -= 1
+
+    def _on_signal(self, signum: int, frame: object) -> None:
+        """The Python-level handler (main thread): record the request. The loop meets it
+        at its next iteration boundary; elsewhere the watcher thread stops the process
+        (``os._exit`` after cleaning up: no interpreter shutdown amid JAX's threads)."""
+        self.request(signum)
+
     def request(self, signum: int) -> None:
         """Ask the command to stop (a signal's number; the first request counts)."""
         with self.cond:
@@ -138,13 +156,14 @@ class Session:
             self.cond.notify_all()
 
     def code(self) -> int:
+        if self.signum is None:
+            return 130  # KeyboardInterrupt without a handler (library use)
         return EXIT_CODES.get(self.signum, 143)  # type: ignore[arg-type]
 
     def what(self) -> str:
         if self.signum == TIME_LIMIT:
             return f"stopped: the time limit (--max-minutes {self.max_minutes:g}) was reached"
-        name = signal.Signals(self.signum).name if self.signum else "signal"
-        return f"interrupted ({name})"
+        return f"interrupted ({signal.Signals(self.signum).name})" if self.signum else "interrupted"
 
     def interrupted(self, kept: str | None = None) -> Interrupted:
         """The main thread takes the stop over: the watcher leaves it alone."""
@@ -160,7 +179,7 @@ class Session:
         os.set_blocking(w, False)
         self._wake = (r, w)
         for s in EXIT_CODES:
-            self._saved[s] = signal.signal(s, lambda signum, _: self.request(signum))
+            self._saved[s] = signal.signal(s, self._on_signal)
         self._saved_fd = signal.set_wakeup_fd(w)
         self._thread = threading.Thread(target=self._watch, name="designopt-signals", daemon=True)
         self._thread.start()
@@ -193,18 +212,21 @@ class Session:
             timeout = None
             if self.deadline is not None and not self.stop.is_set():
                 timeout = max(0.0, self.deadline - time.monotonic())
-            ready, _, _ = select.select([r], [], [], timeout)
-            data = os.read(r, 64) if ready else b""
-            if b"\0" in data:
+            try:
+                ready, _, _ = select.select([r], [], [], timeout)
+                data = os.read(r, 64) if ready else b""
+            except OSError:
+                return
+            if b"\0" in data or self._wake is None:
                 return
             sigs = [b for b in data if b in (int(s) for s in EXIT_CODES)]
             if sigs:
                 self.request(sigs[0])
             elif not self.stop_requested():
                 continue
-            end = time.monotonic() + GRACE_S
+            end = time.monotonic() + GRACE_S["loop" if self.phase == "loop" else "prompt"]
             with self.cond:
-                while not self.handled and self.phase == "loop" and time.monotonic() < end:
+                while not self.handled and time.monotonic() < end:
                     self.cond.wait(end - time.monotonic())
                 if self.handled:
                     continue
@@ -213,7 +235,7 @@ class Session:
     def _abort(self) -> None:
         """Stop the process now (from the watcher thread): newest checkpoint written,
         temporary files and locks removed, one line, exit 130 or 143."""
-        with self.io:
+        with self.writing():
             if self.handled:
                 return
             msg = None
@@ -272,8 +294,8 @@ def session(signals: bool = False) -> Iterator[Session]:
         yield ses
         failed = False
     finally:
-        with ses.io:
-            ses.uninstall()
+        ses.uninstall()
+        with ses.writing():
             ses.cleanup(failed)
         _ACTIVE.remove(ses)
 
@@ -294,7 +316,7 @@ def write_file(path: str | Path, data: bytes, what: str = "archive") -> Path:
     WriteError (one line: path, OS reason) on any OSError; the old file, if any, is kept."""
     path = Path(path)
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    with session() as ses, ses.io:
+    with session() as ses, ses.writing():
         ses.temps.add(tmp)
         try:
             fd = OPS.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
@@ -317,7 +339,7 @@ def write_file(path: str | Path, data: bytes, what: str = "archive") -> Path:
 
 def remove(path: Path) -> None:
     """Remove a file (a finished run's checkpoint) under the writer's lock."""
-    with session() as ses, ses.io:
+    with session() as ses, ses.writing():
         path.unlink(missing_ok=True)
 
 
@@ -336,7 +358,7 @@ def publish_figures(
             _remove(tmp)
             OPS.mkdir(tmp)
             drawn = [Path(p) for p in draw(tmp)]
-            with ses.io:
+            with ses.writing():
                 if swap:
                     if folder.exists():
                         OPS.replace(folder, old)
@@ -483,7 +505,29 @@ def claim(path: Path, overwrite: bool = False, need_bytes: int = 0) -> None:
     lk.acquire()
     ses.locks.append(lk)
     ses.covered.add(path)
+    _sweep_stale(path)
     check(path, overwrite=overwrite, need_bytes=need_bytes, make=False)
+
+
+def pid_alive(pid: int) -> bool:
+    """Whether a process with this id runs (on this machine)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:
+        return True
+    return True
+
+
+def _sweep_stale(path: Path) -> None:
+    """Remove the temporary files of a killed writer of ``path`` (``.<stem>*.tmp-<pid>``,
+    ``.old-<pid>``), which no one else may touch while we hold its lock."""
+    parent = path.parent if str(path.parent) else Path(".")
+    for p in parent.glob(f".{path.stem}*"):
+        stem, sep, pid = p.name.rpartition("-")
+        if sep and pid.isdigit() and stem.endswith((".tmp", ".old")) and not pid_alive(int(pid)):
+            _remove(p)
 
 
 def available_memory() -> int:

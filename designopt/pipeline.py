@@ -26,7 +26,7 @@ import yaml
 
 from designopt import archive, output
 from designopt.config import ConfigError, load, validate
-from designopt.errors import Interrupted
+from designopt.errors import WriteError
 from designopt.problems.base import Problem
 from designopt.studies import Study, get, key_data, streams
 from designopt.timing import Stopwatch
@@ -61,12 +61,26 @@ def resolved_yaml(cfg: Any) -> str:
     return yaml.safe_dump(cfg.model_dump(mode="json", by_alias=True), sort_keys=False)
 
 
+_PROBLEMS: dict[tuple, Problem] = {}
+
+
 def build_problem(cfg: Any, keys: Mapping[str, jax.Array], where: str = "config") -> Problem:
-    """The study's Problem for this config; a ValueError becomes a ConfigError."""
+    """The study's Problem for this config; a ValueError becomes a ConfigError. The last
+    few are kept: a second run of the same study settings, keys and dtype in one process
+    reuses the Problem, so its compiled programs too (a resume, a test, a notebook)."""
+    dtype = dtype_of(cfg)
+    key = (cfg.study.name, cfg.study.model_dump_json(), str(dtype), bool(jax.config.jax_enable_x64),
+           repr(key_data(keys)))  # fmt: skip
+    if key in _PROBLEMS:
+        return _PROBLEMS[key]
     try:
-        return study_of(cfg).problem(cfg.study, keys, dtype_of(cfg))
+        problem = study_of(cfg).problem(cfg.study, keys, dtype)
     except ValueError as e:
         raise ConfigError(f"{where}: study: {e}") from None
+    while len(_PROBLEMS) >= 4:
+        _PROBLEMS.pop(next(iter(_PROBLEMS)))
+    _PROBLEMS[key] = problem
+    return problem
 
 
 def check_optimizer(cfg: Any, where: str) -> None:
@@ -105,10 +119,10 @@ def write_archive(path: Path, tree: dict[str, Any], attrs: dict[str, Any], **kw:
 
 # ---------------------------------------------------------------------- pre-flight
 
-BYTES_PER_DESIGN_SAMPLE = 512
+BYTES_PER_DESIGN_SAMPLE = 128
 """Peak memory per (design × Monte-Carlo sample in flight), conservative: master9 measures
 80-280 B in float64 and float32 on CPU (XLA's buffers of one sample chunk)."""
-BASE_BYTES = 1 << 30  # JAX, XLA and the compiled programs
+BASE_BYTES = 1 << 29  # JAX, XLA and the compiled programs
 DESIGN_SAMPLES_PER_CHUNK = 20_000_000
 """Work per optimizer chunk (designs × samples × iterations): ≈ 0.2-0.5 s on 2 CPU cores,
 so a stop request meets an iteration boundary promptly (docs/faults.md)."""
@@ -442,7 +456,10 @@ def run(cfg: Any, text: str, where: str, out: Path, resume: bool = False,
         def write_checkpoint(c: Any) -> None:
             tree = {"checkpoint": {"state": c.state, "history": c.history,
                                    "history_x": c.history_x, "attrs": {"done": c.done}}}  # fmt: skip
-            write_archive(partial, tree, attrs, complete=False)
+            try:
+                write_archive(partial, tree, attrs, complete=False)
+            except WriteError as e:
+                raise WriteError(f"{e}; {what_is_kept(last_good=True)}") from None
             kept["written"], kept["at"] = c.done, time.monotonic()
 
         def flush() -> None:
@@ -450,17 +467,18 @@ def run(cfg: Any, text: str, where: str, out: Path, resume: bool = False,
             if c is not None and c.done > kept["written"]:
                 write_checkpoint(c)
 
-        def what_is_kept() -> str:
+        def what_is_kept(last_good: bool = False) -> str:
             if kept["written"] < 0 or not partial.is_file():
-                return "nothing written"
-            return (f"finished part ({kept['written']} of {o.n_iters} iterations) kept in "
+                return "nothing kept" if last_good else "nothing written"
+            part = "the last good checkpoint" if last_good else "finished part"
+            return (f"{part} ({kept['written']} of {o.n_iters} iterations) kept in "
                     f"{partial}; resume with `{hint} --resume`")  # fmt: skip
 
         def checkpoint(c: Any) -> None:
             kept["latest"] = c
             ses.set_phase("loop")
             if ses.stop_requested():
-                with ses.io:
+                with ses.writing():
                     flush()
                     raise ses.interrupted(what_is_kept())
             if time.monotonic() - kept["at"] >= cfg.checkpoint_every_s:
@@ -474,13 +492,13 @@ def run(cfg: Any, text: str, where: str, out: Path, resume: bool = False,
                 try:
                     res = optimise(cfg, problem, keys["optimizer"], progress=bar,
                                    checkpoint=checkpoint, resume=ck)  # fmt: skip
-                except KeyboardInterrupt:  # library use: no signal handling installed
-                    with ses.io:
+                except KeyboardInterrupt:
+                    with ses.writing():
                         flush()
-                        raise Interrupted(what_is_kept()) from None
+                        raise ses.interrupted(what_is_kept()) from None
             ses.set_phase("prompt")
             if ses.stop_requested():
-                with ses.io:
+                with ses.writing():
                     flush()
                     raise ses.interrupted(what_is_kept())
             with Stopwatch() as post:
@@ -492,13 +510,20 @@ def run(cfg: Any, text: str, where: str, out: Path, resume: bool = False,
                   "compilations_by_stage": {"setup": setup.compilations,
                                             "optimizer": opt.compilations,
                                             "scoring_polish": post.compilations}}  # fmt: skip
-        with ses.io:
-            write_archive(out, tree, attrs)
+        with ses.writing():
+            try:
+                write_archive(out, tree, attrs)
+            except WriteError as e:
+                with contextlib.suppress(WriteError):
+                    flush()
+                raise WriteError(f"{e}; {what_is_kept()}") from None
             output.remove(partial)
             ses.flush = None
             ses.kept = lambda: (
                 f"the archive {out} is complete (`designopt report {out}` draws its figures)"
             )
+            if ses.stop_requested():  # a stop during the final write: it is done, say so
+                raise ses.interrupted()
     lines = summary_lines(cfg, problem, tree)
     lines.append(f"samples per design: {problem.info.get('n_samples_used', '-')}; wall "
                  f"{total.wall:.1f} s = compile {total.compile:.1f} s + run {total.run:.1f} s "

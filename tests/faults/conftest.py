@@ -1,0 +1,30 @@
+"""Fixtures of the fault-injection suite: the reference result and the children's
+environment."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+from faultkit import config
+
+from designopt.cli import main
+
+
+@pytest.fixture(scope="session")
+def reference(tmp_path_factory) -> Path:
+    """The uninterrupted run of TINY (every interrupted-and-resumed run must equal it)."""
+    d = tmp_path_factory.mktemp("reference")
+    cfg = config(d)
+    assert main(["run", str(cfg), "--quiet", "--no-figures", "--out", str(d / "ref.h5")]) == 0
+    return d / "ref.h5"
+
+
+@pytest.fixture(scope="session")
+def child_env(tmp_path_factory) -> dict[str, str]:
+    """The environment of child processes: one compilation cache for the suite."""
+    env = dict(os.environ)
+    env["DESIGNOPT_CACHE_DIR"] = str(tmp_path_factory.mktemp("jax_cache"))
+    env["PYTHONPATH"] = str(Path(__file__).resolve().parents[2])
+    return env
