@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import os
 import re
+import resource
 import shutil
 import statistics
 import subprocess
@@ -25,6 +26,7 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
+_LAST: dict[str, float] = {}  # CPU time and load average around the last subprocess
 TARGETS = {"cold": 20.0, "warm": 10.0, "report": 3.0}  # seconds, on 2 cores (issue #14)
 SUMMARY = re.compile(
     r"wall (?P<wall>[\d.]+) s = compile (?P<compile>[\d.]+) s \+ run (?P<run>[\d.]+) s "
@@ -48,14 +50,21 @@ def _cli() -> list[str]:
     return [str(exe)] if exe.exists() else [sys.executable, "-m", "designopt.cli"]
 
 
+def _cpu() -> float:
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
 def _timed_lines(cmd: list[str], env: dict[str, str]) -> tuple[float, list[tuple[float, str]]]:
     """Run cmd; return (wall s, [(seconds since start, line)]) of its stdout and stderr."""
+    _LAST["cpu0"], _LAST["load0"] = _cpu(), os.getloadavg()[0]
     t0 = time.perf_counter()
     p = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE,
                          stderr=subprocess.STDOUT, text=True)  # fmt: skip
     lines = [(time.perf_counter() - t0, ln.rstrip("\n")) for ln in p.stdout]
     rc = p.wait()
     wall = time.perf_counter() - t0
+    _LAST["cpu"], _LAST["load"] = _cpu() - _LAST["cpu0"], max(_LAST["load0"], os.getloadavg()[0])
     if rc != 0:
         sys.exit(f"{' '.join(cmd)} failed ({rc}):\n" + "\n".join(ln for _, ln in lines[-20:]))
     return wall, lines
@@ -71,6 +80,7 @@ def one_run(config: str, out: Path, cache: Path) -> dict[str, float]:
 
     env = os.environ | {"DESIGNOPT_CACHE_DIR": str(cache), "PYTHONUNBUFFERED": "1"}
     e2e, lines = _timed_lines([*_cli(), "run", config, "--out", str(out), "--quiet"], env)
+    cpu, load = _LAST["cpu"], _LAST["load"]
     m = next((SUMMARY.search(ln) for _, ln in lines if SUMMARY.search(ln)), None)
     if m is None:
         sys.exit("no summary line in the run's output:\n" + "\n".join(ln for _, ln in lines))
@@ -94,6 +104,8 @@ def one_run(config: str, out: Path, cache: Path) -> dict[str, float]:
         "arithmetic": arith,
         "ratio": e2e / arith,
         "exact_arithmetic": float(by_stage is not None),
+        "cpu": cpu,  # user + system seconds of the run's process (all its threads)
+        "load": load,  # 1-minute load average, the larger of before and after
     }
 
 
@@ -144,7 +156,8 @@ def main() -> None:
             ("optimizer", "optimizer"), ("scoring/polish", "scoring_polish"),
             ("  of which compile (all stages)", "compile"), ("XLA compilations", "compilations"),
             ("figures (in the run)", "figures"), ("exit", "exit"),
-            ("END TO END", "end_to_end"), ("arithmetic only (PSO + scoring)", "arithmetic"),
+            ("END TO END", "end_to_end"), ("  CPU time of the run (user + sys)", "cpu"),
+            ("  load average around the run", "load"), ("arithmetic only (PSO + scoring)", "arithmetic"),
             ("ratio end to end / arithmetic", "ratio"),
             ("report: whole process", "report_process"),
             ("report: after imports", "report"), ("  of which compile", "report_compile"),
