@@ -22,12 +22,9 @@ WRITERS = ("run", "sweep", "scan", "bench", "report")
 
 
 def _load(args: argparse.Namespace):
-    import time
-
     from designopt import output
     from designopt.config import load
 
-    t0 = time.monotonic()
     cfg, text = load(args.config)
     if getattr(args, "seed", None) is not None:
         cfg.seed = args.seed
@@ -39,7 +36,7 @@ def _load(args: argparse.Namespace):
         cfg.max_minutes = args.max_minutes
     ses = output.current()
     if ses is not None and cfg.max_minutes is not None:
-        ses.set_deadline(cfg.max_minutes, t0)
+        ses.set_deadline(cfg.max_minutes)
     import jax
 
     if cfg.precision == "float64":  # the CLI is the program: it may switch JAX to 64-bit

@@ -101,6 +101,7 @@ class Session:
         self.flush: Callable[[], None] | None = None
         self.kept: Callable[[], str] = lambda: "nothing written"
         self.exit: Callable[[int], None] = os._exit
+        self.t0 = time.monotonic()  # the command's start: --max-minutes counts from here
         self._wake: tuple[int, int] | None = None
         self._thread: threading.Thread | None = None
         self._saved: dict[int, object] = {}
@@ -111,10 +112,10 @@ class Session:
         return Path(path) in self.covered
 
     # -- stop requests
-    def set_deadline(self, minutes: float | None, t0: float | None = None) -> None:
-        """Stop cleanly ``minutes`` after ``t0`` (default: now)."""
+    def set_deadline(self, minutes: float | None) -> None:
+        """Stop cleanly ``minutes`` after the command started."""
         self.max_minutes = minutes
-        self.deadline = None if minutes is None else (t0 or time.monotonic()) + 60 * minutes
+        self.deadline = None if minutes is None else self.t0 + 60 * minutes
         self._poke()
 
     def stop_requested(self) -> bool:

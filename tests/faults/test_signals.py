@@ -171,3 +171,32 @@ def test_enough_kill_points():
     if KILL_POINTS["child"] == 0 or KILL_POINTS["in-process"] == 0:
         pytest.skip("run with the whole module to count the kill points")
     assert n >= 50, KILL_POINTS
+
+
+def test_max_minutes_stops_cleanly_and_the_printed_command_finishes(tmp_path, child_env,
+                                                                    timing, reference):  # fmt: skip
+    """--max-minutes takes the signals' path: exit 143 with the checkpoint and the resume
+    command (which repeats --max-minutes); repeating it finishes the run, as in
+    scheduler slots, with the uninterrupted result."""
+    minutes = (timing["loop"] + 0.3 * (timing["write"] - timing["loop"])) / 60
+    out = tmp_path / "a.h5"
+    args = ["run", config(tmp_path), "--quiet", "--no-figures", "--out", out,
+            "--max-minutes", f"{minutes:.6f}"]  # fmt: skip
+    stops = 0
+    for _ in range(8):
+        p = spawn(args, child_env)
+        _, err = p.communicate(timeout=120)
+        if p.returncode == 0:
+            break
+        stops += 1
+        assert p.returncode == 143, err
+        msg = one_line(err)
+        assert "time limit (--max-minutes" in msg
+        if f"{out} is complete" in msg:
+            break
+        if archive.partial_path(out).exists():
+            args = resume_args(err)
+            assert "--max-minutes" in args
+    assert stops >= 1 and out.exists(), err
+    same_result(out, reference)
+    assert strays(tmp_path) == []
