@@ -4,8 +4,8 @@ a chunked ``lax.scan``, and (``run_batch``) a second vmap over a list of setting
 The runner sees only the protocol (protocol.py): ``init``/``step``/``best`` and opaque
 state pytrees. It owns each run's PRNG key (split once per iteration, the second half is
 the step's key), records the best-so-far value, design and violation after every
-iteration, and hands the host a :class:`Checkpoint` between chunks (progress bar,
-Ctrl-C safety). A checkpoint's ``state`` is a flat dict of numpy arrays named by the
+iteration, and hands the host a :class:`Checkpoint` after every chunk, the last one
+included (progress bar, stops at an iteration boundary, resuming after the loop). A checkpoint's ``state`` is a flat dict of numpy arrays named by the
 state pytree's paths; resuming from it gives bit-for-bit the uninterrupted run.
 """
 
@@ -184,7 +184,7 @@ def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress
         done += length
         if progress is not None:
             progress(length)
-        if checkpoint is not None and done < n_iters:
+        if checkpoint is not None:  # the last chunk too: a stop while scoring resumes there
             hf = [np.concatenate(hf, axis=-1)]
             hx = [np.concatenate(hx, axis=-2)]
             hv = [np.concatenate(hv, axis=-1)]
@@ -241,8 +241,8 @@ def run(
     ``problem`` with population ``n_particles``.
 
     ``settings`` override the optimizer's numeric ``Params`` (``setting_names(name)``) or
-    set its string options (e.g. PSO's ``draws``). ``checkpoint`` is called between chunks
-    of ``chunk_iters`` iterations with a :class:`Checkpoint`; passing one back as
+    set its string options (e.g. PSO's ``draws``). ``checkpoint`` is called after every
+    chunk of ``chunk_iters`` iterations with a :class:`Checkpoint`; passing one back as
     ``resume`` continues the run and gives exactly the uninterrupted result.
     """
     opt = _prepare(name, n_particles, n_iters, n_runs, bounds, [settings])

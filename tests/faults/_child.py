@@ -1,7 +1,8 @@
 """``designopt`` as a child process of the fault tests, writing phase marks (seconds since
 start) to the file $FAULT_MARKS: ``handlers`` (signal handling installed), ``loop`` (the
 first iteration boundary: compilation is over), ``write`` (the final archive's bytes are
-being written; each write then sleeps $FAULT_WRITE_SLEEP s to widen the window)."""
+being written; each write then sleeps $FAULT_WRITE_SLEEP s to widen the window);
+$FAULT_CHUNK_SLEEP slows each optimizer chunk."""
 
 import os
 import sys
@@ -56,7 +57,37 @@ output.Session.set_phase = _set_phase
 output.OPS.open = staticmethod(_open)
 output.OPS.write = staticmethod(_write)
 
-from designopt.cli import main  # noqa: E402
+from designopt import cli  # noqa: E402
+
+progress = cli._progress
+
+
+def _progress(quiet):
+    """The CLI's bar, each chunk slowed by $FAULT_CHUNK_SLEEP s (a longer loop)."""
+    bar, pause = progress(quiet), float(os.environ.get("FAULT_CHUNK_SLEEP", "0"))
+
+    def slowed(total, desc):
+        cm = bar(total, desc)
+        update = cm.__enter__()
+
+        def step(n):
+            time.sleep(pause)
+            update(n)
+
+        class Slowed:
+            def __enter__(self):
+                return step
+
+            def __exit__(self, *exc):
+                return cm.__exit__(*exc)
+
+        return Slowed()
+
+    return slowed
+
+
+cli._progress = _progress
+main = cli.main
 
 rc = main(sys.argv[1:])
 mark("done")

@@ -64,8 +64,8 @@ def test_random_stops_in_process_then_resume_equals_uninterrupted(
         with archive.h5py.File(archive.partial_path(out)) as h:
             now = int(h["checkpoint"].attrs["done"])
         # the next boundary (chunks of 3) once this run has met its first one; a stop at
-        # the loop's end keeps the last boundary's checkpoint
-        assert now == min(max(-(-it // 3) * 3, done + 6), N_ITERS - 3), (it, done, now)
+        # the loop's end keeps the checkpoint of its last iteration
+        assert now == min(max(-(-it // 3) * 3, done + 6), N_ITERS), (it, done, now)
         done = now
         args = resume_args(err)
         KILL_POINTS["in-process"] += 1
@@ -178,13 +178,14 @@ def test_max_minutes_stops_cleanly_and_the_printed_command_finishes(tmp_path, ch
     """--max-minutes takes the signals' path: exit 143 with the checkpoint and the resume
     command (which repeats --max-minutes); repeating it finishes the run, as in
     scheduler slots, with the uninterrupted result."""
-    minutes = (timing["loop"] + 0.3 * (timing["write"] - timing["loop"])) / 60
     out = tmp_path / "a.h5"
-    args = ["run", config(tmp_path), "--quiet", "--no-figures", "--out", out,
-            "--max-minutes", f"{minutes:.6f}"]  # fmt: skip
-    stops = 0
-    for _ in range(8):
-        p = spawn(args, child_env)
+    partial = archive.partial_path(out)
+    minutes = (timing["loop"] + 1.0) / 60  # about 1 s of a loop slowed to 2 s
+    args = ["run", config(tmp_path), "--quiet", "--no-figures", "--out", out]
+    env = child_env | {"FAULT_CHUNK_SLEEP": "0.1"}
+    stops, done = 0, -1
+    for _ in range(10):
+        p = spawn([*args, "--max-minutes", f"{minutes:.6f}"], env)
         _, err = p.communicate(timeout=120)
         if p.returncode == 0:
             break
@@ -194,9 +195,15 @@ def test_max_minutes_stops_cleanly_and_the_printed_command_finishes(tmp_path, ch
         assert "time limit (--max-minutes" in msg
         if f"{out} is complete" in msg:
             break
-        if archive.partial_path(out).exists():
-            args = resume_args(err)
-            assert "--max-minutes" in args
+        if partial.exists():
+            cmd = resume_args(err)
+            assert cmd[cmd.index("--max-minutes") + 1] == f"{minutes:g}"
+            args = [a for a in cmd if a != "--max-minutes" and a != f"{minutes:g}"]
+            with archive.h5py.File(partial) as h:
+                now = int(h["checkpoint"].attrs["done"])
+            if now == done:  # the slot ended before its first boundary (a busy machine)
+                minutes *= 1.5
+            done = now
     assert stops >= 1 and out.exists(), err
     same_result(out, reference)
     assert strays(tmp_path) == []

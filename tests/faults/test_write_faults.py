@@ -81,7 +81,7 @@ def test_injected_fault_while_writing(tmp_path, monkeypatch, capsys, reference, 
         return
     with archive.h5py.File(partial) as h:  # the last good checkpoint
         done = int(h["checkpoint"].attrs["done"])
-    assert done == (3 * (nth - 1) if kind == "checkpoint" else 57), msg
+    assert done == (3 * (nth - 1) if kind == "checkpoint" else 60), msg
     rc, _, err = cli(capsys, *resume_args(err))
     assert rc == 0, err
     same_result(out, reference)
