@@ -235,7 +235,8 @@ def optimise(cfg: Any, problem: Problem, key: jax.Array,
     chunk = max(1, min(o.n_iters // 20, DESIGN_SAMPLES_PER_CHUNK // max(work, 1)))
     common = dict(n_particles=o.n_particles, n_iters=o.n_iters, n_runs=o.n_runs, bounds=o.bounds,
                   dtype=dtype_of(cfg), chunk_iters=chunk,
-                  progress=progress, checkpoint=checkpoint, resume=resume)  # fmt: skip
+                  progress=progress, checkpoint=checkpoint, resume=resume,
+                  checkpoint_at_end=checkpoint is not None)  # fmt: skip
     if members is None:
         return optim.run(o.name, problem, key, **common, **o.settings)
     return optim.run_batch(o.name, problem, key, [o.settings | m for m in members], **common)

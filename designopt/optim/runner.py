@@ -4,8 +4,9 @@ a chunked ``lax.scan``, and (``run_batch``) a second vmap over a list of setting
 The runner sees only the protocol (protocol.py): ``init``/``step``/``best`` and opaque
 state pytrees. It owns each run's PRNG key (split once per iteration, the second half is
 the step's key), records the best-so-far value, design and violation after every
-iteration, and hands the host a :class:`Checkpoint` after every chunk, the last one
-included (progress bar, stops at an iteration boundary, resuming after the loop). A checkpoint's ``state`` is a flat dict of numpy arrays named by the
+iteration, and hands the host a :class:`Checkpoint` between chunks, and after the last
+one with ``checkpoint_at_end`` (progress bar, stops at an iteration boundary, resuming
+after the loop). A checkpoint's ``state`` is a flat dict of numpy arrays named by the
 state pytree's paths; resuming from it gives bit-for-bit the uninterrupted run.
 """
 
@@ -141,7 +142,7 @@ def _from_numpy(d: dict[str, np.ndarray], template) -> Any:
 
 
 def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress, checkpoint,
-           resume, batched, B, record):  # fmt: skip
+           resume, batched, B, record, at_end=False):  # fmt: skip
     n_iters = opt.n_iters
     lower = jnp.asarray(problem.lower, dtype)
     upper = jnp.asarray(problem.upper, dtype)
@@ -184,7 +185,7 @@ def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress
         done += length
         if progress is not None:
             progress(length)
-        if checkpoint is not None:  # the last chunk too: a stop while scoring resumes there
+        if checkpoint is not None and (done < n_iters or at_end):
             hf = [np.concatenate(hf, axis=-1)]
             hx = [np.concatenate(hx, axis=-2)]
             hv = [np.concatenate(hv, axis=-1)]
@@ -235,21 +236,24 @@ def run(
     progress: Callable[[int], None] | None = None,
     checkpoint: Callable[[Checkpoint], None] | None = None,
     resume: Checkpoint | None = None,
+    checkpoint_at_end: bool = False,
     **settings: Any,
 ) -> RunResult:
     """Run ``n_runs`` independent runs of optimizer ``name`` (``registry.names()``) on
     ``problem`` with population ``n_particles``.
 
     ``settings`` override the optimizer's numeric ``Params`` (``setting_names(name)``) or
-    set its string options (e.g. PSO's ``draws``). ``checkpoint`` is called after every
-    chunk of ``chunk_iters`` iterations with a :class:`Checkpoint`; passing one back as
-    ``resume`` continues the run and gives exactly the uninterrupted result.
+    set its string options (e.g. PSO's ``draws``). ``checkpoint`` is called between chunks
+    of ``chunk_iters`` iterations (and after the last with ``checkpoint_at_end``) with a
+    :class:`Checkpoint`; passing one back as ``resume`` continues the run and gives exactly
+    the uninterrupted result.
     """
     opt = _prepare(name, n_particles, n_iters, n_runs, bounds, [settings])
     e = registry.resolve(name)
     params = e.cls.make_params(dtype, e.preset, **registry.split_settings(name, settings)[0])
     return _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress,
-                  checkpoint, resume, False, 1, _record(name, opt, params, n_runs))  # fmt: skip
+                  checkpoint, resume, False, 1, _record(name, opt, params, n_runs),
+                  checkpoint_at_end)  # fmt: skip
 
 
 def run_batch(
@@ -266,6 +270,7 @@ def run_batch(
     progress: Callable[[int], None] | None = None,
     checkpoint: Callable[[Checkpoint], None] | None = None,
     resume: Checkpoint | None = None,
+    checkpoint_at_end: bool = False,
 ) -> RunResult:
     """Run the optimizer once per settings dict in ``members``, all as one vmapped program.
 
@@ -283,4 +288,5 @@ def run_batch(
     ]
     params = jax.tree.map(lambda *a: jnp.stack(a), *plist)
     return _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress,
-                  checkpoint, resume, True, len(members), _record(name, opt, params, n_runs))  # fmt: skip
+                  checkpoint, resume, True, len(members), _record(name, opt, params, n_runs),
+                  checkpoint_at_end)  # fmt: skip
