@@ -30,7 +30,7 @@ def _bars(stats: dict[str, Any], mean: str, std: str, ylabel: str, title: str, l
         ax.bar(names, m, yerr=[lo, s], capsize=3, color="tab:blue", alpha=0.8)
         if log and np.all(m > 0):
             ax.set_yscale("log")
-        ax.set_title(case.replace("_", " "), fontsize=9)
+        ax.set_title(case.replace("_", " "), fontsize=9, y=1.0)
         ax.set_ylabel(ylabel, fontsize=8)
         ax.tick_params(labelsize=7)
         ax.tick_params(axis="x", labelrotation=45)
@@ -63,7 +63,7 @@ def draw(folder: Path, stats: dict[str, Any], histories: dict[str, dict[str, np.
             ax.fill_between(it, q25, q75, color=line.get_color(), alpha=0.2, lw=0)
         if np.all(np.concatenate([np.ravel(h) for h in histories[case].values()]) > 0):
             ax.set_yscale("log")
-        ax.set_title(case.replace("_", " "), fontsize=9)
+        ax.set_title(case.replace("_", " "), fontsize=9, y=1.0)
         ax.set_xlabel("iteration", fontsize=8)
         ax.set_ylabel("best f (median, IQR)", fontsize=8)
         ax.tick_params(labelsize=7)

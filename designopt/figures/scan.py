@@ -58,7 +58,7 @@ def draw(a: dict[str, Any], folder: Path) -> list[Path]:
             fig.colorbar(im, ax=ax, label=k)
             ax.set_xlabel(varied[1])
             ax.set_ylabel(varied[0])
-            ax.set_title(k, fontsize=9)
+            ax.set_title(k, fontsize=9, y=1.0)
         fig.suptitle(f"{study}: scan over {varied[0]} × {varied[1]}", fontsize=10)
         fig.tight_layout()
         return save(fig, folder, f"scan_{varied[0]}_{varied[1]}")

@@ -90,7 +90,7 @@ def _maps(z_all, axes_deg, title: str, unit: str, labels: list[str], cmap: str):
             fig.colorbar(im, ax=ax, label=unit)
             ax.set_xlabel(f"{names[pair[0]]} (deg)")
             ax.set_ylabel(f"{names[pair[1]]} (deg)")
-            ax.set_title(f"{label}: mean {z.mean():.4g}", fontsize=9)
+            ax.set_title(f"{label}: mean {z.mean():.4g}", fontsize=9, y=1.0)
     fig.suptitle(title, fontsize=10)
     fig.subplots_adjust(left=0.06, right=0.95, bottom=0.09, top=0.89, wspace=0.45, hspace=0.5)
     return fig
@@ -142,7 +142,7 @@ def draw(
         L = full["a1"] + full["a3"] + full["d3"]
         vol = x.get("volume")
         vtxt = f"V = {vol:.4e} mm³, " if vol is not None else ""
-        ax.set_title(f"{label}: {vtxt}L = {L:.3f} mm", fontsize=9)
+        ax.set_title(f"{label}: {vtxt}L = {L:.3f} mm", fontsize=9, y=1.0)
         ax.tick_params(labelsize=6)
     fig.suptitle(f"Workspace of the position mechanism ({n_cloud} uniform joint samples; IEEE "
                  "Access 2019, Fig. 15)", fontsize=10)  # fmt: skip

@@ -88,7 +88,7 @@ def draw_maps(s: PlasSettings, designs: np.ndarray, labels: list[str], folder: P
             fig.colorbar(im, ax=ax, label=lab)
             ax.set_xlabel("θ2 (deg)")
             ax.set_ylabel("θ3 (deg)")
-            ax.set_title(f"{labels[j]}\nmean {z.mean():.3g}, max {z.max():.3g}", fontsize=8)
+            ax.set_title(f"{labels[j]}\nmean {z.mean():.3g}, max {z.max():.3g}", fontsize=8, y=1.0)
     fig.suptitle("Master-slave tip mismatch over (θ2, θ3), θ4 = 0", fontsize=10)
     fig.tight_layout()
     return save(fig, folder, name)

@@ -89,7 +89,7 @@ def draw_run(a: dict[str, Any], folder: Path, resolution: int = MAP_RESOLUTION) 
             fig.colorbar(im, ax=ax, label="1/k")
             ax.set_xlabel(f"q1 ({ua})" if ua else "q1")
             ax.set_ylabel(f"q2 ({ub})" if ub else "q2")
-            ax.set_title(f"{lab}: mean {zi.mean():.4g}", fontsize=9)
+            ax.set_title(f"{lab}: mean {zi.mean():.4g}", fontsize=9, y=1.0)
         fig.suptitle(f"1/k ({s.indices.norm}-norm; rows {rows_txt}) over q1, q2, others at mid-range",
                      fontsize=10)  # fmt: skip
         fig.tight_layout()
@@ -109,7 +109,7 @@ def draw_run(a: dict[str, Any], folder: Path, resolution: int = MAP_RESOLUTION) 
     ax.set_xlabel("x")
     ax.set_ylabel("y")
     fig.colorbar(sc, ax=ax, label="1/k", shrink=0.7)
-    ax.set_title("final design: tip positions of 4000 uniform joint samples", fontsize=9)
+    ax.set_title("final design: tip positions of 4000 uniform joint samples", fontsize=9, y=1.0)
     fig.tight_layout()
     out += save(fig, folder, "workspace")
     return out
