@@ -89,3 +89,32 @@ def test_output_that_is_a_folder_or_unwritable_is_refused_before_the_run(tmp_pat
     assert "optimizer.name" in capsys.readouterr().err
     assert not (tmp_path / "new").exists()
     assert not list(tmp_path.glob("adir*.h5")) and not list((tmp_path / "adir").iterdir())
+
+
+def test_long_jobs_print_their_eta_once_after_the_first_timed_chunk(monkeypatch, capsys):
+    import time
+
+    from designopt import cli
+
+    clock = iter([10.0, 15.0, 20.0, 25.0])  # the first chunk (compile) ends at 10 s
+    monkeypatch.setattr(time, "monotonic", lambda: next(clock))
+    with cli._progress(True)(100, "ptpso on master9") as update:
+        for _ in range(4):
+            update(1)
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "about 8 min left" in err and "--max-minutes" in err
+    clock = iter([10.0, 10.1, 10.2])
+    with cli._progress(True)(10, "short") as update:
+        for _ in range(3):
+            update(1)
+    assert capsys.readouterr().err == ""
+
+
+def test_bad_max_minutes_and_dry_run(tmp_path, capsys):
+    cfg = write(tmp_path, TINY)
+    assert main(["run", str(cfg), "--max-minutes", "-1"]) == 2
+    assert "--max-minutes" in capsys.readouterr().err
+    assert main(["run", str(cfg), "--max-minutes", "nan"]) == 2
+    assert main(["run", str(cfg), "--dry-run"]) == 0
+    assert "checks passed; nothing written" in capsys.readouterr().out
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["c.yaml"]
