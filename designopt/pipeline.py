@@ -13,6 +13,7 @@ import contextlib
 import itertools
 import math
 import os
+import sys
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -123,6 +124,8 @@ BYTES_PER_DESIGN_SAMPLE = 128
 """Peak memory per (design × Monte-Carlo sample in flight), conservative: master9 measures
 80-280 B in float64 and float32 on CPU (XLA's buffers of one sample chunk)."""
 BASE_BYTES = 1 << 29  # JAX, XLA and the compiled programs
+DESIGN_SAMPLES_PER_S = 1e8  # master9 on 2 CPU cores: 50 × 65536 in 27-59 ms
+HUGE_WORK = 3600 * DESIGN_SAMPLES_PER_S  # an hour or more: warn before starting
 DESIGN_SAMPLES_PER_CHUNK = 20_000_000
 """Work per optimizer chunk (designs × samples × iterations): ≈ 0.2-0.5 s on 2 CPU cores,
 so a stop request meets an iteration boundary promptly (docs/faults.md)."""
@@ -149,6 +152,18 @@ class Estimate:
     work_per_iter: int
     lower: str
     lines: list[str] = field(default_factory=list)
+    work: float = 0.0  # design-samples of the whole job
+    sample_key: str = "study.n_samples"
+
+    def warn_if_huge(self) -> None:
+        """One warning line (stderr) when the job's Monte-Carlo work means hours or more:
+        the optimizer's ETA comes only after its first chunk, set-up may take long before."""
+        if self.work > HUGE_WORK:
+            hours = self.work / DESIGN_SAMPLES_PER_S / 3600
+            print(f"designopt: warning: a huge job: about {self.work:.2g} design-samples of "
+                  f"Monte-Carlo work, some {hours:.2g} h at ~{DESIGN_SAMPLES_PER_S:.0e} per "
+                  f"second; lower {self.sample_key} or stop it cleanly with --max-minutes",
+                  file=sys.stderr)  # fmt: skip
 
     def check(self, where: str) -> None:
         """ConfigError (exit 2) when the memory estimate exceeds what is available."""
@@ -172,10 +187,11 @@ def estimate(cfg: Any, n_designs: int = 0, members: int = 1) -> Estimate:
     designs; ``members``: a sweep) from the config alone, before anything compiles."""
     st = cfg.study.model_dump(mode="json", by_alias=True)
     D = max(1, len(cfg.study.variables))
-    samples, per_chunk, lower_chunk = 1, 1, "study"
+    samples, per_chunk, lower_chunk, sample_key = 1, 1, "study", "study.n_samples"
     for path, d in _numbers(st, "n_samples"):
         c = min(int(d["n_samples"]), int(d.get("chunk") or d["n_samples"]))
-        samples = max(samples, int(d["n_samples"]))
+        if int(d["n_samples"]) >= samples:
+            samples, sample_key = int(d["n_samples"]), path
         if c >= per_chunk:
             per_chunk = c
             lower_chunk = path.rsplit(".", 1)[0] + (".chunk" if "chunk" in d else ".n_samples")
@@ -201,10 +217,10 @@ def estimate(cfg: Any, n_designs: int = 0, members: int = 1) -> Estimate:
         lower = next((p for p, _ in _numbers(st, "n_norm")), lower)
     if device >= host and per_chunk > 4096 and designs * per_chunk > 1e10:
         lower += f" (or {lower_chunk})"
-    return Estimate(memory, 2 * disk, swarm * samples, lower,
-                    [f"pre-flight: about {output.human(memory)} of memory "
-                     f"({output.human(available_memory())} available), "
-                     f"{output.human(2 * disk)} of disk"])  # fmt: skip
+    work = float(samples) * (n_norm + (n_designs or swarm * T + T))
+    line = (f"pre-flight: about {output.human(memory)} of memory "
+            f"({output.human(available_memory())} available), {output.human(2 * disk)} of disk")  # fmt: skip
+    return Estimate(memory, 2 * disk, swarm * samples, lower, [line], work, sample_key)
 
 
 def base_attrs(kind: str, cfg: Any, text: str, keys: Mapping[str, jax.Array]) -> dict[str, Any]:
@@ -417,6 +433,7 @@ class Report:
 def _dry(out: Path, cfg: Any, est: Estimate) -> Report:
     """A dry run's report: every check passed, nothing written."""
     output.check(out, cfg.overwrite, est.disk, make=False)
+    est.warn_if_huge()
     return Report(out, [f"checks passed; nothing written; {est.lines[0]}"])
 
 
@@ -447,6 +464,7 @@ def run(cfg: Any, text: str, where: str, out: Path, resume: bool = False,
         if ses.deadline is None:
             ses.set_deadline(cfg.max_minutes)
         check_output(out, cfg.overwrite, est.disk)
+        est.warn_if_huge()
         ses.covered.add(partial)
         keys = streams(cfg.seed)
         resolved = resume_key(cfg)
@@ -543,6 +561,7 @@ def _replay(cfg: Any, text: str, where: str, out: Path, dry_run: bool = False) -
     attrs = base_attrs("run", cfg, text, keys)
     with output.session():
         check_output(out, cfg.overwrite, est.disk)
+        est.warn_if_huge()
         with Stopwatch() as total:
             try:
                 tree, lines = study_of(cfg).replay(cfg.study, keys, dtype_of(cfg), where)
@@ -597,6 +616,7 @@ def sweep(cfg: Any, text: str, where: str, out: Path,
         return _dry(out, cfg, est)
     with output.session():
         check_output(out, cfg.overwrite, est.disk)
+        est.warn_if_huge()
         root_keys = streams(cfg.seed)
         tree: dict = {"members": {}}
         lines = []
@@ -726,6 +746,7 @@ def scan(cfg: Any, text: str, where: str, out: Path,
     keys = streams(cfg.seed)
     with output.session():
         check_output(out, cfg.overwrite, est.disk)
+        est.warn_if_huge()
         with Stopwatch() as total:
             problem = build_problem(cfg, keys, where)
             varied, X = scan_designs(cfg, problem, where)
