@@ -170,7 +170,7 @@ class Estimate:
         """ConfigError (exit 2) when the memory estimate exceeds what is available."""
         avail = available_memory()
         if self.memory > avail:
-            raise ConfigError(f"{where}: key '{self.lower}': the job needs about "
+            raise ConfigError(f"{where}: key '{self.lower.split(' (')[0]}': the job needs about "
                               f"{output.human(self.memory)} of memory, {output.human(avail)} "
                               f"available; lower {self.lower}")  # fmt: skip
 
