@@ -1,0 +1,159 @@
+"""The ``study:`` section of a ``davinci`` config (docs/davinci.md lists every key).
+
+Angles in degrees, lengths in mm. Design variables are any of ``alpha_deg``,
+``beta_deg``, ``l_QH``, ``l_IJ`` (the arm parameters of Table 1 of the da Vinci
+patient-side arm IK paper, Applied Sciences 2019); the others keep Table 1's values
+unless ``fixed`` overrides them.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+from designopt.studies.base import StudySettings
+
+KEYS: tuple[str, ...] = ("alpha_deg", "beta_deg", "l_QH", "l_IJ")
+TABLE1: dict[str, float] = {"alpha_deg": 20.0, "beta_deg": 30.45, "l_QH": 784.29, "l_IJ": 10.0}
+UNITS: dict[str, str] = {"alpha_deg": "deg", "beta_deg": "deg", "l_QH": "mm", "l_IJ": "mm"}
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+def _lohi(name: str, v: tuple[float, float]) -> tuple[float, float]:
+    if not v[0] < v[1]:
+        raise ValueError(f"{name}: lower value {v[0]} is not below upper value {v[1]}")
+    return v
+
+
+class Workspace(_Strict):
+    """The surgical workspace around the RCM point H.
+
+    Shaft directions fill a cone of half-angle ``cone_deg`` about the axis the Table 1
+    arm's shaft has at (q1, q2) = ``axis_q_deg`` (a fixed world direction, so the task
+    does not move with the design); insertion depth ``depth_mm`` from H. Dexterity is
+    averaged over joint samples whose shaft lies in the cone (q1, q2 from the direction,
+    q3 the depth) with the wrist joints uniform over ``wrist_deg`` (q4, q5, q6). The IK
+    task poses put the jaw point J at depth along a cone direction, the jaw's pointing
+    direction within ``tool_cone_deg`` of it and the jaw axis at a uniform angle about it."""
+
+    cone_deg: float = Field(30.0, gt=0, le=80)
+    axis_q_deg: tuple[float, float] = (0.0, -67.5)
+    depth_mm: tuple[float, float] = (50.0, 250.0)
+    wrist_deg: tuple[tuple[float, float], tuple[float, float], tuple[float, float]] = (
+        (-180.0, 180.0),
+        (-80.0, 80.0),
+        (-80.0, 80.0),
+    )
+    tool_cone_deg: float = Field(45.0, ge=0, le=90)
+
+    @field_validator("depth_mm")
+    @classmethod
+    def _depth(cls, v: tuple[float, float]) -> tuple[float, float]:
+        _lohi("depth_mm", v)
+        if v[0] < 0 or v[1] > 315:
+            raise ValueError(f"must lie within the insertion range [0, 315] mm, got {list(v)}")
+        return v
+
+    @field_validator("wrist_deg")
+    @classmethod
+    def _wrist(cls, v):
+        lim = ((-180, 180), (-90, 90), (-90, 90))
+        for j, ((lo, hi), (llo, lhi)) in enumerate(zip(v, lim, strict=True)):
+            _lohi(f"wrist_deg.q{j + 4}", (lo, hi))
+            if lo < llo or hi > lhi:
+                raise ValueError(
+                    f"q{j + 4}: [{lo:g}, {hi:g}] exceeds the joint range [{llo}, {lhi}] deg"
+                )
+        return v
+
+
+class Indices(_Strict):
+    """How dexterity and the IK success rate are estimated."""
+
+    n_samples: int = Field(4096, gt=1)  # joint samples for the GCI (shared by the swarm)
+    n_ik: int = Field(512, gt=1)  # task poses for the IK success rate
+    length_mm: float = Field(100.0, gt=0)  # characteristic length of the 6×6 Jacobian
+    sampler: Literal["uniform", "halton"] = "uniform"
+    solver: Literal["lm", "closed_form"] = "lm"  # which IK the success rate measures
+
+
+class Objective(_Strict):
+    """f = −(w_gci · GCI + w_ik · IK success rate): minimised."""
+
+    gci: float = Field(1.0, ge=0)
+    ik_success: float = Field(1.0, ge=0)
+
+    @model_validator(mode="after")
+    def _some(self) -> Objective:
+        if self.gci + self.ik_success <= 0:
+            raise ValueError("give at least one positive weight (gci, ik_success)")
+        return self
+
+
+class IKSettings(_Strict):
+    """The production IK solver (``designopt ik``; docs/davinci.md)."""
+
+    first_iter: int = Field(5, ge=1, le=100)
+    continue_iter: int = Field(10, ge=1, le=200)
+    max_iter: int = Field(60, ge=1, le=500)
+    warm_iter: int = Field(4, ge=1, le=100)
+    retries: int = Field(1, ge=0, le=4)
+    success_pos_mm: float = Field(1e-9, gt=0)
+    success_rot_rad: float = Field(1e-9, gt=0)
+    grid_deg: float = Field(10.0, gt=0, le=45)  # q1, q2 database step
+    grid_q3_mm: float = Field(15.0, gt=0, le=100)
+    grid_wrist_deg: float = Field(15.0, gt=0, le=45)  # q4, q5
+    grid_q6_deg: float = Field(10.0, gt=0, le=45)
+    q_prev: tuple[float, float, float, float, float, float] | None = None
+    """Previous configuration (deg; q3 in mm) for the branch choice of a cold solve."""
+    batch: int = Field(65536, ge=1)  # poses per compiled call
+    orthonormal_tol: float = Field(1e-6, gt=0)
+
+
+class DavinciSettings(StudySettings):
+    """Study B: the da Vinci patient-side arm (Applied Sciences 2019)."""
+
+    name: Literal["davinci"] = "davinci"
+    variables: dict[str, tuple[float, float]] = {"l_IJ": (2.0, 30.0), "beta_deg": (15.0, 45.0)}
+    fixed: dict[str, float] = {}
+    workspace: Workspace = Workspace()
+    indices: Indices = Indices()
+    objective: Objective = Objective()
+    ik: IKSettings = IKSettings()
+
+    @field_validator("variables")
+    @classmethod
+    def _vars(cls, v: dict[str, tuple[float, float]]) -> dict[str, tuple[float, float]]:
+        for k, (lo, _hi) in v.items():
+            if k not in KEYS:
+                raise ValueError(f"unknown design variable '{k}'; allowed {list(KEYS)}")
+            if k in ("l_QH", "l_IJ") and lo <= 0:
+                raise ValueError(f"{k}: a length must be > 0 mm, got lower bound {lo}")
+        return v
+
+    @field_validator("fixed")
+    @classmethod
+    def _fixed(cls, v: dict[str, float]) -> dict[str, float]:
+        for k, x in v.items():
+            if k not in KEYS:
+                raise ValueError(f"unknown arm parameter '{k}'; allowed {list(KEYS)}")
+            if k in ("l_QH", "l_IJ") and x <= 0:
+                raise ValueError(f"{k}: a length must be > 0 mm, got {x}")
+        return v
+
+    @model_validator(mode="after")
+    def _consistent(self) -> DavinciSettings:
+        both = sorted(set(self.fixed) & set(self.variables))
+        if both:
+            raise ValueError(
+                f"fixed: {both} are design variables; a parameter is either variable or fixed"
+            )
+        return self
+
+    def design(self) -> dict[str, float]:
+        """Arm parameters that are not varied (Table 1 unless ``fixed``), config units."""
+        return {k: float(self.fixed.get(k, TABLE1[k])) for k in KEYS if k not in self.variables}
