@@ -46,7 +46,7 @@ def test_run_writes_archive_and_same_seed_gives_same_numbers(tmp_path, capsys):
         (TINY.replace("n_particles: 8", "n_particles: many"), "optimizer.n_particles"),
         (TINY.replace("{n_samples: 2048}", "{n_samples: -5}"), "study.indices.n_samples"),
         (TINY.replace("name: ptpso", "name: p9"), "optimizer.name"),
-        (TINY.replace("name: master9", "name: davinci"), "study.name"),
+        (TINY.replace("name: master9", "name: nosuchstudy"), "study.name"),
         (TINY.replace("n_norm: 8", "n_norm: 8\n  variables: {a1: [350, 250]}"), "variables"),
         ("study: [unclosed\n", "malformed YAML"),
     ],
