@@ -283,7 +283,11 @@ def cmd_show(args: argparse.Namespace) -> int:
             print(
                 f"wall time {at['wall_time_s']:.1f} s (compile {at.get('compile_time_s', 0):.1f} s)"
             )
-            if kind == "run":
+            if kind == "run" and "problem" not in h:  # a replay (Study.replay)
+                for g in h.values():
+                    if "summary" in g.attrs:
+                        print(g.attrs["summary"])
+            elif kind == "run":
                 names = [n.decode() for n in h["problem/names"][()]]
                 fin = h["final"]
                 print("final design: " + ", ".join(
