@@ -10,6 +10,7 @@ vmap; steps as one lax.scan.
 
 from __future__ import annotations
 
+from functools import partial
 from typing import Any, NamedTuple
 
 import jax
@@ -58,27 +59,15 @@ def make_optimizer(method: str, learning_rate: float) -> optax.GradientTransform
     return optax.chain(base, project_box(0.0, 1.0))
 
 
-def refine(
-    problem: Problem,
-    x0: np.ndarray,
-    steps: int = 100,
-    learning_rate: float = 0.01,
-    method: str = "adam",
-    key: jax.Array | None = None,
-    dtype: Any = jnp.float64,
-) -> RefineResult:
-    """Polish designs x0 (n, D) by projected gradient descent on ``problem``'s objective.
-
-    ``learning_rate`` is in units of the box width (Adam's step size). The objective is the
-    problem's fixed-sample Monte-Carlo estimate, so the polish is deterministic.
-    """
-    key = jax.random.key(0) if key is None else key
-    lo = jnp.asarray(problem.lower, dtype)
-    span = jnp.asarray(problem.upper - problem.lower, dtype)
+@partial(jax.jit, static_argnames=("fn", "method", "steps"))
+def _polish(fn, params, key, lo, span, u0, learning_rate, method: str, steps: int):
+    """The vmapped polish of unit-box designs u0 (n, D) as one compiled program; the
+    learning rate and every number are arguments, so a second polish compiles nothing."""
+    dtype = u0.dtype
     opt = make_optimizer(method, learning_rate)
 
     def f_of_u(u):
-        return problem.fn(problem.params, (lo + span * u)[None], key)[0][0].astype(dtype)
+        return fn(params, (lo + span * u)[None], key)[0][0].astype(dtype)
 
     value_and_grad = jax.value_and_grad(f_of_u)
 
@@ -101,8 +90,30 @@ def refine(
         best_f = jnp.minimum(f_last, best_f)
         return best_u, best_f, jnp.concatenate([hist, f_last[None]])
 
+    return jax.vmap(one)(u0)
+
+
+def refine(
+    problem: Problem,
+    x0: np.ndarray,
+    steps: int = 100,
+    learning_rate: float = 0.01,
+    method: str = "adam",
+    key: jax.Array | None = None,
+    dtype: Any = jnp.float64,
+) -> RefineResult:
+    """Polish designs x0 (n, D) by projected gradient descent on ``problem``'s objective.
+
+    ``learning_rate`` is in units of the box width (Adam's step size). The objective is the
+    problem's fixed-sample Monte-Carlo estimate, so the polish is deterministic.
+    """
+    key = jax.random.key(0) if key is None else key
+    lo = jnp.asarray(problem.lower, dtype)
+    span = jnp.asarray(problem.upper - problem.lower, dtype)
+    make_optimizer(method, learning_rate)  # validate the method before tracing
     u0 = optax.projections.projection_box((jnp.asarray(x0, dtype) - lo) / span, 0.0, 1.0)
-    bu, bf, hist = jax.jit(jax.vmap(one))(u0)
+    bu, bf, hist = _polish(problem.fn, problem.params, key, lo, span, u0,
+                           jnp.asarray(learning_rate, dtype), method, steps)  # fmt: skip
     # back to design units; the min/max only absorbs the last-ulp rounding of lo + span·u
     x = np.asarray(jnp.minimum(jnp.maximum(lo + span * bu, lo), jnp.asarray(problem.upper, dtype)))
     f = np.asarray(bf)
