@@ -10,6 +10,10 @@ Constraints (optional): ``constraints(params, X) -> G (M, n_c)``; a design is fe
 when every g ≤ 0. Optimizers see the total violation v = Σ max(g, 0) (``total_violation``)
 beside f and rank candidates by Deb's feasibility rules (docs/optimizers.md). No
 constraint function means zero constraints: v = 0 everywhere.
+
+Sample sharding (optional, docs/scaling.md): ``shard_samples(mesh) -> Problem`` gives the
+same problem whose fn (and constraints) spread their Monte-Carlo sample chunks over the
+mesh's ``samples`` axis (``designopt.montecarlo.scan_chunks``); None: not supported.
 """
 
 from __future__ import annotations
@@ -44,6 +48,7 @@ class Problem:
     params: Any = None
     info: dict[str, Any] = field(default_factory=dict)
     constraints: ConstraintFn | None = None  # G = constraints(params, X) (M, n_c), g ≤ 0
+    shard_samples: Callable[[Any], Problem] | None = None  # mesh → the sample-sharded problem
 
     def __post_init__(self) -> None:
         lo, hi = np.asarray(self.lower, np.float64), np.asarray(self.upper, np.float64)

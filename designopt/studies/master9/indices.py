@@ -162,9 +162,10 @@ def _chunk_sums(x, q, delta, s: IndexSettings):
     return mc.power_sums(w, r), mc.power_sums(w, e), mc.power_sums(adet, jnp.ones_like(adet))
 
 
-def index_sums(x: dict[str, Array], key: jax.Array, s: IndexSettings, dtype=None):
+def index_sums(x: dict[str, Array], key: jax.Array, s: IndexSettings, dtype=None, mesh=None):
+    """Accumulated power sums for (1/k, e_max, |det J_v|) over all samples, per design
+    (the chunks spread over the ``samples`` axis of ``mesh`` when given)."""
     dtype = mc.out_dtype(dtype)
-    """Accumulated power sums for (1/k, e_max, |det J_v|) over all samples, per design."""
     lo, hi = s.box
     lo, hi = jnp.asarray(lo, dtype), jnp.asarray(hi, dtype)
     chunk = min(s.chunk, s.n_samples)
@@ -173,24 +174,22 @@ def index_sums(x: dict[str, Array], key: jax.Array, s: IndexSettings, dtype=None
     x = {k: jnp.asarray(x[k], dtype) for k in LINEAR_KEYS}
     M = x["a1"].shape[0]
 
-    def body(acc, k):
+    def sums(k):
         u = mc.unit_samples(key, k * chunk, chunk, 3, s.sampler, dtype)
         q = lo + (hi - lo) * u
-        new = _chunk_sums(x, q, delta, s)
-        return tuple(mc.add(a, b) for a, b in zip(acc, new, strict=True)), None
+        return _chunk_sums(x, q, delta, s)
 
     z = jnp.zeros((M, 5), dtype)
     init = tuple(mc.PowerSums(z, z, jnp.asarray(0.0, dtype)) for _ in range(3))
-    acc, _ = jax.lax.scan(body, init, jnp.arange(n_chunks))
-    return acc
+    return mc.scan_chunks(sums, init, n_chunks, mesh)
 
 
 def swarm_indices(
-    design: dict[str, Array], key: jax.Array, s: IndexSettings, dtype=None
+    design: dict[str, Array], key: jax.Array, s: IndexSettings, dtype=None, mesh=None
 ) -> dict[str, Array]:
     """All indices of eq. (35)-(42) for a swarm: design values of shape (M,). Returns (M,) arrays."""
     dtype = mc.out_dtype(dtype)
-    ps_k, ps_p, ps_v = index_sums(design, key, s, dtype)
+    ps_k, ps_p, ps_v = index_sums(design, key, s, dtype, mesh)
     lo, hi = s.box
     qvol = float(np.prod(hi - lo))
     gci, gcsei, fk = mc.mean(ps_k), mc.std(ps_k), mc.std_minus_mean(ps_k)

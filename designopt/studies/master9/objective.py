@@ -37,14 +37,15 @@ def _full_design(params: Mapping[str, Any], X, names) -> dict:
     return d
 
 
-def build_fn(names: tuple[str, ...], settings: IndexSettings, dtype):
+def build_fn(names: tuple[str, ...], settings: IndexSettings, dtype, mesh: Any = None):
     """The pure swarm objective fn(params, X, key) for these design variables; the
-    Monte-Carlo samples come from ``params["sample_key"]`` (common random numbers)."""
+    Monte-Carlo samples come from ``params["sample_key"]`` (common random numbers), their
+    chunks spread over the ``samples`` axis of ``mesh`` when given."""
 
     def fn(params, X, key):
         X = X.astype(dtype)
         d = _full_design(params, X, names)
-        ind = swarm_indices(d, params["sample_key"], settings, dtype)
+        ind = swarm_indices(d, params["sample_key"], settings, dtype, mesh)
         b = params["bounds"]  # (3, 2): rows f_k, f_l, f_p; cols min, max
         w = params["weights"]
         f = sum(
@@ -121,7 +122,11 @@ def problem(
         "n_norm": n_norm,
         "dtype": dtype.name,
     }
-    return Problem(names, lower, upper, fn, params, info)
+
+    def shard_samples(mesh: Any) -> Problem:
+        return Problem(names, lower, upper, build_fn(names, ind, dtype, mesh), params, info)
+
+    return Problem(names, lower, upper, fn, params, info, shard_samples=shard_samples)
 
 
 def indices(

@@ -119,22 +119,23 @@ def design_columns(s: RcmSettings, params: Mapping[str, Any], X: jnp.ndarray):
     return cols[0], cols[1]
 
 
-def estimates(s: RcmSettings, params: Mapping[str, Any], X: jnp.ndarray) -> dict[str, Any]:
-    """Every estimate (value, se) for the swarm X, streamed over chunks of samples."""
+def estimates(s: RcmSettings, params: Mapping[str, Any], X: jnp.ndarray,
+              mesh: Any = None) -> dict[str, Any]:  # fmt: skip
+    """Every estimate (value, se) for the swarm X, streamed over chunks of samples (spread
+    over the ``samples`` axis of ``mesh`` when given)."""
     dt = X.dtype
     a, c = design_columns(s, params, X)
     n_chunks, chunk = chunking(s.eta.n_samples)
     p = {k: v.astype(dt) for k, v in params.items() if k not in ("sample_key", "design")}
 
-    def body(acc, k):
+    def sums(k):
         u = mc.unit_samples(params["sample_key"], k * chunk, chunk, 3, s.eta.sampler, dt)
-        new = chunk_sums(p, a, c, u, s)
-        return {n: mc.add(acc[n], new[n]) for n in acc}, None
+        return chunk_sums(p, a, c, u, s)
 
     z = jnp.zeros((X.shape[0], 5), dt)
     keys = ("box", "cone", "reach_eta", "reach")
     init = {n: mc.PowerSums(z, z, jnp.asarray(0.0, dt)) for n in keys}
-    acc, _ = jax.lax.scan(body, init, jnp.arange(n_chunks))
+    acc = mc.scan_chunks(sums, init, n_chunks, mesh)
     return {n: mc.mean(ps) for n, ps in acc.items()} | {"a": a, "c": c}
 
 
@@ -143,12 +144,12 @@ def eq19_margin(s: RcmSettings, p: Mapping[str, Any], a: jnp.ndarray, c: jnp.nda
     return a - jnp.sin(p["half_apex"]) * (c - p["depth"][0])
 
 
-def build_fn(s: RcmSettings):
+def build_fn(s: RcmSettings, mesh: Any = None):
     """fn(params, X, key) -> (f = −η, every index with its SE)."""
     ws = s.eta.workspace
 
     def fn(params, X, key):
-        e = estimates(s, params, X)
+        e = estimates(s, params, X, mesh)
         p = {k: v.astype(X.dtype) for k, v in params.items() if k != "sample_key"}
         out = {}
         for name, src in (("eta_box", "box"), ("eta_cone", "cone"), ("eta_reach", "reach_eta"),
@@ -161,7 +162,7 @@ def build_fn(s: RcmSettings):
     return fn
 
 
-def build_constraints(s: RcmSettings):
+def build_constraints(s: RcmSettings, mesh: Any = None):
     """constraints(params, X) -> G (M, n_c), feasible when ≤ 0: eq. (19) as
     (sin(apex/2)(c − d_min) − a)/c, and reach_min − reach; None when both are off."""
     cons = s.constraints
@@ -175,7 +176,7 @@ def build_constraints(s: RcmSettings):
         if cons.eq19:
             cols.append(-eq19_margin(s, p, a, c) / c)
         if cons.reach_min is not None:
-            reach = estimates(s, params, X)["reach"].value
+            reach = estimates(s, params, X, mesh)["reach"].value
             cols.append(cons.reach_min - reach)
         return jnp.stack(cols, -1)
 
@@ -239,4 +240,10 @@ def problem(s: RcmSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Proble
         "cone_dim": s.cone.dim,
         "dtype": dtype.name,
     }
-    return Problem(names, lower, upper, build_fn(s), params, info, build_constraints(s))
+
+    def shard_samples(mesh: Any) -> Problem:
+        return Problem(names, lower, upper, build_fn(s, mesh), params, info,
+                       build_constraints(s, mesh))  # fmt: skip
+
+    return Problem(names, lower, upper, build_fn(s), params, info, build_constraints(s),
+                   shard_samples)  # fmt: skip

@@ -101,8 +101,9 @@ def chunking(n_samples: int, max_chunk: int) -> tuple[int, int]:
     return n_chunks, -(-n_samples // n_chunks)
 
 
-def build_fn(mech: Mechanism, s: SerialSettings, dtype: Any):
-    """The pure swarm function fn(params, X, key) -> (f, indices with *_se)."""
+def build_fn(mech: Mechanism, s: SerialSettings, dtype: Any, mesh: Any = None):
+    """The pure swarm function fn(params, X, key) -> (f, indices with *_se); with a
+    ``mesh``, its sample chunks are spread over the mesh's ``samples`` axis."""
     ind = s.indices
     names = s.index_names()
     weights = s.weights()
@@ -118,15 +119,14 @@ def build_fn(mech: Mechanism, s: SerialSettings, dtype: Any):
         full = jnp.concatenate([X, fixed], axis=1) * params["scale"].astype(dtype)
         lo_, hi_ = params["q_lower"].astype(dtype), params["q_upper"].astype(dtype)
 
-        def body(acc, k):
+        def sums(k):
             u = mc.unit_samples(params["sample_key"], k * chunk, chunk, mech.n, ind.sampler, dtype)
             q = lo_ + (hi_ - lo_) * u
-            new = chunk_sums(mech, s, full, q)
-            return tuple(mc.add(a, b) for a, b in zip(acc, new, strict=True)), None
+            return chunk_sums(mech, s, full, q)
 
         z = jnp.zeros((M, 5), dtype)
         init = tuple(mc.PowerSums(z, z, jnp.asarray(0.0, dtype)) for _ in range(3))
-        (ps_k, ps_m, ps_v), _ = jax.lax.scan(body, init, jnp.arange(n_chunks))
+        ps_k, ps_m, ps_v = mc.scan_chunks(sums, init, n_chunks, mesh)
         out = {}
         for k, est in (("gci", mc.mean(ps_k)), ("gcsei", mc.std(ps_k)),
                        ("manipulability", mc.mean(ps_m)), ("volume", mc.box_integral(ps_v, qvol))):  # fmt: skip
@@ -205,4 +205,7 @@ def problem(s: SerialSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Pro
             """G = A x − b (M, n_c): the linear constraints, feasible when ≤ 0."""
             return X @ p["lin_A"].astype(X.dtype).T - p["lin_b"].astype(X.dtype)
 
-    return Problem(names, lower, upper, fn, params, info, cons)
+    def shard_samples(mesh: Any) -> Problem:
+        return Problem(names, lower, upper, build_fn(mech, s, dtype, mesh), params, info, cons)
+
+    return Problem(names, lower, upper, fn, params, info, cons, shard_samples)
