@@ -118,11 +118,9 @@ def _is_key(x) -> bool:
     return jnp.issubdtype(x.dtype, jax.dtypes.prng_key)
 
 
-def _to_numpy(carry) -> dict[str, np.ndarray]:
+def _to_numpy(carry, host: Callable[[Any], np.ndarray] = np.asarray) -> dict[str, np.ndarray]:
     leaves, _ = jax.tree_util.tree_flatten_with_path(carry)
-    return {
-        _path_name(p): np.asarray(jax.random.key_data(v) if _is_key(v) else v) for p, v in leaves
-    }
+    return {_path_name(p): host(jax.random.key_data(v) if _is_key(v) else v) for p, v in leaves}
 
 
 def _from_numpy(d: dict[str, np.ndarray], template) -> Any:
@@ -142,30 +140,34 @@ def _from_numpy(d: dict[str, np.ndarray], template) -> Any:
 
 
 def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress, checkpoint,
-           resume, batched, B, record, at_end=False):  # fmt: skip
+           resume, batched, B, record, at_end=False, plan=None):  # fmt: skip
     n_iters = opt.n_iters
     lower = jnp.asarray(problem.lower, dtype)
     upper = jnp.asarray(problem.upper, dtype)
     keys = jax.random.split(key, n_runs)
     if batched:
         keys = jnp.broadcast_to(keys, (B, n_runs))  # common random numbers across settings
+    pparams = problem.params
+    # a Plan (designopt.parallel) places every input on its device mesh; None: as ever
+    place = (lambda t: t) if plan is None else plan.put  # noqa: E731
+    host = np.asarray if plan is None else plan.host
+    if plan is not None:
+        keys, params, pparams, lower, upper = plan.put((keys, params, pparams, lower, upper))
     statics = dict(opt=opt, fn=problem.fn, cons=problem.constraints, batched=batched)
     if resume is None:
-        carry = _init(keys, params, problem.params, lower, upper, **statics)
+        carry = place(_init(keys, params, pparams, lower, upper, **statics))
         b = _best(opt, carry, batched)
         hf, hx, hv = (
-            [np.asarray(b.f)[..., None]],
-            [np.asarray(b.x)[..., None, :]],
-            [np.asarray(b.v)[..., None]],
+            [host(b.f)[..., None]],
+            [host(b.x)[..., None, :]],
+            [host(b.v)[..., None]],
         )
         done = 0
     else:
-        template = jax.eval_shape(
-            lambda: _init(keys, params, problem.params, lower, upper, **statics)
-        )
+        template = jax.eval_shape(lambda: _init(keys, params, pparams, lower, upper, **statics))
         st = dict(resume.state)
         hv0 = st.pop("runner.history_v", None)
-        carry = _from_numpy(st, template)
+        carry = place(_from_numpy(st, template))
         done = resume.done
         hf, hx = [np.asarray(resume.history)], [np.asarray(resume.history_x)]
         hv = [np.zeros_like(hf[0]) if hv0 is None else np.asarray(hv0)]
@@ -176,12 +178,12 @@ def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress
     chunk = n_iters if chunk_iters is None else max(1, min(chunk_iters, n_iters))
     while done < n_iters:
         length = min(chunk, n_iters - done)
-        carry, (x, f, v) = _advance(
-            carry, params, problem.params, lower, upper, length=length, **statics
-        )
-        hf.append(np.asarray(f))
-        hx.append(np.asarray(x))
-        hv.append(np.asarray(v))
+        carry, (x, f, v) = _advance(carry, params, pparams, lower, upper, length=length, **statics)
+        if plan is not None:
+            carry = place(carry)  # the same placement every chunk: one compiled program
+        hf.append(host(f))
+        hx.append(host(x))
+        hv.append(host(v))
         done += length
         if progress is not None:
             progress(length)
@@ -189,7 +191,7 @@ def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress
             hf = [np.concatenate(hf, axis=-1)]
             hx = [np.concatenate(hx, axis=-2)]
             hv = [np.concatenate(hv, axis=-1)]
-            state = _to_numpy(carry) | {"runner.history_v": hv[0]}
+            state = _to_numpy(carry, host) | {"runner.history_v": hv[0]}
             checkpoint(Checkpoint(state, hf[0], hx[0], done))
     history = np.concatenate(hf, axis=-1)
     history_x = np.concatenate(hx, axis=-2)
@@ -237,6 +239,7 @@ def run(
     checkpoint: Callable[[Checkpoint], None] | None = None,
     resume: Checkpoint | None = None,
     checkpoint_at_end: bool = False,
+    plan: Any = None,
     **settings: Any,
 ) -> RunResult:
     """Run ``n_runs`` independent runs of optimizer ``name`` (``registry.names()``) on
@@ -246,14 +249,15 @@ def run(
     set its string options (e.g. PSO's ``draws``). ``checkpoint`` is called between chunks
     of ``chunk_iters`` iterations (and after the last with ``checkpoint_at_end``) with a
     :class:`Checkpoint`; passing one back as ``resume`` continues the run and gives exactly
-    the uninterrupted result.
+    the uninterrupted result. ``plan`` (``designopt.parallel.plan``) shards the runs or
+    particles over a device mesh: one compiled program, the same numbers.
     """
     opt = _prepare(name, n_particles, n_iters, n_runs, bounds, [settings])
     e = registry.resolve(name)
     params = e.cls.make_params(dtype, e.preset, **registry.split_settings(name, settings)[0])
     return _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress,
                   checkpoint, resume, False, 1, _record(name, opt, params, n_runs),
-                  checkpoint_at_end)  # fmt: skip
+                  checkpoint_at_end, plan)  # fmt: skip
 
 
 def run_batch(
@@ -271,6 +275,7 @@ def run_batch(
     checkpoint: Callable[[Checkpoint], None] | None = None,
     resume: Checkpoint | None = None,
     checkpoint_at_end: bool = False,
+    plan: Any = None,
 ) -> RunResult:
     """Run the optimizer once per settings dict in ``members``, all as one vmapped program.
 
@@ -289,4 +294,4 @@ def run_batch(
     params = jax.tree.map(lambda *a: jnp.stack(a), *plist)
     return _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress,
                   checkpoint, resume, True, len(members), _record(name, opt, params, n_runs),
-                  checkpoint_at_end)  # fmt: skip
+                  checkpoint_at_end, plan)  # fmt: skip
