@@ -42,15 +42,23 @@ def _load(args: argparse.Namespace):
     if cfg.precision == "float64":  # the CLI is the program: it may switch JAX to 64-bit
         jax.config.update("jax_enable_x64", True)
     if cfg.compile_cache and not getattr(args, "no_cache", False):
-        folder = cache_dir()
-        try:
-            folder.mkdir(parents=True, exist_ok=True)
-        except OSError:
-            return cfg, text  # an unwritable cache folder only costs compile time
-        jax.config.update("jax_compilation_cache_dir", str(folder))
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
-        jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+        use_cache()
     return cfg, text
+
+
+def use_cache() -> None:
+    """Keep XLA's compiled programs in :func:`cache_dir` (an unwritable folder only costs
+    compile time)."""
+    import jax
+
+    folder = cache_dir()
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return
+    jax.config.update("jax_compilation_cache_dir", str(folder))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
 
 
 def cache_dir() -> Path:
@@ -257,6 +265,8 @@ def cmd_report(args: argparse.Namespace) -> int:
 
     p = Path(args.archive)
     _readable(p)
+    if not getattr(args, "no_cache", False):
+        use_cache()  # the figure kernels compile once, then load
     for f in pipeline.draw_figures(p):
         print(f)
     return 0
@@ -380,6 +390,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.set_defaults(func=cmd_bench)
     p = sub.add_parser("report", help="draw the figures of an archive (PNG + PDF beside it)")
     p.add_argument("archive")
+    p.add_argument("--no-cache", action="store_true", help="do not keep compiled programs")
     p.set_defaults(func=cmd_report)
     s = sub.add_parser("show", help="print the summary of an archive")
     s.add_argument("archive")
