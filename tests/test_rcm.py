@@ -297,7 +297,7 @@ def test_malformed_trajectory_names_the_line(tmp_path, body, line):
         teleop.read_csv(p)
 
 
-def test_teleop_run_archives_the_replay(tmp_path):
+def test_teleop_run_archives_the_replay(tmp_path, capsys):
     cfgp = tmp_path / "tele.yaml"
     traj = tmp_path / "m.csv"
     teleop.write_csv(teleop.synthetic(rate_hz=50.0), traj)
@@ -307,6 +307,8 @@ def test_teleop_run_archives_the_replay(tmp_path):
     tt = a["teleop"]
     assert tt["q"].shape == (len(tt["t"]), 3)
     assert float(np.max(tt["error"])) < 1e-9  # no delay, nothing clamped: exact tracking
+    assert main(["show", str(tmp_path / "t.h5")]) == 0
+    assert "tracking error" in capsys.readouterr().out
 
 
 # ------------------------------------------------------------------------ bad input
