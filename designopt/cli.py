@@ -37,6 +37,7 @@ def _load(args: argparse.Namespace):
     ses = output.current()
     if ses is not None and cfg.max_minutes is not None:
         ses.set_deadline(cfg.max_minutes)
+    _parallel(args, cfg)
     import jax
 
     if cfg.precision == "float64":  # the CLI is the program: it may switch JAX to 64-bit
@@ -44,6 +45,24 @@ def _load(args: argparse.Namespace):
     if cfg.compile_cache and not getattr(args, "no_cache", False):
         use_cache()
     return cfg, text
+
+
+def _parallel(args: argparse.Namespace, cfg=None) -> None:
+    """--devices and the multi-process flags (docs/scaling.md): JAX set up before its
+    backend starts; a non-zero process of a job writes and prints nothing."""
+    from designopt import output, parallel
+
+    devices = getattr(args, "devices", None)
+    coord, n_proc = getattr(args, "coordinator", None), getattr(args, "num_processes", None)
+    multi = parallel.requested(coord, n_proc)
+    if cfg is not None and (devices is not None or multi):
+        p = cfg.parallel or parallel.ParallelSettings()
+        cfg.parallel = p.model_copy(update={"devices": devices if devices else p.devices})
+    p = cfg.parallel if cfg is not None else None
+    timeout = p.timeout_s if p is not None else parallel.DEFAULT_TIMEOUT_S
+    parallel.configure(p.devices if p is not None else devices, coord, n_proc,
+                       getattr(args, "process_id", None), timeout)  # fmt: skip
+    output.set_writer(parallel.is_writer())
 
 
 def use_cache() -> None:
@@ -113,7 +132,9 @@ def _progress(quiet: bool):
             seen["n"] += n
             seen["t"] = now
 
-        with tqdm(total=total, desc=desc, unit="it", disable=quiet) as t:
+        from designopt import output
+
+        with tqdm(total=total, desc=desc, unit="it", disable=quiet or not output.writes()) as t:
             yield update
 
     return bar
@@ -128,6 +149,8 @@ def _finish(rep, args: argparse.Namespace) -> int:
     (a figure write fault: exit 1, the archive kept)."""
     from designopt import output, pipeline
 
+    if not output.writes():  # a non-zero process of a multi-process job: process 0 reports
+        return 0
     for line in rep.lines:
         print(line)
     if getattr(args, "dry_run", False):
@@ -158,6 +181,8 @@ def resume_command(args: argparse.Namespace, cfg) -> str:
             parts.append("--" + flag.replace("_", "-"))
     if args.max_minutes is not None:
         parts += ["--max-minutes", f"{args.max_minutes:g}"]
+    if getattr(args, "devices", None) is not None:
+        parts += ["--devices", str(args.devices)]
     return shlex.join(parts)
 
 
@@ -243,6 +268,7 @@ def cmd_studies(args: argparse.Namespace) -> int:
 def cmd_bench(args: argparse.Namespace) -> int:
     from designopt import benchsuite
 
+    _parallel(args)
     return benchsuite.command(args.config, args.seed, args.out, args.quiet, args.overwrite)
 
 
@@ -334,6 +360,16 @@ def cmd_show(args: argparse.Namespace) -> int:
     return 0
 
 
+def _positive(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: give a positive integer")
+    return n
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="designopt",
@@ -359,6 +395,14 @@ def build_parser() -> argparse.ArgumentParser:
             p.add_argument("--no-figures", action="store_true", help="write the archive only")
         p.add_argument("--no-cache", action="store_true",
                        help="do not read or write the persistent compilation cache")  # fmt: skip
+        g = p.add_argument_group("devices and processes (docs/scaling.md)")
+        g.add_argument("--devices", type=_positive, default=None, metavar="N",
+                       help="use N devices (all processes together; on CPU, N host devices); "
+                            "the axis to shard comes from the config's parallel section")  # fmt: skip
+        g.add_argument("--coordinator", default=None, metavar="HOST:PORT",
+                       help="join a multi-process job (jax.distributed) at this coordinator")  # fmt: skip
+        g.add_argument("--num-processes", type=_positive, default=None, metavar="N")
+        g.add_argument("--process-id", type=int, default=None, metavar="I")
 
     r = sub.add_parser("run", help="optimise one study from a YAML config")
     common(r)
@@ -413,6 +457,9 @@ def main(argv: list[str] | None = None) -> int:
                         if ses.flush is not None:
                             ses.flush()
                         raise ses.interrupted() from None
+                except Exception as e:
+                    _peer_lost(e, ses)
+                    raise
         return args.func(args)
     except ConfigError as e:
         print(f"designopt: error: {e}", file=sys.stderr)
@@ -426,6 +473,29 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("designopt: interrupted (SIGINT); nothing written", file=sys.stderr)
         return 130
+
+
+def _peer_lost(e: BaseException, ses) -> None:
+    """A process of a multi-process job died or stopped answering: the newest checkpoint
+    written (process 0), one line, exit 1 at once (``jax.distributed``'s shutdown would
+    wait for the lost peer). Returns when ``e`` is something else."""
+    import os
+
+    from designopt import parallel
+
+    if "jax" not in sys.modules or (lost := parallel.peer_error(e)) is None:
+        return
+    kept = ""
+    with contextlib.suppress(Exception), ses.writing():
+        if ses.flush is not None:
+            ses.flush()
+        kept = "; " + ses.kept()
+    ses.cleanup()
+    print(f"designopt: error: {lost}{kept}", file=sys.stderr)
+    with contextlib.suppress(Exception):
+        sys.stdout.flush()
+        sys.stderr.flush()
+    os._exit(1)
 
 
 if __name__ == "__main__":

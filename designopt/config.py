@@ -10,6 +10,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model, field_validator
 
 from designopt.errors import ConfigError  # noqa: E402  (re-exported)
+from designopt.parallel import ParallelSettings
 
 
 class _UniqueKeyLoader(yaml.SafeLoader):
@@ -129,6 +130,7 @@ class RunConfigBase(_Strict):
         None, gt=0, allow_inf_nan=False
     )  # stop cleanly (--max-minutes)
     checkpoint_every_s: float = Field(10.0, ge=0, allow_inf_nan=False)  # checkpoint cadence
+    parallel: ParallelSettings | None = None  # devices and the axis to shard (--devices)
 
     CONTROL_KEYS: ClassVar[tuple[str, ...]] = (
         "output",
@@ -136,6 +138,7 @@ class RunConfigBase(_Strict):
         "overwrite",
         "max_minutes",
         "checkpoint_every_s",
+        "parallel",
     )
     """Keys that steer how a run is carried out, not what it computes: a resume may change them."""
 

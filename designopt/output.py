@@ -14,6 +14,11 @@ through here, with one policy (docs/faults.md).
   anywhere else (set-up, compilation, scoring) a watcher thread stops the process at once,
   keeping the last checkpoint; temporary files and locks are removed either way.
 
+In a multi-process job (docs/scaling.md) only process 0 writes: the others call
+``set_writer(False)``, after which ``claim`` only checks (read-only, so every process
+refuses the same outputs), and ``write_file``, ``remove`` and ``publish_figures`` write
+nothing.
+
 Kept free of JAX and h5py so the CLI starts fast.
 """
 
@@ -54,6 +59,17 @@ class _Ops:
 
 
 OPS = _Ops()
+_WRITER = [True]
+
+
+def set_writer(writes: bool) -> None:
+    """Whether this process writes files (False: a non-zero process of a multi-process job)."""
+    _WRITER[0] = bool(writes)
+
+
+def writes() -> bool:
+    """Whether this process writes files."""
+    return _WRITER[0]
 
 
 def reason(e: OSError) -> str:
@@ -316,6 +332,8 @@ def write_file(path: str | Path, data: bytes, what: str = "archive") -> Path:
     """Write ``data`` to ``path`` atomically: a temporary file beside it, fsync, rename.
     WriteError (one line: path, OS reason) on any OSError; the old file, if any, is kept."""
     path = Path(path)
+    if not writes():
+        return path
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     with session() as ses, ses.writing():
         ses.temps.add(tmp)
@@ -340,6 +358,8 @@ def write_file(path: str | Path, data: bytes, what: str = "archive") -> Path:
 
 def remove(path: Path) -> None:
     """Remove a file (a finished run's checkpoint) under the writer's lock."""
+    if not writes():
+        return
     with session() as ses, ses.writing():
         path.unlink(missing_ok=True)
 
@@ -351,6 +371,8 @@ def publish_figures(
     replaces the whole folder (a run's ``<stem>_figures``), else file by file (figures
     that live beside the archive). OSError → WriteError; the temporary folder removed."""
     folder = Path(folder)
+    if not writes():
+        return []
     tmp = folder.with_name(f".{folder.name}.tmp-{os.getpid()}")
     old = folder.with_name(f".{folder.name}.old-{os.getpid()}")
     with session() as ses:
@@ -496,6 +518,11 @@ def claim(path: Path, overwrite: bool = False, need_bytes: int = 0) -> None:
     session, the checks only)."""
     path = Path(path)
     ses = current()
+    if not writes():
+        check(path, overwrite, need_bytes, make=False)
+        if ses is not None:
+            ses.covered.add(path)
+        return
     if ses is None:
         check(path, overwrite, need_bytes)
         return

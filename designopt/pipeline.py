@@ -25,7 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 import yaml
 
-from designopt import archive, output
+from designopt import archive, output, parallel
 from designopt.config import ConfigError, load, validate
 from designopt.errors import WriteError
 from designopt.problems.base import Problem
@@ -238,14 +238,20 @@ def optimise(cfg: Any, problem: Problem, key: jax.Array,
              members: list[dict[str, float]] | None = None,
              progress: Callable[[int], None] | None = None,
              checkpoint: Callable[[Any], None] | None = None,
-             resume: Any = None) -> Any:  # fmt: skip
+             resume: Any = None, where: str = "config") -> Any:  # fmt: skip
     """The configured optimizer on ``problem``; with ``members`` (overrides of optimizer
     settings) one vmapped batch on common keys. Chunks are small (≤ 5 % of the run and
-    about DESIGN_SAMPLES_PER_CHUNK of work), so a stop meets an iteration boundary soon."""
+    about DESIGN_SAMPLES_PER_CHUNK of work), so a stop meets an iteration boundary soon.
+    A ``parallel:`` section shards the job over devices (designopt.parallel)."""
     from designopt import optim
     from designopt.problems import penalty
 
     o = cfg.optimizer
+    plan = parallel.plan(cfg.parallel, n_runs=o.n_runs, n_particles=o.n_particles,
+                         members=None if members is None else len(members), problem=problem,
+                         where=where)  # fmt: skip
+    if plan is not None:
+        problem = plan.problem(problem)
     if o.constraints.method == "penalty":
         problem = penalty.quadratic(problem, o.constraints.weight)
     work = estimate(cfg, members=len(members or [None])).work_per_iter
@@ -254,28 +260,39 @@ def optimise(cfg: Any, problem: Problem, key: jax.Array,
                   dtype=dtype_of(cfg), chunk_iters=chunk,
                   progress=progress, checkpoint=checkpoint, resume=resume,
                   checkpoint_at_end=checkpoint is not None)  # fmt: skip
+    if plan is not None:
+        common["plan"] = plan
     if members is None:
-        return optim.run(o.name, problem, key, **common, **o.settings)
-    return optim.run_batch(o.name, problem, key, [o.settings | m for m in members], **common)
+        res = optim.run(o.name, problem, key, **common, **o.settings)
+    else:
+        res = optim.run_batch(o.name, problem, key, [o.settings | m for m in members], **common)
+    if plan is not None:
+        res.settings["parallel"] = plan.describe()
+    return res
 
 
-def score(problem: Problem, X: np.ndarray, batch: int | None = None) -> dict[str, np.ndarray]:
+def score(problem: Problem, X: np.ndarray, batch: int | None = None,
+          plan: Any = None) -> dict[str, np.ndarray]:  # fmt: skip
     """f and every index (with standard errors) of designs X (n, D), in vmapped batches of
-    a fixed size (the last one padded), so one compiled program serves any n."""
+    a fixed size (the last one padded), so one compiled program serves any n. ``plan``
+    (``designopt.parallel.scoring_plan``) splits each batch's designs over its devices."""
     X = np.asarray(X, np.float64)
     n = X.shape[0]
     b = n if batch is None else max(1, min(batch, n))
     fn = _scorer(problem.fn, problem.constraints)
+    params, key, host, rows = problem.params, jax.random.key(0), np.asarray, jnp.asarray
+    if plan is not None:
+        b = -(-b // plan.n_devices) * plan.n_devices
+        params, key, host = plan.put(params), plan.put(key), plan.host
+        rows = lambda x: parallel.shard_rows(plan, x)  # noqa: E731
     outs = []
     for i in range(0, n, b):
         Xi = X[i : i + b]
         pad = b - Xi.shape[0]
         if pad:
             Xi = np.concatenate([Xi, np.repeat(Xi[-1:], pad, 0)])
-        f, sub = fn(problem.params, jnp.asarray(Xi), jax.random.key(0))
-        outs.append(
-            {"f": np.asarray(f)[: b - pad]} | {k: np.asarray(v)[: b - pad] for k, v in sub.items()}
-        )
+        f, sub = fn(params, rows(Xi), key)
+        outs.append({"f": host(f)[: b - pad]} | {k: host(v)[: b - pad] for k, v in sub.items()})
     return {k: np.concatenate([o[k] for o in outs]) for k in outs[0]}
 
 
@@ -511,7 +528,7 @@ def run(cfg: Any, text: str, where: str, out: Path, resume: bool = False,
             with Stopwatch() as opt, progress(o.n_iters, f"{o.name} on {cfg.study.name}") as bar:
                 try:
                     res = optimise(cfg, problem, keys["optimizer"], progress=bar,
-                                   checkpoint=checkpoint, resume=ck)  # fmt: skip
+                                   checkpoint=checkpoint, resume=ck, where=where)  # fmt: skip
                 except KeyboardInterrupt:
                     with ses.writing():
                         flush()
@@ -629,7 +646,8 @@ def sweep(cfg: Any, text: str, where: str, out: Path,
                 keys = streams(c.seed)
                 problem = build_problem(c, keys, where)
                 opt_sets = [sw.split(m)[1] for _, m in mem]
-                res = optimise(c, problem, keys["optimizer"], members=opt_sets, progress=bar)
+                res = optimise(c, problem, keys["optimizer"], members=opt_sets, progress=bar,
+                               where=where)  # fmt: skip
                 for j, (i, m) in enumerate(mem):
                     sets = {
                         a: (b[j] if isinstance(b, list) else b) for a, b in res.settings.items()
@@ -752,10 +770,11 @@ def scan(cfg: Any, text: str, where: str, out: Path,
             problem = build_problem(cfg, keys, where)
             varied, X = scan_designs(cfg, problem, where)
             b = cfg.scan.batch
+            plan = parallel.scoring_plan(cfg.parallel, where)
             parts = []
             with progress(X.shape[0], "scan") as bar:
                 for i in range(0, X.shape[0], b):
-                    parts.append(score(problem, X[i : i + b], batch=b))
+                    parts.append(score(problem, X[i : i + b], batch=b, plan=plan))
                     bar(min(b, X.shape[0] - i))
             res = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
         tree = {"scan": {"names": np.array(problem.names, dtype="S"), "x": X,
