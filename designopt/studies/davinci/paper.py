@@ -169,31 +169,31 @@ def solve(
     n_fine = int(round(180.0 / (h0_deg / 2 ** (levels - 1))))
     grid = jnp.linspace(lo[0], hi[0], n_fine + 1, dtype=T.dtype)
     Fg = jnp.stack([jax.vmap(lambda t, b=b: reduced(X, T, t, b).F)(grid) for b in (0, 1)])
-    cands, cand_level = [], []
+    # every bracket of every step and both roots of eq. (14), solved in one vmapped Newton
+    i0, br, lv = [], [], []
     for k in range(levels):
         stride = 2 ** (levels - 1 - k)
-        i0 = np.arange(0, n_fine, stride)
+        idx = np.arange(0, n_fine, stride)
         for b in (0, 1):
-            fa, fb = Fg[b, i0], Fg[b, i0 + stride]
-            bracket = (jnp.sign(fa) != jnp.sign(fb)) & jnp.isfinite(fa) & jnp.isfinite(fb)
+            i0.append(np.stack([idx, idx + stride], -1))
+            br.append(np.full(len(idx), b))
+            lv.append(np.full(len(idx), k))
+    ii, branch, level = np.concatenate(i0), np.concatenate(br), jnp.asarray(np.concatenate(lv))
+    fa, fb = Fg[branch, ii[:, 0]], Fg[branch, ii[:, 1]]
+    bracket = (jnp.sign(fa) != jnp.sign(fb)) & jnp.isfinite(fa) & jnp.isfinite(fb)
+    bj = jnp.asarray(branch, T.dtype)
 
-            def root(a_, b_, ok, b=b):
-                def f(x, b=b):
-                    return reduced(X, T, x, b).F
+    def root(a_, b_, ok, bb):
+        def f(x):
+            return reduced(X, T, x, bb).F
 
-                return jnp.where(ok, _newton(f, a_, b_, newton_iters), a_)
+        t = jnp.where(ok, _newton(f, a_, b_, newton_iters), a_)
+        return reduced(X, T, t, bb).q
 
-            t = jax.vmap(root)(grid[i0], grid[i0 + stride], bracket)
-            q = jax.vmap(lambda t_, b=b: reduced(X, T, t_, b).q)(t)
-            ok, pe, re = ik._evaluate(X, jnp.broadcast_to(T, (len(i0), 4, 4)), q, lo, hi,
-                                      ik.Options(success_pos=tol, success_rot=tol))  # fmt: skip
-            cands.append((q, ok & bracket, pe, re))
-            cand_level.append(np.full(len(i0), k))
-    q = jnp.concatenate([c[0] for c in cands])
-    ok = jnp.concatenate([c[1] for c in cands])
-    pe = jnp.concatenate([c[2] for c in cands])
-    re = jnp.concatenate([c[3] for c in cands])
-    level = jnp.asarray(np.concatenate(cand_level))
+    q = jax.vmap(root)(grid[ii[:, 0]], grid[ii[:, 1]], bracket, bj)
+    ok, pe, re = ik._evaluate(X, jnp.broadcast_to(T, (len(ii), 4, 4)), q, lo, hi,
+                              ik.Options(success_pos=tol, success_rot=tol))  # fmt: skip
+    ok = ok & bracket
     first = jnp.min(jnp.where(ok, level, levels))
     pick = ok & (level == first)
     dist = jnp.where(pick, ik._branch_dist(q, q_prev[None], ik.Options()), jnp.inf)

@@ -112,6 +112,18 @@ class IKSettings(_Strict):
     """Previous configuration (deg; q3 in mm) for the branch choice of a cold solve."""
     batch: int = Field(65536, ge=1)  # poses per compiled call
     orthonormal_tol: float = Field(1e-6, gt=0)
+    arm: dict[str, float] = {}
+    """Arm parameters for ``designopt ik`` (Table 1 unless given here or in ``fixed``)."""
+
+    @field_validator("arm")
+    @classmethod
+    def _arm(cls, v: dict[str, float]) -> dict[str, float]:
+        for k, x in v.items():
+            if k not in KEYS:
+                raise ValueError(f"unknown arm parameter '{k}'; allowed {list(KEYS)}")
+            if k in ("l_QH", "l_IJ") and x <= 0:
+                raise ValueError(f"{k}: a length must be > 0 mm, got {x}")
+        return v
 
 
 class DavinciSettings(StudySettings):
@@ -153,6 +165,10 @@ class DavinciSettings(StudySettings):
                 f"fixed: {both} are design variables; a parameter is either variable or fixed"
             )
         return self
+
+    def ik_arm(self) -> dict[str, float]:
+        """The arm ``designopt ik`` solves for: Table 1, then ``fixed``, then ``ik.arm``."""
+        return {k: float(self.ik.arm.get(k, self.fixed.get(k, TABLE1[k]))) for k in KEYS}
 
     def design(self) -> dict[str, float]:
         """Arm parameters that are not varied (Table 1 unless ``fixed``), config units."""
