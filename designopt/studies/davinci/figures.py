@@ -72,7 +72,7 @@ def gci_line(s: DavinciSettings, params, x: np.ndarray, names: tuple[str, ...], 
     ax.fill_between(ls, g - 2 * se, g + 2 * se, alpha=0.25, lw=0)
     for lab, v in marks.items():
         ax.axvline(v, ls="--", lw=0.8, color="0.4")
-        ax.text(v, ax.get_ylim()[1], f" {lab}", fontsize=8, va="top")
+        ax.text(v, ax.get_ylim()[1], f" {lab}", fontsize=8, va="top", rotation=90)
     ax.set_xlabel("wrist offset l_IJ (mm)")
     ax.set_ylabel("GCI (mean 1/k over the cone)")
     beta = math.degrees(float(base[1]))

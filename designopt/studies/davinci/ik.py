@@ -44,7 +44,7 @@ class Options(NamedTuple):
     first_iter: int = 5  # LM iterations of the first pass over every lane
     continue_iter: int = 10  # then, lanes not yet converged (gathered): a short pass
     max_iter: int = 60  # iterations of each later rescue pass (failed lanes only)
-    warm_iter: int = 4  # trajectory mode: iterations from the previous solution
+    warm_iter: int = 2  # trajectory mode: iterations from the predicted solution
     tol_pos: float = 1e-10  # mm, convergence (stricter than success)
     tol_rot: float = 1e-12  # rad
     success_pos: float = 1e-9  # mm
@@ -52,7 +52,7 @@ class Options(NamedTuple):
     length: float = 100.0  # mm, characteristic length scaling the position rows
     damping: float = 1e-12  # λ₀
     retries: int = 1  # extra seeds for lanes that failed (next database entries)
-    chunk: int = 2048  # lanes per early-exit group
+    chunk: int = 8192  # lanes per early-exit group (measured: 1024 → 20k/s, 8192 → 50-80k/s)
     q3_weight: float = 0.01  # rad per mm in the branch distance
 
 
@@ -448,22 +448,27 @@ def _rescues(X, db, T, r: Result, lo, hi, o: Options) -> Result:
 def solve_trajectory(X: Array, db: Database, T: Array, q_start: Array | None = None,
                      o: Options = OPTIONS) -> Result:  # fmt: skip
     """IK along paths T (S, P, 4, 4): S time steps of P independent paths, by a
-    ``lax.scan`` over time warm-started from the previous step's solution (``o.warm_iter``
-    LM iterations); the first step is solved by :func:`solve` (closest to ``q_start``
-    (P, 6) if given). Lanes whose warm start fails are solved from the database at that
-    step, as :func:`solve` does."""
+    ``lax.scan`` over time warm-started from the previous solutions (linear predictor
+    q_{k-1} + (q_{k-1} − q_{k-2}), then ``o.warm_iter`` LM iterations); the first step is
+    solved by :func:`solve` (closest to ``q_start`` (P, 6) if given). Lanes whose warm
+    start fails are solved from the database at that step, as :func:`solve` does."""
     X = jnp.asarray(X, T.dtype)
     lo, hi = jnp.asarray(mech.LOWER, T.dtype), jnp.asarray(mech.UPPER, T.dtype)
     first = solve(X, db, T[0], q_start, o)
 
-    def step(q_prev, Tk):
-        q, it = _lm_chunk(X, Tk, q_prev, lo, hi, o._replace(max_iter=o.warm_iter))
+    def step(carry, Tk):
+        q_prev, dq = carry
+        q0 = _project(q_prev + dq, lo, hi)  # linear predictor from the last two solutions
+        q, it = _lm_chunk(X, Tk, q0, lo, hi, o._replace(max_iter=o.warm_iter))
         ok, pe, re = _evaluate(X, Tk, q, lo, hi, o)
         r = _rescues(X, db, Tk, Result(q, ok, it, pe, re), lo, hi, o)
-        return jnp.where(r.success[:, None], r.q, q_prev), r
+        q_next = jnp.where(r.success[:, None], r.q, q_prev)
+        d = q_next - q_prev
+        d = d.at[:, 3].set(jnp.remainder(d[:, 3] + math.pi, 2 * math.pi) - math.pi)
+        return (q_next, jnp.where(r.success[:, None], d, 0.0)), r
 
     q_init = jnp.where(first.success[:, None], first.q, seed(X, db, T[0]))
-    _, rest = jax.lax.scan(step, q_init, T[1:])
+    _, rest = jax.lax.scan(step, (q_init, jnp.zeros_like(q_init)), T[1:])
     return jax.tree.map(lambda a, b: jnp.concatenate([a[None], b]), first, rest)
 
 

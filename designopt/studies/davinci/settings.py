@@ -100,7 +100,7 @@ class IKSettings(_Strict):
     first_iter: int = Field(5, ge=1, le=100)
     continue_iter: int = Field(10, ge=1, le=200)
     max_iter: int = Field(60, ge=1, le=500)
-    warm_iter: int = Field(4, ge=1, le=100)
+    warm_iter: int = Field(2, ge=1, le=100)
     retries: int = Field(1, ge=0, le=4)
     success_pos_mm: float = Field(1e-9, gt=0)
     success_rot_rad: float = Field(1e-9, gt=0)
