@@ -202,6 +202,14 @@ def test_unreachable_poses_report_failure_never_a_wrong_success(db, solve64):
     assert np.all(np.asarray(pe)[~ok] > 1e-9) or np.all(np.isfinite(np.asarray(r.q)))
 
 
+def test_nan_pose_is_a_failure_in_the_jitted_solver(db, solve64):
+    T = np.array(m.pose(X, jnp.asarray(random_q(3))))
+    T[1, 2, 3] = np.nan
+    T[2, 0, 0] = np.inf
+    r = solve64(T, db)
+    assert np.asarray(r.success).tolist() == [True, False, False]
+
+
 @pytest.mark.slow
 def test_previous_configuration_picks_the_branch_and_closed_form_shows_one_in_limits(db):
     q = random_q(64, np.random.default_rng(5), margin=0.1)
