@@ -141,3 +141,22 @@ def test_wrong_study_and_missing_file_are_config_errors(tmp_path):
         run(CONFIG, "--poses", tmp_path / "none.csv", "--out", tmp_path / "o.h5")
     with pytest.raises(ConfigError, match="da Vinci arm"):
         run("configs/plas.yaml", "--poses", tmp_path / "none.csv", "--out", tmp_path / "o.h5")
+
+
+@pytest.mark.slow
+def test_batches_padding_and_trajectory_segments_agree(tmp_path):
+    """More poses than ``ik.batch``: cold batches (the last padded) and trajectory
+    segments (each warm-started from the previous segment's last solution)."""
+    import yaml
+
+    from designopt.config import validate
+
+    raw = yaml.safe_load(open(CONFIG))
+    raw["study"]["ik"]["batch"] = 4
+    cfg = validate(raw, "test")
+    q, T = poses(10)
+    cold = ikcli.solve_poses(cfg.study, T)
+    traj = ikcli.solve_poses(cfg.study, T, trajectory=True)
+    assert cold["q"].shape == (10, 6) and cold["success"].all() and traj["success"].all()
+    np.testing.assert_allclose(cold["q"], q, atol=1e-8)
+    np.testing.assert_allclose(traj["q"], q, atol=1e-8)
