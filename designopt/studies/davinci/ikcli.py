@@ -185,15 +185,18 @@ def solve_poses(settings: Any, T: np.ndarray, trajectory: bool = False,
         q_start = None if qp is None else _q_rad(qp)
         for i in range(0, N, B):
             Tk = T[i : i + B]
+            n = len(Tk)
             if q_start is None:
                 q_start = np.asarray(ik.seed(X, db, jnp.asarray(Tk[:1])))[0]
+            if n < B:  # hold the last pose: one compiled program for every segment
+                Tk = np.concatenate([Tk, np.broadcast_to(Tk[-1:], (B - n, 4, 4))])
             r = fn(jnp.asarray(Tk), jnp.asarray(q_start))
-            r = jax.tree.map(lambda a: np.asarray(a)[:, 0], r)
+            r = jax.tree.map(lambda a, n=n: np.asarray(a)[:n, 0], r)
             ok = np.flatnonzero(r.success)
             q_start = r.q[ok[-1]] if len(ok) else q_start
             _collect(out, r)
             if progress is not None:
-                progress(len(Tk))
+                progress(n)
     else:
         fn = jax.jit(lambda T, qprev: ik.solve(X, db, T, qprev, o))
         for i in range(0, N, B):
