@@ -404,8 +404,9 @@ def solve(
     """IK of poses T (B, 4, 4) for design X (4,), cold-started from the database.
 
     A first pass runs ``o.first_iter`` LM iterations from the nearest database sample;
-    lanes that have not converged continue for ``o.max_iter`` iterations, then restart
-    from the next database samples (``o.retries``). With ``q_prev`` (B, 6), the previous
+    lanes not yet solved continue for ``o.continue_iter``, then ``o.max_iter`` iterations,
+    then restart from the full-wrist seed and from the next database samples
+    (``o.retries``), each pass on the failed lanes only (:func:`_rescue`). With ``q_prev`` (B, 6), the previous
     configuration is a second seed and, among the converged solutions within limits, the
     one closest to q_prev is returned (joint distance with q3 scaled by ``o.q3_weight``).
     Inputs must be finite rigid transforms (:func:`check_poses`).
