@@ -113,9 +113,15 @@ def cases(cfg: BenchConfig) -> list[tuple[str, str, int | None]]:
     return out
 
 
-def run_suite(cfg: BenchConfig, progress: Callable[[int], None] | None = None) -> dict[str, Any]:
-    """Run every case × entry; returns {"results": {case: {label: record}}, "stats": ...}."""
+def run_suite(cfg: BenchConfig, progress: Callable[[int], None] | None = None,
+              parallel: Any = None) -> dict[str, Any]:  # fmt: skip
+    """Run every case × entry; returns {"results": {case: {label: record}}, "stats": ...}.
+    ``parallel`` (a ``designopt.parallel.ParallelSettings``) splits runs or particles over
+    devices (docs/scaling.md)."""
+    from designopt import parallel as par
+
     b = cfg.bench
+    plan = par.plan(parallel, n_runs=b.n_runs, n_particles=b.n_particles, where="bench")
     dtype = jnp.dtype(cfg.precision)
     ents = entries(cfg)
     for _, name, settings in ents:
@@ -130,7 +136,7 @@ def run_suite(cfg: BenchConfig, progress: Callable[[int], None] | None = None) -
                 r = optim.run(
                     name, problem, jax.random.fold_in(key, ci), b.n_particles, b.n_iters,
                     b.n_runs, bounds=b.bounds, dtype=dtype, chunk_iters=max(1, b.n_iters // 5),
-                    progress=progress, **settings,
+                    progress=progress, **({"plan": plan} if plan else {}), **settings,
                 )  # fmt: skip
             results[case][label] = {
                 "history": r.history.astype(np.float32),
@@ -180,7 +186,7 @@ def format_table(case: str, st: dict[str, Any], reference: str) -> str:
 
 
 def command(config_path: str, seed: int | None, out: str | None, quiet: bool,
-            overwrite: bool = False) -> int:  # fmt: skip
+            overwrite: bool = False, parallel: Any = None) -> int:  # fmt: skip
     """``designopt bench CONFIG [--seed N] [--out PATH] [--quiet] [--overwrite]``: run the
     suite, print the tables, write the archive and the figures through the one writer
     (``designopt.output``). ConfigError for bad input (the CLI prints it and exits 2)
@@ -195,10 +201,10 @@ def command(config_path: str, seed: int | None, out: str | None, quiet: bool,
     path = Path(out or cfg.output)
     with output.session():
         output.claim(path, overwrite)
-        return _command(cfg, text, path, quiet)
+        return _command(cfg, text, path, quiet or not output.writes(), parallel)
 
 
-def _command(cfg: BenchConfig, text: str, path: Path, quiet: bool) -> int:
+def _command(cfg: BenchConfig, text: str, path: Path, quiet: bool, parallel: Any = None) -> int:
     """The suite, its tables, archive and figures, once the output is claimed."""
     from tqdm import tqdm
 
@@ -208,8 +214,10 @@ def _command(cfg: BenchConfig, text: str, path: Path, quiet: bool) -> int:
     n_ent = len(b.variants)
     total = len(cases(cfg)) * n_ent * b.n_iters
     with Stopwatch() as sw, tqdm(total=total, desc="bench", unit="it", disable=quiet) as bar:
-        res = run_suite(cfg, progress=bar.update)
+        res = run_suite(cfg, progress=bar.update, parallel=parallel)
     st = res["stats"]
+    if not output.writes():  # a non-zero process of a multi-process job: process 0 reports
+        return 0
     for case in st:
         print(format_table(case, st[case], b.reference), end="\n\n")
     tree: dict[str, Any] = {"bench": {}}

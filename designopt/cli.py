@@ -47,22 +47,27 @@ def _load(args: argparse.Namespace):
     return cfg, text
 
 
-def _parallel(args: argparse.Namespace, cfg=None) -> None:
+def _parallel(args: argparse.Namespace, cfg=None):
     """--devices and the multi-process flags (docs/scaling.md): JAX set up before its
-    backend starts; a non-zero process of a job writes and prints nothing."""
+    backend starts; a non-zero process of a job writes and prints nothing. Returns the
+    parallel settings in force (None: one device, as ever)."""
     from designopt import output, parallel
 
     devices = getattr(args, "devices", None)
     coord, n_proc = getattr(args, "coordinator", None), getattr(args, "num_processes", None)
     multi = parallel.requested(coord, n_proc)
-    if cfg is not None and (devices is not None or multi):
-        p = cfg.parallel or parallel.ParallelSettings()
-        cfg.parallel = p.model_copy(update={"devices": devices if devices else p.devices})
     p = cfg.parallel if cfg is not None else None
+    if devices is not None or multi:
+        p = (p or parallel.ParallelSettings()).model_copy(
+            update={"devices": devices if devices else (p.devices if p else None)}
+        )
+        if cfg is not None:
+            cfg.parallel = p
     timeout = p.timeout_s if p is not None else parallel.DEFAULT_TIMEOUT_S
     parallel.configure(p.devices if p is not None else devices, coord, n_proc,
                        getattr(args, "process_id", None), timeout)  # fmt: skip
     output.set_writer(parallel.is_writer())
+    return p
 
 
 def use_cache() -> None:
@@ -268,8 +273,8 @@ def cmd_studies(args: argparse.Namespace) -> int:
 def cmd_bench(args: argparse.Namespace) -> int:
     from designopt import benchsuite
 
-    _parallel(args)
-    return benchsuite.command(args.config, args.seed, args.out, args.quiet, args.overwrite)
+    return benchsuite.command(args.config, args.seed, args.out, args.quiet, args.overwrite,
+                              _parallel(args))  # fmt: skip
 
 
 def _readable(p: Path) -> None:
