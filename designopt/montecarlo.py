@@ -86,7 +86,7 @@ class PowerSums(NamedTuple):
 
 def power_sums(w: Array, g: Array, axis: int = -1) -> PowerSums:
     """Weighted power sums of g along ``axis`` (weights w broadcast against g)."""
-    w = jnp.broadcast_to(w, g.shape)
+    w = jnp.broadcast_to(jnp.asarray(w, g.dtype), g.shape)  # a Python 1.0 must not widen g
     w2 = w * w
     gb = [jnp.ones_like(g), g, g * g, g * g * g, (g * g) * (g * g)]
     s1 = jnp.stack([jnp.sum(w * x, axis=axis) for x in gb], -1)
@@ -97,7 +97,7 @@ def power_sums(w: Array, g: Array, axis: int = -1) -> PowerSums:
 def mean_sums(w: Array, g: Array, axis: int = -1) -> PowerSums:
     """The power sums :func:`mean` needs (b ≤ 2; the higher ones are left 0): a third of
     the work of :func:`power_sums`. Not for :func:`std`."""
-    w = jnp.broadcast_to(w, g.shape)
+    w = jnp.broadcast_to(jnp.asarray(w, g.dtype), g.shape)
     wg = w * g
     z = jnp.zeros(wg.shape[:axis] + wg.shape[axis + 1 :] if axis != -1 else wg.shape[:-1], g.dtype)
     s1 = jnp.stack(

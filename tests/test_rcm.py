@@ -341,3 +341,12 @@ def test_malformed_trajectory_exits_2_naming_the_line(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert "line 3" in err and "bad.csv" in err and len(err.splitlines()) == 1, err
     assert not (tmp_path / "x.h5").exists()
+
+
+def test_float32_problem_with_x64_enabled():
+    """float32 configs run with JAX's 64-bit mode on (the tests' default): no dtype leak."""
+    s = RcmSettings(eta={"n_samples": 2048})
+    P = obj.problem(s, streams(0), jnp.float32)
+    f, aux = P.evaluate(jnp.asarray([[120.0, 250.0]], jnp.float32))
+    assert f.dtype == jnp.float32 and aux["reach"].dtype == jnp.float32
+    assert 0.99 < float(aux["reach"][0]) <= 1.0
