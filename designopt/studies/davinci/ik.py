@@ -41,8 +41,8 @@ Array = jnp.ndarray
 class Options(NamedTuple):
     """Solver settings (static: they shape the compiled program)."""
 
-    first_iter: int = 5  # LM iterations of the first pass over every lane
-    continue_iter: int = 10  # then, lanes not yet converged (gathered): a short pass
+    first_iter: int = 4  # LM iterations of the first pass over every lane
+    continue_iter: int = 6  # then, lanes not yet converged (gathered): a short pass
     max_iter: int = 60  # iterations of each later rescue pass (failed lanes only)
     warm_iter: int = 2  # trajectory mode: iterations from the predicted solution
     tol_pos: float = 1e-10  # mm, convergence (stricter than success)
@@ -176,6 +176,12 @@ def _mtm(A: Array, B: Array) -> Array:
     return jnp.sum(A[..., :, :, None] * B[..., :, None, :], axis=-3)
 
 
+def _dot3(x: Array, pts: Array) -> Array:
+    """x (B, d) · pts (N, d)ᵀ as elementwise products (fused with the arg-max that reads
+    it; a small-K matrix product would be materialised first)."""
+    return sum(x[:, k, None] * pts[None, :, k] for k in range(x.shape[1]))
+
+
 def _best(score: Array, rank: int) -> Array:
     """Index of the ``rank``-th largest score along the last axis."""
     if rank == 0:
@@ -206,14 +212,14 @@ def seed(X: Array, db: Database, T: Array, rank: int = 0, wrist_point: bool = Tr
         d = d - X[3] * v / jnp.where(nv > 0, nv, 1.0)
     r = jnp.linalg.norm(d, axis=-1)
     r = jnp.where(r > 0, r, 1.0)
-    q12 = db.qa[_best((d / r[:, None]) @ db.sa.T, rank)]
+    q12 = db.qa[_best(_dot3(d / r[:, None], db.sa), rank)]
     q3 = db.q3[jnp.argmin(jnp.abs(r[:, None] - db.q3[None, :]), -1)]
     q123 = jnp.concatenate([q12, q3[:, None]], -1)
     W = _mtm(_rot3(X, q123), T[:, :3, :3])  # target rotation in frame 3
     if full_wrist:
-        qw = db.qw[jnp.argmax(W.reshape(-1, 9) @ db.rw.T, -1)]
+        qw = db.qw[jnp.argmax(_dot3(W.reshape(-1, 9), db.rw), -1)]
         return jnp.concatenate([q123, qw], -1)
-    q45 = db.qb[jnp.argmax(W[:, :, 2] @ db.ab.T, -1)]
+    q45 = db.qb[jnp.argmax(_dot3(W[:, :, 2], db.ab), -1)]
     G = _mtm(_wrist_rot(q45), W)  # ≈ Rz(q6)
     c, s = G[:, 0, 0] + G[:, 1, 1], G[:, 1, 0] - G[:, 0, 1]
     q6 = db.qc[jnp.argmax(c[:, None] * db.cs[None, :, 0] + s[:, None] * db.cs[None, :, 1], -1)]

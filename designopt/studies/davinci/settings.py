@@ -97,8 +97,8 @@ class Objective(_Strict):
 class IKSettings(_Strict):
     """The production IK solver (``designopt ik``; docs/davinci.md)."""
 
-    first_iter: int = Field(5, ge=1, le=100)
-    continue_iter: int = Field(10, ge=1, le=200)
+    first_iter: int = Field(4, ge=1, le=100)
+    continue_iter: int = Field(6, ge=1, le=200)
     max_iter: int = Field(60, ge=1, le=500)
     warm_iter: int = Field(2, ge=1, le=100)
     retries: int = Field(1, ge=0, le=4)
