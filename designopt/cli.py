@@ -17,7 +17,7 @@ from pathlib import Path
 
 from designopt.errors import ConfigError, Interrupted, WriteError
 
-WRITERS = ("run", "sweep", "scan", "bench", "report")
+WRITERS = ("run", "sweep", "scan", "bench", "report", "ik")
 """Commands that write files: they run in the writer's session with signal handling."""
 
 
@@ -291,6 +291,12 @@ def _readable(p: Path) -> None:
         raise ConfigError(f"{p}: not a readable HDF5 archive ({e})") from None
 
 
+def cmd_ik(args: argparse.Namespace) -> int:
+    from designopt.studies.davinci import ikcli
+
+    return ikcli.cmd_ik(args, _load(args))
+
+
 def cmd_report(args: argparse.Namespace) -> int:
     from designopt import pipeline
 
@@ -437,6 +443,27 @@ def build_parser() -> argparse.ArgumentParser:
     )
     common(b, figures=False, dry=False)
     b.set_defaults(func=cmd_bench)
+    k = sub.add_parser(
+        "ik",
+        help="inverse kinematics of the da Vinci arm for poses from a CSV or HDF5 file",
+        description="Solve the da Vinci patient-side arm's inverse kinematics (Applied "
+        "Sciences 2019) for every pose of a file: CSV with a header row and columns "
+        "T00..T33 (row-major 4x4, mm) or x,y,z,qw,qx,qy,qz; or HDF5 with a dataset "
+        "'poses' (N, 4, 4). Writes ik/q (q3 in mm, the others in rad), ik/success, "
+        "ik/iterations, ik/pos_err (mm) and ik/rot_err (rad).",
+    )
+    k.add_argument(
+        "config", help="config (YAML) with a davinci study, e.g. configs/davinci_ik.yaml"
+    )
+    k.add_argument("--poses", required=True, metavar="PATH", help="poses file (.csv or .h5)")
+    k.add_argument("--out", default=None, metavar="PATH",
+                   help="archive path (default results/davinci/<poses name>_ik.h5)")  # fmt: skip
+    k.add_argument("--trajectory", action="store_true",
+                   help="solve in row order, each pose warm-started from the previous solution")  # fmt: skip
+    k.add_argument("--overwrite", action="store_true", help="replace an existing archive")
+    k.add_argument("--no-cache", action="store_true", help="do not keep compiled programs")
+    k.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
+    k.set_defaults(func=cmd_ik)
     p = sub.add_parser("report", help="draw the figures of an archive (PNG + PDF beside it)")
     p.add_argument("archive")
     p.add_argument("--no-cache", action="store_true", help="do not keep compiled programs")

@@ -1,14 +1,13 @@
 """``designopt ik`` (designopt/studies/davinci/ikcli.py): poses files in, archive out; bad
 files are one ConfigError naming the row (the CLI prints it and exits 2)."""
 
-import argparse
-
 import h5py
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
 from designopt import archive
+from designopt.cli import build_parser
 from designopt.errors import ConfigError
 from designopt.studies.davinci import ikcli, paper
 from designopt.studies.davinci import mechanism as m
@@ -18,9 +17,7 @@ X = jnp.asarray(m.table1())
 
 
 def run(*argv):
-    ap = argparse.ArgumentParser()
-    ikcli.add_parser(ap.add_subparsers(dest="command"))
-    a = ap.parse_args(["ik", *map(str, argv)])
+    a = build_parser().parse_args(["ik", *map(str, argv)])
     return a.func(a)
 
 

@@ -7,7 +7,8 @@ with a dataset ``poses`` (N, 4, 4). Rows are counted from 1 (the first row after
 header). Output: an archive with ``ik/q`` (N, 6; q1, q2, q4, q5, q6 in rad, q3 in mm),
 ``ik/success``, ``ik/iterations``, ``ik/pos_err`` (mm) and ``ik/rot_err`` (rad).
 
-The CLI wires it in with ``add_parser(sub)``; ``solve_poses`` is the Python API.
+``designopt.cli`` parses the arguments and calls :func:`cmd_ik`; ``solve_poses`` is the
+Python API.
 """
 
 from __future__ import annotations
@@ -26,31 +27,6 @@ from designopt.errors import ConfigError
 MATRIX_COLUMNS = tuple(f"T{i}{j}" for i in range(4) for j in range(4))
 QUAT_COLUMNS = ("x", "y", "z", "qw", "qx", "qy", "qz")
 PROGRESS_MIN = 20_000  # poses from which a progress bar shows
-
-
-def add_parser(sub: Any) -> argparse.ArgumentParser:
-    """Add the ``ik`` command to an argparse subparsers object."""
-    p = sub.add_parser(
-        "ik",
-        help="inverse kinematics of the da Vinci arm for poses from a CSV or HDF5 file",
-        description="Solve the da Vinci patient-side arm's inverse kinematics (Applied "
-        "Sciences 2019) for every pose of a file: CSV with a header row and columns "
-        "T00..T33 (row-major 4x4, mm) or x,y,z,qw,qx,qy,qz; or HDF5 with a dataset "
-        "'poses' (N, 4, 4). Writes ik/q (q3 in mm, the others in rad), ik/success, "
-        "ik/iterations, ik/pos_err (mm) and ik/rot_err (rad).",
-    )
-    p.add_argument(
-        "config", help="config (YAML) with a davinci study, e.g. configs/davinci_ik.yaml"
-    )
-    p.add_argument("--poses", required=True, metavar="PATH", help="poses file (.csv or .h5)")
-    p.add_argument("--out", default=None, metavar="PATH",
-                   help="archive path (default results/davinci/<poses name>_ik.h5)")  # fmt: skip
-    p.add_argument("--trajectory", action="store_true",
-                   help="solve in row order, each pose warm-started from the previous solution")  # fmt: skip
-    p.add_argument("--overwrite", action="store_true", help="replace an existing archive")
-    p.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
-    p.set_defaults(func=cmd_ik)
-    return p
 
 
 # ---------------------------------------------------------------------------- input
@@ -226,15 +202,16 @@ def _collect(out: dict[str, list[np.ndarray]], r: Any) -> None:
 # ---------------------------------------------------------------------------- command
 
 
-def cmd_ik(args: argparse.Namespace) -> int:
-    """``designopt ik CONFIG --poses PATH [--out PATH] [--trajectory] [--quiet]``."""
+def cmd_ik(args: argparse.Namespace, loaded: tuple[Any, str] | None = None) -> int:
+    """``designopt ik CONFIG --poses PATH [--out PATH] [--trajectory] [--quiet]``;
+    ``loaded``: the (config, text) the CLI already loaded (with its compilation cache)."""
     import jax
 
     from designopt import config, pipeline
     from designopt.studies import streams
     from designopt.timing import Stopwatch
 
-    cfg, text = config.load(args.config)
+    cfg, text = loaded if loaded is not None else config.load(args.config)
     if cfg.study.name != "davinci":
         raise ConfigError(f"{args.config}: key 'study.name': `designopt ik` solves the da Vinci "
                           f"arm; this config's study is '{cfg.study.name}'")  # fmt: skip
