@@ -48,6 +48,34 @@ class StudySettings(BaseModel):
         return v
 
 
+class Section(BaseModel):
+    """A nested section of a study's settings: unknown keys are errors."""
+
+    model_config = ConfigDict(extra="forbid")
+
+
+def lo_hi(name: str, v: tuple[float, float]) -> tuple[float, float]:
+    """A (lo, hi) range with lo < hi; ValueError naming ``name`` otherwise."""
+    if not v[0] < v[1]:
+        raise ValueError(f"{name}: lower limit {v[0]} is not below upper limit {v[1]}")
+    return v
+
+
+def known_lengths(v: Mapping[str, Any], known: tuple[str, ...], lengths: tuple[str, ...],
+                  what: str = "design variable") -> Mapping[str, Any]:  # fmt: skip
+    """Every key of ``v`` is in ``known`` and the ``lengths`` among them are > 0 (for a
+    range (lo, hi), its lo); ValueError naming the key otherwise."""
+    for k, x in v.items():
+        if k not in known:
+            raise ValueError(f"unknown {what} '{k}'; allowed {list(known)}")
+        lo = x[0] if isinstance(x, tuple | list) else x
+        if k in lengths and not lo > 0:
+            raise ValueError(
+                f"{k}: lengths must be > 0, got {'lower bound ' if lo is not x else ''}{lo}"
+            )
+    return v
+
+
 def streams(seed: int) -> dict[str, jax.Array]:
     """One root key ``key(seed)`` split once into the named streams of :data:`STREAMS`."""
     keys = jax.random.split(jax.random.key(seed), len(STREAMS))

@@ -10,26 +10,16 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import Field, field_validator, model_validator
 
-from designopt.studies.base import StudySettings
+from designopt.studies.base import Section, StudySettings, known_lengths, lo_hi
 
 KEYS: tuple[str, ...] = ("alpha_deg", "beta_deg", "l_QH", "l_IJ")
 TABLE1: dict[str, float] = {"alpha_deg": 20.0, "beta_deg": 30.45, "l_QH": 784.29, "l_IJ": 10.0}
 UNITS: dict[str, str] = {"alpha_deg": "deg", "beta_deg": "deg", "l_QH": "mm", "l_IJ": "mm"}
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
-
-def _lohi(name: str, v: tuple[float, float]) -> tuple[float, float]:
-    if not v[0] < v[1]:
-        raise ValueError(f"{name}: lower value {v[0]} is not below upper value {v[1]}")
-    return v
-
-
-class Workspace(_Strict):
+class Workspace(Section):
     """The surgical workspace around the RCM point H.
 
     Shaft directions fill a cone of half-angle ``cone_deg`` about the axis the Table 1
@@ -53,7 +43,7 @@ class Workspace(_Strict):
     @field_validator("depth_mm")
     @classmethod
     def _depth(cls, v: tuple[float, float]) -> tuple[float, float]:
-        _lohi("depth_mm", v)
+        lo_hi("depth_mm", v)
         if v[0] < 0 or v[1] > 315:
             raise ValueError(f"must lie within the insertion range [0, 315] mm, got {list(v)}")
         return v
@@ -63,7 +53,7 @@ class Workspace(_Strict):
     def _wrist(cls, v):
         lim = ((-180, 180), (-90, 90), (-90, 90))
         for j, ((lo, hi), (llo, lhi)) in enumerate(zip(v, lim, strict=True)):
-            _lohi(f"wrist_deg.q{j + 4}", (lo, hi))
+            lo_hi(f"wrist_deg.q{j + 4}", (lo, hi))
             if lo < llo or hi > lhi:
                 raise ValueError(
                     f"q{j + 4}: [{lo:g}, {hi:g}] exceeds the joint range [{llo}, {lhi}] deg"
@@ -71,7 +61,7 @@ class Workspace(_Strict):
         return v
 
 
-class Indices(_Strict):
+class Indices(Section):
     """How dexterity and the IK success rate are estimated."""
 
     n_samples: int = Field(4096, gt=1)  # joint samples for the GCI (shared by the swarm)
@@ -81,7 +71,7 @@ class Indices(_Strict):
     solver: Literal["lm", "closed_form"] = "lm"  # which IK the success rate measures
 
 
-class Objective(_Strict):
+class Objective(Section):
     """f = −(w_gci · GCI + w_ik · IK success rate): minimised."""
 
     gci: float = Field(1.0, ge=0)
@@ -94,7 +84,7 @@ class Objective(_Strict):
         return self
 
 
-class IKSettings(_Strict):
+class IKSettings(Section):
     """The production IK solver (``designopt ik``; docs/davinci.md)."""
 
     first_iter: int = Field(4, ge=1, le=100)
@@ -118,12 +108,7 @@ class IKSettings(_Strict):
     @field_validator("arm")
     @classmethod
     def _arm(cls, v: dict[str, float]) -> dict[str, float]:
-        for k, x in v.items():
-            if k not in KEYS:
-                raise ValueError(f"unknown arm parameter '{k}'; allowed {list(KEYS)}")
-            if k in ("l_QH", "l_IJ") and x <= 0:
-                raise ValueError(f"{k}: a length must be > 0 mm, got {x}")
-        return v
+        return known_lengths(v, KEYS, ("l_QH", "l_IJ"), "arm parameter")
 
 
 class DavinciSettings(StudySettings):
@@ -140,22 +125,12 @@ class DavinciSettings(StudySettings):
     @field_validator("variables")
     @classmethod
     def _vars(cls, v: dict[str, tuple[float, float]]) -> dict[str, tuple[float, float]]:
-        for k, (lo, _hi) in v.items():
-            if k not in KEYS:
-                raise ValueError(f"unknown design variable '{k}'; allowed {list(KEYS)}")
-            if k in ("l_QH", "l_IJ") and lo <= 0:
-                raise ValueError(f"{k}: a length must be > 0 mm, got lower bound {lo}")
-        return v
+        return known_lengths(v, KEYS, ("l_QH", "l_IJ"))
 
     @field_validator("fixed")
     @classmethod
     def _fixed(cls, v: dict[str, float]) -> dict[str, float]:
-        for k, x in v.items():
-            if k not in KEYS:
-                raise ValueError(f"unknown arm parameter '{k}'; allowed {list(KEYS)}")
-            if k in ("l_QH", "l_IJ") and x <= 0:
-                raise ValueError(f"{k}: a length must be > 0 mm, got {x}")
-        return v
+        return known_lengths(v, KEYS, ("l_QH", "l_IJ"), "arm parameter")
 
     @model_validator(mode="after")
     def _consistent(self) -> DavinciSettings:

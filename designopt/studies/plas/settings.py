@@ -9,9 +9,9 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import Field, field_validator, model_validator
 
-from designopt.studies.base import StudySettings
+from designopt.studies.base import Section, StudySettings, lo_hi
 
 MASTER_KEYS: tuple[str, ...] = ("a2p", "a3p", "d6")
 """Mirrors ``mechanism.MASTER_KEYS`` (kept import-light): a2', a3' (offset between the
@@ -20,17 +20,7 @@ BUILT = {"a2p": 138.0, "a3p": 0.0, "d6": 60.0}
 JOINTS = ("theta2", "theta3", "theta4")
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
-
-def _range(name: str, v: tuple[float, float]) -> tuple[float, float]:
-    if not v[0] < v[1]:
-        raise ValueError(f"{name}: lower limit {v[0]} is not below upper limit {v[1]}")
-    return v
-
-
-class JointBox(_Strict):
+class JointBox(Section):
     """(lo, hi) in degrees for θ2, θ3, θ4."""
 
     theta2: tuple[float, float]
@@ -40,13 +30,13 @@ class JointBox(_Strict):
     @field_validator("theta2", "theta3", "theta4")
     @classmethod
     def _lo_hi(cls, v: tuple[float, float], info) -> tuple[float, float]:
-        return _range(info.field_name, v)
+        return lo_hi(info.field_name, v)
 
     def rows(self) -> list[tuple[float, float]]:
         return [getattr(self, j) for j in JOINTS]
 
 
-class Slave(_Strict):
+class Slave(Section):
     """The slave lengths the mapping uses (seed 004 §3.4), mm."""
 
     a2: float = 50.0
@@ -63,7 +53,7 @@ class Slave(_Strict):
         return v
 
 
-class Mismatch(_Strict):
+class Mismatch(Section):
     """How the workspace mismatch is estimated."""
 
     n_samples: int = Field(4096, gt=1)
@@ -77,7 +67,7 @@ class Mismatch(_Strict):
         return -(-self.n_samples // c) * c
 
 
-class Constraints(_Strict):
+class Constraints(Section):
     """Reach within ±tolerance of the built master; mapping factors within the range the
     slave motors can follow (our default, docs/plas.md)."""
 
@@ -93,7 +83,7 @@ class Constraints(_Strict):
         return v
 
 
-class Objective(_Strict):
+class Objective(Section):
     """Weights of f = Σ w · index / (index of the built master)."""
 
     velocity: float = Field(1.0, ge=0)
@@ -107,7 +97,7 @@ class Objective(_Strict):
         return self
 
 
-class Counterbalance(_Strict):
+class Counterbalance(Section):
     """§2.1.2: M, L (links beyond joint 4 and their lever), r, l, tilt θ. ``L_per_d6``:
     how much L grows per mm of d6 beyond the built 60 mm (our model, docs/plas.md)."""
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import Field, field_validator, model_validator
 
-from designopt.studies.base import StudySettings
+from designopt.studies.base import Section, StudySettings, known_lengths, lo_hi
 
 DESIGN_KEYS = ("a", "c")
 """What the design can vary; b only moves R and changes neither η nor reach (eq. 17-18)."""
@@ -15,17 +15,7 @@ WORKSPACES = ("box", "cone", "reach")
 BUILT = {"a": 120.0, "b": 260.0, "c": 250.0}
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
-
-def _lo_hi(name: str, v: tuple[float, float]) -> tuple[float, float]:
-    if not v[0] < v[1]:
-        raise ValueError(f"{name}: lower limit {v[0]} is not below upper limit {v[1]}")
-    return v
-
-
-class Joints(_Strict):
+class Joints(Section):
     """Joint ranges (Table 2): θ1 in degrees, d1 and d2 in mm."""
 
     theta1_deg: tuple[float, float] = (-38.0, 38.0)
@@ -35,7 +25,7 @@ class Joints(_Strict):
     @field_validator("theta1_deg", "d1", "d2")
     @classmethod
     def _range(cls, v: tuple[float, float], info) -> tuple[float, float]:
-        return _lo_hi(info.field_name, v)
+        return lo_hi(info.field_name, v)
 
     @field_validator("d2")
     @classmethod
@@ -46,7 +36,7 @@ class Joints(_Strict):
         return v
 
 
-class Cone(_Strict):
+class Cone(Section):
     """The task cone at R: full apex angle and insertion-depth range (seed 003 §2.4:
     60°, 50-200 mm). ``dim`` 2 is its section in the mechanism's plane (a sector), 3 the
     cone of the 3-DOF arm around the instrument's home direction, 1 its axis alone (depth
@@ -59,13 +49,13 @@ class Cone(_Strict):
     @field_validator("depth")
     @classmethod
     def _depth(cls, v: tuple[float, float]) -> tuple[float, float]:
-        _lo_hi("depth", v)
+        lo_hi("depth", v)
         if v[0] <= 0:
             raise ValueError(f"depth: must be > 0 (the tip beyond R), got {list(v)}")
         return v
 
 
-class Eta(_Strict):
+class Eta(Section):
     """The global conditioning index η = mean of 1/k over a workspace (eq. 12).
 
     ``workspace``: ``box`` (the joint box), ``cone`` (the task cone, sampled uniformly in
@@ -80,7 +70,7 @@ class Eta(_Strict):
     sampler: Literal["uniform", "halton"] = "uniform"
 
 
-class Constraints(_Strict):
+class Constraints(Section):
     """Design constraints g ≤ 0: eq. (19) a ≥ sin(apex/2)·(c − depth_min), and the joint
     box reaching at least ``reach_min`` of the task cone's samples."""
 
@@ -102,25 +92,13 @@ class RcmSettings(StudySettings):
     @field_validator("variables")
     @classmethod
     def _known(cls, v: dict[str, tuple[float, float]]) -> dict[str, tuple[float, float]]:
-        bad = sorted(set(v) - set(DESIGN_KEYS))
-        if bad:
-            raise ValueError(f"unknown design variable(s) {bad}; the design is {list(DESIGN_KEYS)} "
-                             "(b only moves R and changes neither η nor reach)")  # fmt: skip
-        for k, (lo, _) in v.items():
-            if lo <= 0:
-                raise ValueError(f"{k}: lengths must be > 0, got lower bound {lo}")
-        return v
+        """(b only moves R and changes neither η nor reach, so it is no variable.)"""
+        return known_lengths(v, DESIGN_KEYS, DESIGN_KEYS)
 
     @field_validator("fixed")
     @classmethod
     def _fixed(cls, v: dict[str, float]) -> dict[str, float]:
-        bad = sorted(set(v) - set(BUILT))
-        if bad:
-            raise ValueError(f"unknown key(s) {bad}; fixed values may name {list(BUILT)}")
-        for k, x in v.items():
-            if not x > 0:
-                raise ValueError(f"{k}: lengths must be > 0, got {x}")
-        return v
+        return known_lengths(v, tuple(BUILT), tuple(BUILT), "fixed length")
 
     @model_validator(mode="after")
     def _consistent(self) -> RcmSettings:
@@ -136,7 +114,7 @@ class RcmSettings(StudySettings):
         return BUILT | self.fixed
 
 
-class Arm(_Strict):
+class Arm(Section):
     """The 3-DOF arm's lengths, mm: a, b, c (Table 1) and L, the height of R above the
     base frame (Table 3; not printed in the paper, 0 puts R at the origin)."""
 

@@ -7,19 +7,15 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator, model_validator
+from pydantic import Field, ValidationInfo, field_validator, model_validator
 
-from designopt.studies.base import StudySettings
+from designopt.studies.base import Section, StudySettings
 
 ROWS = ("vx", "vy", "vz", "wx", "wy", "wz")
 INDEX_NAMES = ("gci", "gcsei", "manipulability", "volume")
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
-
-class Joint(_Strict):
+class Joint(Section):
     """One DH row: joint type, the four DH entries (α, θ in degrees) and the joint limits
     (degrees for R joints, length units for P joints)."""
 
@@ -38,12 +34,12 @@ class Joint(_Strict):
         return v
 
 
-class Chain(_Strict):
+class Chain(Section):
     convention: Literal["standard", "modified"] = "standard"
     joints: list[Joint] = Field(min_length=1, max_length=12)
 
 
-class SerialIndices(_Strict):
+class SerialIndices(Section):
     """Which Jacobian, which condition number, which measure, how many samples."""
 
     jacobian: list[Literal["vx", "vy", "vz", "wx", "wy", "wz"]] | Literal["position", "full"] = (
@@ -75,7 +71,7 @@ class SerialIndices(_Strict):
         return tuple(sorted(ROWS.index(r) for r in self.jacobian))
 
 
-class LinearConstraint(_Strict):
+class LinearConstraint(Section):
     """A linear constraint on the design variables: Σ terms[name]·x[name] ≤ le (or ≥ ge),
     e.g. ``{terms: {l1: 1, l2: 1}, le: 1.2}`` bounds the total reach."""
 
