@@ -112,7 +112,7 @@ class IKSettings(Section):
 
 
 class DavinciSettings(StudySettings):
-    """Study B: the da Vinci patient-side arm (Applied Sciences 2019)."""
+    """The da Vinci patient-side arm (Applied Sciences 2019): wrist design and IK settings."""
 
     name: Literal["davinci"] = "davinci"
     variables: dict[str, tuple[float, float]] = {"l_IJ": (2.0, 30.0), "beta_deg": (15.0, 45.0)}
