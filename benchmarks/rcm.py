@@ -81,7 +81,7 @@ def main() -> None:
         t0 = time.perf_counter()
         jax.block_until_ready(fn(P.params, X, None))
         tj.append(time.perf_counter() - t0)
-    n_chunks, chunk = o.chunking(args.samples)
+    n_chunks, chunk = mc.chunking(args.samples, o.CHUNK)
     u = np.concatenate([np.asarray(mc.unit_samples(P.params["sample_key"], k * chunk, chunk, 3,
                                                    "uniform", jnp.float64)) for k in range(n_chunks)])  # fmt: skip
     tn = []

@@ -84,6 +84,13 @@ class PowerSums(NamedTuple):
     n: Array
 
 
+def chunking(n_samples: int, max_chunk: int) -> tuple[int, int]:
+    """(number of chunks, chunk size): the fewest chunks of at most ``max_chunk`` samples,
+    balanced so that their total exceeds ``n_samples`` by less than one per chunk."""
+    n_chunks = -(-n_samples // max_chunk)
+    return n_chunks, -(-n_samples // n_chunks)
+
+
 def power_sums(w: Array, g: Array, axis: int = -1) -> PowerSums:
     """Weighted power sums of g along ``axis`` (weights w broadcast against g)."""
     w = jnp.broadcast_to(jnp.asarray(w, g.dtype), g.shape)  # a Python 1.0 must not widen g

@@ -11,7 +11,6 @@ from designopt.cli import main
 from designopt.config import load, validate
 from designopt.studies import streams
 from designopt.studies.serial.mechanism import build
-from designopt.studies.serial.objective import chunking
 
 PLANAR = """
 study:
@@ -45,7 +44,7 @@ def samples(cfg, n):
     """The joint samples the study uses (same stream, same chunks)."""
     ind = cfg.study.indices
     mech = build(cfg.study)
-    n_chunks, chunk = chunking(ind.n_samples, ind.chunk)
+    n_chunks, chunk = mc.chunking(ind.n_samples, ind.chunk)
     key = streams(cfg.seed)["samples"]
     u = np.concatenate([np.asarray(mc.unit_samples(key, k * chunk, chunk, n, ind.sampler))
                         for k in range(n_chunks)])  # fmt: skip

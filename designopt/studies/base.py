@@ -87,6 +87,13 @@ def key_data(keys: Mapping[str, jax.Array]) -> dict[str, list[int]]:
     return {k: np.asarray(jax.random.key_data(v)).tolist() for k, v in keys.items()}
 
 
+def archived_keys(archive: Mapping[str, Any]) -> dict[str, jax.Array]:
+    """The named streams of a run, rebuilt from its archive (the inverse of
+    :func:`key_data`; root attribute ``keys``)."""
+    raw = archive["attrs"]["keys"]
+    return {k: jax.random.wrap_key_data(np.asarray(v, np.uint32)) for k, v in raw.items()}
+
+
 @dataclass(frozen=True)
 class Study:
     """What a study declares.

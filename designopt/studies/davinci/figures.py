@@ -14,17 +14,13 @@ import numpy as np
 
 from designopt import montecarlo as mc
 from designopt.figures import convergence, plt, save
+from designopt.studies.base import archived_keys
 from designopt.studies.davinci import mechanism as mech
 from designopt.studies.davinci import objective
 from designopt.studies.davinci.settings import TABLE1, DavinciSettings
 
 N_LINE = 41
 N_POINTS = 3000
-
-
-def _keys(a: dict[str, Any]) -> dict[str, jax.Array]:
-    return {k: jax.random.wrap_key_data(np.asarray(v, np.uint32))
-            for k, v in a["attrs"]["keys"].items()}  # fmt: skip
 
 
 def _full(s: DavinciSettings, params, x: np.ndarray) -> jnp.ndarray:
@@ -86,7 +82,7 @@ def gci_line(s: DavinciSettings, params, x: np.ndarray, names: tuple[str, ...], 
 def draw_run(a: dict[str, Any], folder: Path) -> list[Path]:
     cfg = a["attrs"]["config_resolved"]
     s = DavinciSettings.model_validate(cfg["study"])
-    params = objective.make_params(s, _keys(a), mc.out_dtype())
+    params = objective.make_params(s, archived_keys(a), mc.out_dtype())
     names = tuple(s.variables)
     x = np.asarray(a["final"]["x"], np.float64)
     out = convergence(a["best_run"], ["f", "gci", "ik_success"], folder,

@@ -14,7 +14,7 @@ import numpy as np
 
 from designopt import montecarlo as mc
 from designopt.figures import convergence, plt, save
-from designopt.studies.base import STREAMS
+from designopt.studies.base import archived_keys
 from designopt.studies.rcm import mechanism as m
 from designopt.studies.rcm import objective, workspace
 from designopt.studies.rcm.settings import RcmSettings
@@ -22,11 +22,6 @@ from designopt.studies.rcm.settings import RcmSettings
 N_C = 81  # points of the η(c) curves
 N_MAP = 121  # grid of the 1/k maps
 N_CLOUD = 20_000  # points drawn of the workspace cloud (the volume uses 100 000)
-
-
-def _keys(a: dict[str, Any]) -> dict[str, jax.Array]:
-    raw = a["attrs"]["keys"]
-    return {k: jax.random.wrap_key_data(jnp.asarray(raw[k], jnp.uint32)) for k in STREAMS}
 
 
 def eta_curves(s: RcmSettings, keys, a_val: float, cs: np.ndarray) -> dict[str, np.ndarray]:
@@ -157,7 +152,7 @@ def draw_workspace(key: jax.Array, folder: Path) -> list[Path]:
 
 def draw_run(a: dict[str, Any], folder: Path) -> list[Path]:
     s = RcmSettings.model_validate(a["attrs"]["config_resolved"]["study"])
-    keys = _keys(a)
+    keys = archived_keys(a)
     names = [n.decode() if isinstance(n, bytes) else str(n) for n in a["problem"]["names"]]
     x = dict(zip(names, np.asarray(a["final"]["x"], np.float64).tolist(), strict=True))
     des = s.design() | x

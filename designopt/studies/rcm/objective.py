@@ -34,12 +34,6 @@ INDICES = ("eta", "eta_box", "eta_cone", "eta_reach", "reach", "eq19_margin")
 CHUNK = 4096  # samples per chunk: (M, 4096) arrays stay in cache (benchmarks/rcm.py: 3× faster than 16384)
 
 
-def chunking(n: int) -> tuple[int, int]:
-    """(chunks, chunk size): the fewest chunks of ≤ CHUNK samples covering n."""
-    k = -(-n // CHUNK)
-    return k, -(-n // k)
-
-
 def cone_samples(u: jnp.ndarray, p: Mapping[str, Any], dim: int) -> dict[str, jnp.ndarray]:
     """Tip positions uniform in the task cone from unit samples u (C, 3): depth d
     (density ∝ d^(dim−1)) and the offsets of the tip from R: on the cone's axis (dim 1),
@@ -125,7 +119,7 @@ def estimates(s: RcmSettings, params: Mapping[str, Any], X: jnp.ndarray,
     over the ``samples`` axis of ``mesh`` when given)."""
     dt = X.dtype
     a, c = design_columns(s, params, X)
-    n_chunks, chunk = chunking(s.eta.n_samples)
+    n_chunks, chunk = mc.chunking(s.eta.n_samples, CHUNK)
     p = {k: v.astype(dt) for k, v in params.items() if k not in ("sample_key", "design")}
 
     def sums(k):
@@ -230,7 +224,7 @@ def problem(s: RcmSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Proble
     names = tuple(s.variables)
     lower = np.array([s.variables[k][0] for k in names])
     upper = np.array([s.variables[k][1] for k in names])
-    n_chunks, chunk = chunking(s.eta.n_samples)
+    n_chunks, chunk = mc.chunking(s.eta.n_samples, CHUNK)
     info = {
         "study": "rcm",
         "n_samples_used": n_chunks * chunk,

@@ -94,13 +94,6 @@ def chunk_sums(mech: Mechanism, s: SerialSettings, full: jnp.ndarray, q: jnp.nda
             mc.power_sums(adet, jnp.ones_like(adet)))  # fmt: skip
 
 
-def chunking(n_samples: int, max_chunk: int) -> tuple[int, int]:
-    """(number of chunks, chunk size): the fewest chunks of at most ``max_chunk`` samples,
-    balanced so that their total exceeds ``n_samples`` by less than one per chunk."""
-    n_chunks = -(-n_samples // max_chunk)
-    return n_chunks, -(-n_samples // n_chunks)
-
-
 def build_fn(mech: Mechanism, s: SerialSettings, dtype: Any, mesh: Any = None):
     """The pure swarm function fn(params, X, key) -> (f, indices with *_se); with a
     ``mesh``, its sample chunks are spread over the mesh's ``samples`` axis."""
@@ -110,7 +103,7 @@ def build_fn(mech: Mechanism, s: SerialSettings, dtype: Any, mesh: Any = None):
     lo = np.asarray(mech.lower)
     hi = np.asarray(mech.upper)
     qvol = float(np.prod(hi - lo))
-    n_chunks, chunk = chunking(ind.n_samples, ind.chunk)
+    n_chunks, chunk = mc.chunking(ind.n_samples, ind.chunk)
 
     def indices(params, X):
         X = X.astype(dtype)
@@ -176,7 +169,7 @@ def problem(s: SerialSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Pro
         b[:, 1] = np.where(b[:, 1] > b[:, 0], b[:, 1], b[:, 0] + 1.0)  # flat index: no scaling
         params["bounds"] = jnp.asarray(b, dtype)
         norm_bounds = {k: b[i].tolist() for i, k in enumerate(weights)}
-    n_chunks, chunk = chunking(s.indices.n_samples, s.indices.chunk)
+    n_chunks, chunk = mc.chunking(s.indices.n_samples, s.indices.chunk)
     n_used = n_chunks * chunk
     info = {
         "study": "serial",
