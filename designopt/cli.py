@@ -17,17 +17,18 @@ from pathlib import Path
 
 from designopt.errors import ConfigError, Interrupted, WriteError
 
-WRITERS = ("run", "sweep", "scan", "bench", "report", "ik")
+WRITERS = ("run", "sweep", "scan", "bench", "report", "ik", "export")
 """Commands that write files: they run in the writer's session with signal handling."""
 
 
 def _load(args: argparse.Namespace):
     from designopt import output
     from designopt.config import load
+    from designopt.finite import check_seed
 
     cfg, text = load(args.config)
     if getattr(args, "seed", None) is not None:
-        cfg.seed = args.seed
+        cfg.seed = check_seed(args.seed, f"--seed {args.seed}")
     if getattr(args, "overwrite", False):
         cfg.overwrite = True
     if getattr(args, "max_minutes", None) is not None:
@@ -222,19 +223,23 @@ def cmd_scan(args: argparse.Namespace) -> int:
 
 
 def _parse_design(items: list[str]) -> dict[str, float]:
-    out = {}
+    """--design NAME=VALUE items as {name: value}: every value a usable number
+    (designopt.finite), every name given once."""
+    from designopt.finite import check_value
+
+    out: dict[str, float] = {}
     for it in items:
         name, sep, val = it.partition("=")
+        name = name.strip()
+        if not sep or not name:
+            raise ConfigError(f"--design '{it}': expected NAME=NUMBER, e.g. --design l1=0.5")
+        if name in out:
+            raise ConfigError(f"--design {name}: given twice ({name}={out[name]:g} and {it}); "
+                              "give each variable once")  # fmt: skip
         try:
-            if not sep or not name:
-                raise ValueError
-            out[name.strip()] = float(val)
-            if not math.isfinite(out[name.strip()]):
-                raise ValueError
-        except ValueError:
-            raise ConfigError(
-                f"--design '{it}': expected NAME=NUMBER, e.g. --design l1=0.5"
-            ) from None
+            out[name] = check_value(f"--design {name}", val)
+        except ConfigError as e:
+            raise ConfigError(f"{e}; expected NAME=NUMBER, e.g. --design l1=0.5") from None
     return out
 
 
@@ -244,8 +249,9 @@ def cmd_eval(args: argparse.Namespace) -> int:
     cfg, _ = _load(args)
     design = _parse_design(args.design)
     res = pipeline.evaluate(cfg, design, where=args.config)
+    feasible = None if "violation" not in res else bool(res["violation"] <= 0)
     if args.json:
-        print(json.dumps(res))
+        print(json.dumps(res | ({} if feasible is None else {"feasible": feasible})))
         return 0
     box = cfg.study.variables
     design = {k: design.get(k, 0.5 * (lo + hi)) for k, (lo, hi) in box.items()}
@@ -255,6 +261,9 @@ def cmd_eval(args: argparse.Namespace) -> int:
         se = res.get(k + "_se")
         print(f"{k:>15} = {v:.6g}" + (f" ± {se:.2g}" if se is not None else ""))
     print("design: " + ", ".join(f"{k} = {v:g}" for k, v in design.items()))
+    if feasible is not None:
+        print("constraints: " + ("feasible" if feasible else
+                                 f"violated by {res['violation']:.3g} (an infeasible design)"))  # fmt: skip
     return 0
 
 
@@ -295,6 +304,18 @@ def cmd_ik(args: argparse.Namespace) -> int:
     from designopt.studies.davinci import ikcli
 
     return ikcli.cmd_ik(args, _load(args))
+
+
+def cmd_chain(args: argparse.Namespace) -> int:
+    from designopt.studies.serial import commands
+
+    return commands.cmd_chain(args, _load(args))
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    from designopt.studies.serial import commands
+
+    return commands.cmd_export(args)
 
 
 def cmd_report(args: argparse.Namespace) -> int:
@@ -355,12 +376,22 @@ def cmd_show(args: argparse.Namespace) -> int:
                     ov = json.loads(g.attrs["overrides"])
                     print(f"  [{k}] {ov}: f = {g['final/f'][()]:.5f}")
             elif kind == "scan":
+                from designopt.pipeline import best_lines
+
                 sc = h["scan"]
                 f = sc["f"][()]
                 names = [n.decode() for n in sc["names"][()]]
-                i = int(np.nanargmin(f))
-                print(f"{len(f)} designs; lowest f = {f[i]:.5g} at " + ", ".join(
-                    f"{n} = {v:.4g}" for n, v in zip(names, sc["x"][()][i], strict=True)))  # fmt: skip
+                viol = sc["violation"][()] if "violation" in sc else None
+                print(f"{len(f)} designs")
+                for line in best_lines(names, sc["x"][()], f, viol):
+                    print(line)
+            elif kind == "ik":
+                from designopt.ikreport import summary_lines
+
+                g = h["ik"]
+                ik = {k: v[()] for k, v in g.items()} | {"attrs": dict(g.attrs)}
+                for line in summary_lines(ik):
+                    print(line)
             elif kind == "bench":
                 for case, g in h["bench"].items():
                     rows = json.loads(g.attrs["stats"])["rows"]
@@ -460,10 +491,38 @@ def build_parser() -> argparse.ArgumentParser:
                    help="archive path (default results/davinci/<poses name>_ik.h5)")  # fmt: skip
     k.add_argument("--trajectory", action="store_true",
                    help="solve in row order, each pose warm-started from the previous solution")  # fmt: skip
+    k.add_argument("--csv", action="store_true",
+                   help="also write the joints, one row per pose, to <archive stem>_joints.csv")  # fmt: skip
     k.add_argument("--overwrite", action="store_true", help="replace an existing archive")
     k.add_argument("--no-cache", action="store_true", help="do not keep compiled programs")
     k.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
     k.set_defaults(func=cmd_ik)
+    c = sub.add_parser(
+        "chain",
+        help="print a serial study's chain as imported (URDF or DH) and check it",
+        description="Print the chain of a serial study as imported: joints, types, axes, "
+        "limits, which numbers are design variables, the forward kinematics of the zero "
+        "pose and of --q; for a URDF chain, cross-check the import against the URDF "
+        "parser's own forward kinematics at random joint values (docs/urdf.md).",
+    )
+    c.add_argument("config", help="config (YAML) with a serial study, e.g. configs/urdf_arm.yaml")
+    c.add_argument("--q", default=None, metavar="Q1,Q2,...",
+                   help="joint values (degrees for revolute, length units for prismatic)")  # fmt: skip
+    c.add_argument("--design", action="append", default=[], metavar="NAME=VALUE",
+                   help="a design variable's value (repeat; others: middle of their box)")  # fmt: skip
+    c.add_argument("--seed", type=int, default=None, help="seed of the random check poses")
+    c.add_argument("--no-cache", action="store_true", help="do not keep compiled programs")
+    c.set_defaults(func=cmd_chain)
+    x = sub.add_parser(
+        "export",
+        help="write the best design of a run archive back as URDF",
+        description="Write the URDF of a serial study's run (or scan) archive with the best "
+        "design's values in the chain's `set` fields and nothing else changed (docs/urdf.md).",
+    )
+    x.add_argument("archive")
+    x.add_argument("--urdf", required=True, metavar="OUT.urdf", help="the URDF file to write")
+    x.add_argument("--overwrite", action="store_true", help="replace an existing file")
+    x.set_defaults(func=cmd_export)
     p = sub.add_parser("report", help="draw the figures of an archive (PNG + PDF beside it)")
     p.add_argument("archive")
     p.add_argument("--no-cache", action="store_true", help="do not keep compiled programs")

@@ -9,6 +9,7 @@ from typing import Annotated, Any, ClassVar, Literal, Union
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model, field_validator
 
+from designopt import finite
 from designopt.errors import ConfigError  # noqa: E402  (re-exported)
 from designopt.parallel import ParallelSettings
 
@@ -122,7 +123,7 @@ class RunConfigBase(_Strict):
     sweep: Sweep | None = None
     scan: Scan | None = None
     precision: Literal["float32", "float64"] = "float64"
-    seed: int = 0
+    seed: int = Field(0, ge=0, le=finite.SEED_MAX)
     output: str | None = None  # default results/<study>/<study>.h5
     compile_cache: bool = True  # keep compiled programs between runs (CLI; --no-cache)
     overwrite: bool = False  # replace an existing archive at the output (CLI; --overwrite)
@@ -197,22 +198,104 @@ def validate(raw: Any, where: str, model: type[BaseModel] | None = None) -> Any:
 
         raise ConfigError(f"{where}: key 'study': missing; name a study, one of "
                           f"{sorted(STUDIES)} (`designopt studies` lists them)")  # fmt: skip
+    finite.check_tree(raw, where)  # NaN, inf and huge numbers first: validators assume finite
     try:
-        return model.model_validate(raw)
+        cfg = model.model_validate(raw)
     except ValidationError as e:
-        raise ConfigError(f"{where}: {error_text(e)}") from None
+        raise ConfigError(f"{where}: {error_text(e, raw)}") from None
+    finite.check_tree(cfg, where)  # numbers pydantic parsed from text ("1e999", "nan")
+    return cfg
 
 
-def error_text(e: ValidationError) -> str:
-    """ "key 'a.b.c': message" for the first error (study tags dropped from the path)."""
+_MESSAGES = {
+    "greater_than_equal": "must be ≥ {ge}",
+    "greater_than": "must be > {gt}",
+    "less_than_equal": "must be ≤ {le}",
+    "less_than": "must be < {lt}",
+    "int_parsing": "must be an integer",
+    "int_type": "must be an integer",
+    "int_from_float": "must be a whole number",
+    "float_parsing": "must be a number",
+    "float_type": "must be a number",
+    "finite_number": "must be a finite number",
+    "bool_parsing": "must be true or false",
+    "bool_type": "must be true or false",
+    "string_type": "must be text",
+    "list_type": "must be a list",
+    "tuple_type": "must be a list",
+    "dict_type": "must be a mapping of keys",
+    "model_type": "must be a mapping of keys",
+    "model_attributes_type": "must be a mapping of keys",
+    "too_short": "needs at least {min_length} item(s), got {actual_length}",
+    "too_long": "takes at most {max_length} item(s), got {actual_length}",
+    "extra_forbidden": "unknown key",
+    "missing": "missing",
+    "literal_error": "must be one of {expected}",
+}
+"""Pydantic's messages in the words of a config file (no type internals)."""
+
+_STRUCTURE = {"list_type", "tuple_type", "dict_type", "model_type", "model_attributes_type",
+              "float_type", "float_parsing", "int_type", "int_parsing", "string_type"}  # fmt: skip
+"""Error types that say "the input is not of this union member's shape"."""
+
+
+def _input_path(err: dict, raw: Any) -> tuple[list[str], int]:
+    """The parts of a pydantic error's location that are keys of the input (union members
+    and validator tags such as ``list[float]``, ``Range`` or ``function-after[...]``
+    dropped), and how deep into the input they reach."""
+    out, node, depth = [], raw, 0
+    loc = err["loc"]
+    for n, x in enumerate(loc):
+        if isinstance(node, dict) and x in node:
+            node, depth = node[x], depth + 1
+            out.append(str(x))
+        elif isinstance(node, list | tuple) and isinstance(x, int):
+            node, depth = (node[x], depth + 1) if 0 <= x < len(node) else (None, depth)
+            out.append(str(x))
+        elif n == len(loc) - 1 and err["type"] == "missing":
+            out.append(str(x))  # the key that is missing
+    return out, depth
+
+
+def error_text(e: ValidationError, raw: Any = None) -> str:
+    """ "key 'a.b.c': message" for the most telling error: of a union (``list`` or
+    ``{from, to, num}``), the member the input was meant for; study tags, union members
+    and validator names dropped from the path; pydantic's wording rewritten."""
     from designopt.studies import STUDIES
 
-    err = e.errors()[0]
-    loc = [str(x) for x in err["loc"]]
+    errs = e.errors()
+    if raw is not None and len(errs) > 1:
+        # prefer an error inside the input's structure over "not a list"/"not a mapping"
+        # from the union members the input was not meant for
+        def rank(err: dict) -> tuple[int, int]:
+            return (err["type"] not in _STRUCTURE, _input_path(err, raw)[1])
+
+        errs = sorted(errs, key=rank, reverse=True)
+    err = errs[0]
+    if raw is not None:
+        loc, _ = _input_path(err, raw)
+    else:
+        loc = [str(x) for x in err["loc"]]
     if len(loc) > 1 and loc[0] == "study" and loc[1] in STUDIES:
         del loc[1]
     msg = err["msg"].removeprefix("Value error, ")
-    if err["type"] in ("union_tag_invalid", "union_tag_not_found") and loc == ["study"]:
+    if err["type"] == "missing" and raw is not None and err["loc"] and isinstance(
+            err["loc"][-1], int) and loc and loc[-1] == str(err["loc"][-1]):  # fmt: skip
+        n = err["loc"][-1]
+        loc = loc[:-1]
+        err = {**err, "type": "too_few", "msg": f"needs at least {n + 1} values"}
+        msg = err["msg"]
+    if err["type"] in _MESSAGES and err["type"] not in ("literal_error",):
+        try:
+            msg = _MESSAGES[err["type"]].format(**err.get("ctx", {}))
+        except (KeyError, IndexError):
+            pass
+    elif err["type"] == "literal_error":
+        msg = (
+            _MESSAGES["literal_error"].format(expected=err.get("ctx", {}).get("expected", msg))
+            + f", got {err['input']!r}"
+        )
+    if err["type"] in ("union_tag_invalid", "union_tag_not_found") and loc[:1] == ["study"]:
         name = err["input"].get("name") if isinstance(err["input"], dict) else None
         loc = ["study", "name"]
         msg = (f"unknown study {name!r}" if name is not None else "missing") + (

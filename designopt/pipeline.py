@@ -25,7 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 import yaml
 
-from designopt import archive, output, parallel
+from designopt import archive, finite, output, parallel
 from designopt.config import ConfigError, load, validate
 from designopt.errors import WriteError
 from designopt.problems.base import Problem
@@ -317,6 +317,24 @@ def _scorer(fn: Callable, constraints: Callable | None = None) -> Callable:
     return _SCORERS[key]
 
 
+def check_finite(values: Mapping[str, Any], where: str, what: str,
+                 names: Sequence[str] = (), X: np.ndarray | None = None) -> None:  # fmt: skip
+    """ConfigError (exit 2, nothing written) when a result holds NaN or inf: numbers a
+    config let through that the arithmetic cannot take (lengths so large their powers
+    overflow in the run's precision). ``X`` (n, D): name the first design affected."""
+    for k, v in values.items():
+        a = np.asarray(v) if k != "attrs" else np.zeros(0)
+        if a.dtype.kind != "f" or np.all(np.isfinite(a)):
+            continue
+        at = ""
+        if X is not None and a.ndim >= 1:
+            i = int(np.flatnonzero(~np.isfinite(a.reshape(len(a), -1)).all(-1))[0])
+            at = " at " + ", ".join(f"{n} = {x:g}" for n, x in zip(names, X[i], strict=True))
+        raise ConfigError(f"{where}: {what}: {k} is not finite{at}; the config's numbers are "
+                          "outside what the arithmetic can take (e.g. lengths so large that "
+                          "their powers overflow); nothing written")  # fmt: skip
+
+
 def result_tree(cfg: Any, problem: Problem, res: Any) -> dict[str, Any]:
     """Archive groups of one (unbatched) run: optimizer, best_run, refine, final, problem."""
     from designopt.refine import refine
@@ -547,6 +565,11 @@ def run(cfg: Any, text: str, where: str, out: Path, resume: bool = False,
                   "compilations_by_stage": {"setup": setup.compilations,
                                             "optimizer": opt.compilations,
                                             "scoring_polish": post.compilations}}  # fmt: skip
+        try:
+            check_finite(tree["final"], where, "the final design")
+        except ConfigError:
+            output.remove(partial)
+            raise
         with ses.writing():
             try:
                 write_archive(out, tree, attrs)
@@ -656,6 +679,7 @@ def sweep(cfg: Any, text: str, where: str, out: Path,
                                           for k, v in res._asdict().items() if k != "settings"},
                                        settings=sets)  # fmt: skip
                     t = result_tree(c, problem, one)
+                    check_finite(t["final"], where, f"sweep member {i} {m}")
                     t["attrs"] = {"overrides": m,
                                   "config_resolved_yaml": resolved_yaml(sw.apply(cfg, m))}  # fmt: skip
                     tree["members"][f"{i:03d}"] = t
@@ -688,6 +712,10 @@ def _designs(cfg: Any, problem: Problem, designs: Mapping[str, Any] | Sequence[M
         if bad:
             raise ConfigError(f"{where}: design variable(s) {bad} not in this study's "
                               f"variables {list(problem.names)}")  # fmt: skip
+        for k, v in d.items():
+            bad = finite.first_bad(np.asarray(v, np.float64).ravel().tolist())
+            if bad is not None:
+                raise ConfigError(f"{where}: design variable '{k}': {bad[1]}")
         cols = [np.asarray(d.get(n, 0.5 * (lo + hi)), np.float64)
                 for n, lo, hi in zip(problem.names, problem.lower, problem.upper, strict=True)]  # fmt: skip
         shape = np.broadcast_shapes(*[c.shape for c in cols])
@@ -713,6 +741,8 @@ def evaluate(config: Any, designs: Mapping[str, Any] | Sequence[Mapping[str, Any
         cfg = validate(dict(config), where)
     else:
         cfg, where = config, where or "config"
+        finite.check_tree(cfg, where)  # a config built in Python, not through validate
+    finite.check_seed(cfg.seed, f"{where}: key 'seed'")
     keys = streams(cfg.seed)
     problem = build_problem(cfg, keys, where)
     X = _designs(cfg, problem, designs, where)
@@ -777,6 +807,7 @@ def scan(cfg: Any, text: str, where: str, out: Path,
                     parts.append(score(problem, X[i : i + b], batch=b, plan=plan))
                     bar(min(b, X.shape[0] - i))
             res = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+        check_finite(res, where, "scan", problem.names, X)
         tree = {"scan": {"names": np.array(problem.names, dtype="S"), "x": X,
                          "varied": np.array(varied, dtype="S"), **res,
                          "attrs": {"mode": cfg.scan.mode, "shape": sizes}},
@@ -786,12 +817,39 @@ def scan(cfg: Any, text: str, where: str, out: Path,
             "n_designs": int(X.shape[0]), "wall_time_s": total.wall,
             "compile_time_s": total.compile, "run_time_s": total.run}  # fmt: skip
         write_archive(out, tree, attrs)
-    i_best = int(np.nanargmin(res["f"]))
     lines = [f"{X.shape[0]} designs over {', '.join(varied)} ({cfg.scan.mode}) in batches of "
              f"{b}; wall {total.wall:.1f} s (compile {total.compile:.1f} s, run {total.run:.1f} s)",
-             "lowest f: " + ", ".join(f"{n} = {v:.4g}" for n, v in zip(problem.names, X[i_best], strict=True))
-             + f": f = {res['f'][i_best]:.5g}"]  # fmt: skip
+             *best_lines(problem.names, X, res["f"], res.get("violation"))]  # fmt: skip
     return Report(out, lines, attrs, tree)
+
+
+def best_lines(names: Sequence[str], X: np.ndarray, f: np.ndarray,
+               violation: np.ndarray | None = None) -> list[str]:  # fmt: skip
+    """The scored designs' summary: the lowest f; under constraints (g ≤ 0), the lowest
+    f among the feasible designs, and the infeasible design with a lower f named apart."""
+
+    def design(i: int) -> str:
+        return ", ".join(f"{n} = {v:.4g}" for n, v in zip(names, X[i], strict=True))
+
+    f = np.asarray(f, np.float64)
+    if violation is None:
+        i = int(np.nanargmin(f))
+        return [f"lowest f: {design(i)}: f = {f[i]:.5g}"]
+    v = np.asarray(violation, np.float64)
+    ok = v <= 0
+    lines = [f"constraints: {int(ok.sum())} of {len(f)} designs feasible"]
+    if ok.any():
+        i = int(np.flatnonzero(ok)[np.nanargmin(f[ok])])
+        lines.append(f"lowest f among the feasible: {design(i)}: f = {f[i]:.5g}")
+        j = int(np.nanargmin(np.where(ok, np.inf, f))) if (~ok).any() else -1
+        if j >= 0 and f[j] < f[i]:
+            lines.append(f"  lower f only where infeasible: {design(j)}: f = {f[j]:.5g}, "
+                         f"violated by {v[j]:.3g}")  # fmt: skip
+    else:
+        j = int(np.argmin(v))
+        lines.append(f"no feasible design; least violation {v[j]:.3g} at {design(j)}: "
+                     f"f = {f[j]:.5g}")  # fmt: skip
+    return lines
 
 
 # -------------------------------------------------------------------------- figures

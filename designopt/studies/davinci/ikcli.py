@@ -27,6 +27,7 @@ from designopt.errors import ConfigError
 MATRIX_COLUMNS = tuple(f"T{i}{j}" for i in range(4) for j in range(4))
 QUAT_COLUMNS = ("x", "y", "z", "qw", "qx", "qy", "qz")
 PROGRESS_MIN = 20_000  # poses from which a progress bar shows
+JOINT_NAMES = ["q1", "q2", "q3", "q4", "q5", "q6"]  # archived as ik attr joint_names
 
 
 # ---------------------------------------------------------------------------- input
@@ -207,7 +208,7 @@ def cmd_ik(args: argparse.Namespace, loaded: tuple[Any, str] | None = None) -> i
     ``loaded``: the (config, text) the CLI already loaded (with its compilation cache)."""
     import jax
 
-    from designopt import config, pipeline
+    from designopt import config, ikreport, output, pipeline
     from designopt.studies import streams
     from designopt.timing import Stopwatch
 
@@ -223,6 +224,9 @@ def cmd_ik(args: argparse.Namespace, loaded: tuple[Any, str] | None = None) -> i
     T = read_poses(poses, cfg.study.ik.orthonormal_tol)
     out = Path(args.out or f"results/davinci/{poses.stem}_ik.h5")
     pipeline.check_output(out, getattr(args, "overwrite", False))
+    csv_out = ikreport.csv_path(out) if getattr(args, "csv", False) else None
+    if csv_out is not None:
+        pipeline.check_output(csv_out, getattr(args, "overwrite", False))
     show = not args.quiet and len(T) >= PROGRESS_MIN
     from tqdm import tqdm
 
@@ -234,19 +238,17 @@ def cmd_ik(args: argparse.Namespace, loaded: tuple[Any, str] | None = None) -> i
     mode = "trajectory" if args.trajectory else "cold"
     tree = {"ik": {**res, "poses": T,
                    "attrs": {"mode": mode, "poses_file": str(poses), "n": len(T),
-                             "arm": cfg.study.ik_arm(),
+                             "arm": cfg.study.ik_arm(), "joint_names": JOINT_NAMES,
                              "units": "q1, q2, q4, q5, q6 rad; q3 mm; pos_err mm; rot_err rad"}}}  # fmt: skip
     attrs = pipeline.base_attrs("ik", cfg, text, streams(cfg.seed)) | {
         "wall_time_s": sw.wall, "compile_time_s": sw.compile, "run_time_s": sw.run}  # fmt: skip
     pipeline.write_archive(out, tree, attrs, overwrite=getattr(args, "overwrite", False))
+    if csv_out is not None:
+        output.write_file(csv_out, ikreport.csv_text(tree["ik"]).encode(), "joints CSV")
     if not args.quiet:
-        ok = res["success"]
-        pe, re = res["pos_err"][ok], res["rot_err"][ok]
-        print(f"{len(T)} poses ({mode}): {int(ok.sum())} solved, {int((~ok).sum())} failed "
-              f"(unreachable or not converged)")  # fmt: skip
-        if ok.any():
-            print(f"max error of the solved: {pe.max():.2g} mm, {re.max():.2g} rad; "
-                  f"iterations median {np.median(res['iterations'][ok]):.0f}")  # fmt: skip
+        print(f"mode: {mode}")
+        for line in ikreport.summary_lines(tree["ik"]):
+            print(line)
         print(f"wall {sw.wall:.1f} s = compile {sw.compile:.1f} s + run {sw.run:.1f} s")
-        print(f"wrote {out}")
+        print(f"wrote {out}" + (f" and {csv_out}" if csv_out is not None else ""))
     return 0
