@@ -185,11 +185,17 @@ def load(path: str | Path, model: type[BaseModel] | None = None) -> tuple[Any, s
     except yaml.YAMLError as e:
         msg = " ".join(str(e).split()).replace('in "<unicode string>", ', "")
         raise ConfigError(f"{p}: malformed YAML: {msg}") from None
-    return validate(raw, str(p), model), text
+    return validate(raw, str(p), model, folder=p.parent), text
 
 
-def validate(raw: Any, where: str, model: type[BaseModel] | None = None) -> Any:
-    """Validate a parsed config (a dict); ConfigError naming ``where`` and the key."""
+def validate(raw: Any, where: str, model: type[BaseModel] | None = None,
+             folder: str | Path | None = None) -> Any:  # fmt: skip
+    """Validate a parsed config (a dict); ConfigError naming ``where`` and the key.
+    Relative paths inside the config (a URDF, a points file) are read from ``folder``:
+    the config file's folder (default: ``where``'s folder when ``where`` is a file, else
+    the working directory); validators get it as the context key ``config_dir``."""
+    if folder is None:
+        folder = Path(where).parent if Path(where).is_file() else Path.cwd()
     model = run_config_model() if model is None else model
     if not isinstance(raw, dict):
         raise ConfigError(f"{where}: top level must be a mapping of keys")
@@ -200,7 +206,7 @@ def validate(raw: Any, where: str, model: type[BaseModel] | None = None) -> Any:
                           f"{sorted(STUDIES)} (`designopt studies` lists them)")  # fmt: skip
     finite.check_tree(raw, where)  # NaN, inf and huge numbers first: validators assume finite
     try:
-        cfg = model.model_validate(raw)
+        cfg = model.model_validate(raw, context={"config_dir": str(folder)})
     except ValidationError as e:
         raise ConfigError(f"{where}: {error_text(e, raw)}") from None
     finite.check_tree(cfg, where)  # numbers pydantic parsed from text ("1e999", "nan")

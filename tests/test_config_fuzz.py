@@ -1,7 +1,8 @@
 """Fuzz the CLI's validation (#14): mutants of valid configs — keys deleted, types swapped,
 extreme numbers, NaN, inf, odd strings, random bytes — through ``designopt run --dry-run``
 (every check of a run, nothing run): no traceback, exit 0 or 2, one line on 2, nothing
-written either way."""
+written either way. Mutants aim at numbers too (NaN, ±inf, huge, negative, zero, wrong
+types: #28), and every real number of every shipped config is swept deterministically."""
 
 from __future__ import annotations
 
@@ -15,7 +16,9 @@ import yaml
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
+from designopt import config
 from designopt.cli import main
+from designopt.errors import ConfigError
 
 ROOT = Path(__file__).resolve().parents[1]
 TINY = {
@@ -27,10 +30,22 @@ TINY = {
 }
 
 
+def absolute_paths(tree, folder: Path):
+    """The config with every string naming a file beside it (a URDF, a data file) made
+    absolute, so that a copy written elsewhere reads the same files."""
+    if isinstance(tree, dict):
+        return {k: absolute_paths(v, folder) for k, v in tree.items()}
+    if isinstance(tree, list):
+        return [absolute_paths(v, folder) for v in tree]
+    if isinstance(tree, str) and "/" in tree and (folder / tree).is_file():
+        return str(folder / tree)
+    return tree
+
+
 def _run_configs() -> list[dict]:
     out = [TINY]
     for p in sorted((ROOT / "configs").glob("*.yaml")):
-        raw = yaml.safe_load(p.read_text())
+        raw = absolute_paths(yaml.safe_load(p.read_text()), p.parent)
         if isinstance(raw, dict) and "study" in raw and "sweep" not in raw:
             raw.pop("output", None)
             out.append(raw)
@@ -47,6 +62,21 @@ VALUE = st.one_of(
     st.dictionaries(st.sampled_from(["a", "name", "n_samples", "l1"]), EXTREME, max_size=2),
     st.floats(allow_nan=True, allow_infinity=True), st.integers(), st.text(max_size=20),
 )  # fmt: skip
+
+
+HOSTILE = st.sampled_from([math.nan, math.inf, -math.inf, 1e308, -1e308, 1e10, 10**400, -1,
+                           0, -0.0, 1e-320, "abc", "nan", "1e999", [1.0], {"a": 1}, None, True])  # fmt: skip
+"""What a numeric field may be given: NaN, ±inf, huge, negative, zero, wrong types."""
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool)
+
+
+def _get(tree, path):
+    for k in path:
+        tree = tree[k]
+    return tree
 
 
 def _paths(tree, prefix=()) -> list[tuple]:
@@ -79,8 +109,16 @@ def mutants(draw) -> bytes:
         parent = cfg
         for k in path[:-1]:
             parent = parent[k]
-        action = draw(st.sampled_from(["delete", "value", "value", "extra"]))
-        if action == "delete":
+        action = draw(st.sampled_from(["delete", "value", "value", "extra", "number", "number"]))
+        if action == "number":  # a number of the config (any study's) made hostile
+            nums = [q for q in paths if _is_number(_get(cfg, q))]
+            if nums:
+                path = draw(st.sampled_from(nums))
+                parent = cfg
+                for k in path[:-1]:
+                    parent = parent[k]
+            parent[path[-1]] = draw(HOSTILE)
+        elif action == "delete":
             del parent[path[-1]]
         elif action == "value":
             parent[path[-1]] = draw(VALUE)
@@ -145,3 +183,94 @@ def test_huge_jobs_are_refused_naming_the_key(tmp_path, capsys):
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and f"key '{name}'" in err and "of memory" in err, err
         assert sorted(p.name for p in tmp_path.iterdir()) == ["c.yaml"]
+
+
+# ---------------------------------------------- every real number of every config
+
+
+def _example_configs() -> list[tuple[str, dict]]:
+    out = []
+    for p in sorted((ROOT / "configs").glob("*.yaml")):
+        raw = absolute_paths(yaml.safe_load(p.read_text()), p.parent)
+        if isinstance(raw, dict) and "study" in raw:
+            out.append((p.name, raw))
+    return out
+
+
+def _real_leaves(tree, path=()):
+    items = tree.items() if isinstance(tree, dict) else enumerate(tree) if isinstance(
+        tree, list) else ()  # fmt: skip
+    for k, v in items:
+        if isinstance(v, float) or (isinstance(v, int) and not isinstance(v, bool)):
+            yield (*path, k)
+        else:
+            yield from _real_leaves(v, (*path, k))
+
+
+def _dotted(path) -> str:
+    out = ""
+    for k in path:
+        out += f".{k}" if out else str(k)
+    return out
+
+
+CONFIGS = _example_configs()
+
+
+@pytest.mark.parametrize("name,raw", CONFIGS, ids=[c[0] for c in CONFIGS])
+def test_every_real_number_of_every_config_refuses_nan_inf_and_huge(name, raw):
+    """Each number of each shipped config (every study), set to NaN, +inf, -inf or 1e300:
+    refused naming exactly that key (validation only; the CLI's path is tested above)."""
+    leaves = list(_real_leaves(raw))
+    assert leaves, name
+    for path in leaves:
+        for bad in (math.nan, math.inf, -math.inf, 1e300):
+            r = copy.deepcopy(raw)
+            node = r
+            for k in path[:-1]:
+                node = node[k]
+            node[path[-1]] = bad
+            with pytest.raises(ConfigError) as e:
+                config.validate(r, str(ROOT / "configs" / name))
+            assert f"key '{_dotted(path)}'" in str(e.value), (path, bad, str(e.value))
+
+
+def test_every_config_number_through_the_cli(tmp_path, capsys):
+    """One number per shipped config, through `designopt run --dry-run`: exit 2, one
+    line, nothing written."""
+    for _name, raw in CONFIGS:
+        path = next(iter(_real_leaves(raw["study"], ("study",))), None)
+        if path is None:
+            continue
+        r = copy.deepcopy(raw)
+        r.pop("output", None)
+        node = r
+        for k in path[:-1]:
+            node = node[k]
+        node[path[-1]] = math.nan
+        p = tmp_path / "c.yaml"
+        p.write_text(yaml.safe_dump(r))
+        cmd = "sweep" if "sweep" in r else "run"
+        capsys.readouterr()
+        assert main([cmd, str(p), "--dry-run", "--out", str(tmp_path / "o" / "a.h5")]) == 2
+        out, err = capsys.readouterr()
+        assert err.startswith("designopt: error: ") and err.count("\n") == 1, err
+        assert f"key '{_dotted(path)}'" in err and "Traceback" not in out + err, err
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["c.yaml"]
+
+
+@pytest.mark.parametrize("name,raw", CONFIGS, ids=[c[0] for c in CONFIGS])
+def test_every_number_of_every_config_takes_odd_values_without_a_crash(name, raw):
+    """Negative, zero, tiny and wrong-type values in every numeric field: the config
+    validates or is refused with one ConfigError naming a key — never another exception."""
+    for path in _real_leaves(raw):
+        for odd in (-1, 0, -0.0, 1e-320, "abc", [1.0], None, True):
+            r = copy.deepcopy(raw)
+            node = r
+            for k in path[:-1]:
+                node = node[k]
+            node[path[-1]] = odd
+            try:
+                config.validate(r, str(ROOT / "configs" / name))
+            except ConfigError as e:
+                assert "key '" in str(e) and "\n" not in str(e), (path, odd, str(e))
