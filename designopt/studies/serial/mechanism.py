@@ -1,6 +1,7 @@
 """A user's serial chain from its YAML description, on the generic frame kernel
-(``designopt.kinematics.kernel``): the DH table as data, the joint box in SI-free units
-(rad for R joints, length units for P joints), and the design columns.
+(``designopt.kinematics.kernel``): the DH table (or the URDF path, ``kinematics.urdf``) as
+data, the joint box in SI-free units (rad for R joints, length units for P joints), and
+the design columns.
 
 Design columns are the variables (in config order) followed by the fixed names; angle
 entries named by a variable are given in degrees and converted by ``scale``.
@@ -13,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from designopt.kinematics.kernel import SerialModel, dh_model
-from designopt.studies.serial.settings import SerialSettings
+from designopt.studies.serial.settings import SerialSettings, UrdfChain
 
 
 @dataclass(frozen=True)
@@ -39,9 +40,27 @@ def _entry(v: float | str, angle: bool) -> float | str:
 
 def build(s: SerialSettings) -> Mechanism:
     """The chain of ``s`` as a kernel model with its joint box and design columns."""
-    joints = s.chain.joints
     names = tuple(s.variables) + tuple(s.fixed)
     angles = s.angle_names()
+    scale = np.array([np.pi / 180 if n in angles else 1.0 for n in names])
+    fixed = np.array([s.fixed[n] for n in s.fixed], np.float64)
+    if isinstance(s.chain, UrdfChain):
+        from designopt.kinematics import urdf
+
+        imp = s.chain.imported
+        bindings: dict[tuple[str, str], urdf.Lin] = {}
+        for (joint, fld), v in s.chain.bound().items():
+            if isinstance(v, str):
+                bindings[(joint, fld)] = (0.0, ((names.index(v), 1.0),))
+            else:
+                bindings[(joint, fld)] = (
+                    float(np.deg2rad(v)) if fld in urdf.ANGLE_FIELDS else float(v),
+                    (),
+                )
+        model = urdf.lower(imp, bindings, names)
+        lo, hi = np.array(imp.lower), np.array(imp.upper)
+        return Mechanism(model, names, len(s.variables), scale, fixed, lo, hi)
+    joints = s.chain.joints
     model = dh_model(
         convention=s.chain.convention,
         joint_types=tuple(j.type for j in joints),
@@ -54,6 +73,4 @@ def build(s: SerialSettings) -> Mechanism:
     lim = np.array([j.limits for j in joints], np.float64)
     rev = np.array([j.type == "R" for j in joints])
     lim[rev] = np.deg2rad(lim[rev])
-    scale = np.array([np.pi / 180 if n in angles else 1.0 for n in names])
-    fixed = np.array([s.fixed[n] for n in s.fixed], np.float64)
     return Mechanism(model, names, len(s.variables), scale, fixed, lim[:, 0], lim[:, 1])

@@ -1,14 +1,29 @@
 """The ``study:`` section of a ``serial`` config: any serial chain described in YAML
-(docs/configs.md). Angles (DH α, θ and R-joint limits) are in degrees, lengths in the
-user's unit; every DH entry is a number or the name of a design variable or fixed value.
+(docs/configs.md), as a DH table or as a robot's URDF (docs/urdf.md). Angles (DH α, θ,
+origin roll/pitch/yaw and R-joint limits) are in degrees, lengths in the user's unit (a
+URDF's own unit for a URDF chain); every DH entry or URDF ``set`` value is a number or the
+name of a design variable or fixed value.
 """
 
 from __future__ import annotations
 
-from typing import Any, Literal
+import hashlib
+import math
+from functools import lru_cache
+from pathlib import Path
+from typing import Annotated, Any, Literal, NamedTuple, Union
 
-from pydantic import Field, ValidationInfo, field_validator, model_validator
+from pydantic import (
+    Discriminator,
+    Field,
+    PrivateAttr,
+    Tag,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
 
+from designopt.errors import ConfigError
 from designopt.studies.base import Section, StudySettings
 
 ROWS = ("vx", "vy", "vz", "wx", "wy", "wz")
@@ -37,6 +52,109 @@ class Joint(Section):
 class Chain(Section):
     convention: Literal["standard", "modified"] = "standard"
     joints: list[Joint] = Field(min_length=1, max_length=12)
+
+
+class ImportedJoint(NamedTuple):
+    """An active joint of a URDF chain, as a DH row shows it: type and limits (degrees
+    for R joints, length units for P joints)."""
+
+    name: str
+    type: str
+    limits: tuple[float, float]
+
+
+@lru_cache(maxsize=16)
+def _parsed(text: str, where: str, digest: str):
+    from designopt.kinematics import urdf
+
+    return urdf.parse(text, where)
+
+
+class UrdfChain(Section):
+    """A chain read from a URDF file: the path ``base`` → ``tip`` with origin numbers bound
+    by ``set`` (docs/urdf.md). ``urdf_path`` and ``urdf_text`` are filled in when the
+    config is loaded (the resolved file and its text), so that an archive carries the
+    robot it was run on and ``designopt export`` needs nothing else."""
+
+    urdf: str = Field(min_length=1)
+    base: str | None = None
+    tip: str | None = None
+    set: dict[str, float | str] = {}
+    limits: dict[str, tuple[float, float]] = {}
+    urdf_path: str | None = None
+    urdf_text: str | None = None
+    _imported: Any = PrivateAttr(default=None)
+
+    @model_validator(mode="after")
+    def _load(self, info: ValidationInfo) -> UrdfChain:
+        from designopt.kinematics import urdf
+
+        if self.urdf_text is None:
+            p = Path(self.urdf).expanduser()
+            if not p.is_absolute():
+                ctx = info.context if isinstance(info.context, dict) else {}
+                folder = ctx.get("config_dir")
+                p = (Path(folder) if folder is not None else Path.cwd()) / p
+            if not p.is_file():
+                raise ConfigError(f"{p}: URDF file not found (chain.urdf: {self.urdf}; a "
+                                  "relative path is read from the config file's folder)")  # fmt: skip
+            try:
+                self.urdf_text = p.read_text(encoding="utf-8")
+            except (OSError, UnicodeDecodeError) as e:
+                raise ConfigError(f"{p}: cannot read the URDF ({e})") from None
+            self.urdf_path = str(p.resolve())
+        where = self.urdf_path or self.urdf
+        digest = hashlib.sha256(self.urdf_text.encode("utf-8")).hexdigest()
+        robot = _parsed(self.urdf_text, where, digest)
+        for n, lim in self.limits.items():
+            if not lim[0] < lim[1]:
+                raise ValueError(f"limits.{n}: lower limit {lim[0]} is not below upper {lim[1]}")
+        rad = {
+            n: tuple(math.radians(x) for x in lim)
+            if n in robot.joints and robot.joints[n].type != "prismatic" else tuple(lim)
+            for n, lim in self.limits.items()
+        }  # fmt: skip
+        imp = urdf.import_path(robot, self.base, self.tip, rad)  # type: ignore[arg-type]
+        self._imported = imp
+        for key in self.set:
+            urdf.parse_key(key, imp)
+        return self
+
+    @property
+    def imported(self):
+        """The imported path (``designopt.kinematics.urdf.Imported``)."""
+        return self._imported
+
+    def bound(self) -> dict[tuple[str, str], float | str]:
+        """{(joint, field): number or name} of ``set``."""
+        from designopt.kinematics.urdf import parse_key
+
+        return {parse_key(k, self._imported): v for k, v in self.set.items()}
+
+    @property
+    def joints(self) -> tuple[ImportedJoint, ...]:
+        """The active joints, in the units of a DH row."""
+        imp = self._imported
+        return tuple(
+            ImportedJoint(
+                n,
+                t,
+                (math.degrees(lo), math.degrees(hi)) if t == "R" else (lo, hi),
+            )
+            for n, t, lo, hi in zip(imp.active, imp.types, imp.lower, imp.upper, strict=True)
+        )
+
+
+def _chain_kind(v: Any) -> str:
+    if isinstance(v, UrdfChain) or (isinstance(v, dict) and "urdf" in v):
+        return "urdf"
+    return "dh"
+
+
+AnyChain = Annotated[
+    Union[Annotated[Chain, Tag("dh")], Annotated[UrdfChain, Tag("urdf")]],  # noqa: UP007
+    Discriminator(_chain_kind),
+]
 
 
 class SerialIndices(Section):
@@ -92,7 +210,7 @@ class SerialSettings(StudySettings):
     name: Literal["serial"] = "serial"
     variables: dict[str, tuple[float, float]]
     fixed: dict[str, float] = {}
-    chain: Chain
+    chain: AnyChain
     indices: SerialIndices = SerialIndices()
     objective: dict[str, float | bool | int] = {"gci": -1.0}
     constraints: list[LinearConstraint] = []
@@ -107,9 +225,11 @@ class SerialSettings(StudySettings):
 
     @field_validator("chain")
     @classmethod
-    def _names(cls, chain: Chain, info: ValidationInfo) -> Chain:
+    def _names(cls, chain: Chain | UrdfChain, info: ValidationInfo) -> Chain | UrdfChain:
         known = set(info.data.get("variables", {})) | set(info.data.get("fixed", {}))
         kinds: dict[str, str] = {}
+        if isinstance(chain, UrdfChain):
+            return _urdf_names(chain, info, known)
         for i, j in enumerate(chain.joints):
             for e in ("a", "alpha", "d", "theta"):
                 v = getattr(j, e)
@@ -184,9 +304,37 @@ class SerialSettings(StudySettings):
         return {k: float(v) for k, v in self.objective.items() if k in INDEX_NAMES}
 
     def angle_names(self) -> set[str]:
+        if isinstance(self.chain, UrdfChain):
+            return {
+                v
+                for (_, f), v in self.chain.bound().items()
+                if isinstance(v, str) and f in ("roll", "pitch", "yaw")
+            }
         return {
             getattr(j, e)
             for j in self.chain.joints
             for e in ("alpha", "theta")
             if isinstance(getattr(j, e), str)
         }
+
+
+def _urdf_names(chain: UrdfChain, info: ValidationInfo, known: set[str]) -> UrdfChain:
+    """Every ``set`` name is a variable or fixed value, used as an angle or as a length
+    but not both; every variable appears in ``set``."""
+    kinds: dict[str, str] = {}
+    for key, v in chain.set.items():
+        if not isinstance(v, str):
+            continue
+        if v not in known:
+            raise ValueError(
+                f"set.{key}: '{v}' is neither a design variable nor a fixed value "
+                f"(variables: {sorted(info.data.get('variables', {}))}, "
+                f"fixed: {sorted(info.data.get('fixed', {}))})"
+            )
+        kind = "angle" if key.rsplit(".", 1)[-1] in ("roll", "pitch", "yaw") else "length"
+        if kinds.setdefault(v, kind) != kind:
+            raise ValueError(f"set.{key}: '{v}' is used as an angle and as a length")
+    unused = sorted(set(info.data.get("variables", {})) - set(kinds))
+    if unused:
+        raise ValueError(f"design variable(s) {unused} appear in no chain.set entry")
+    return chain

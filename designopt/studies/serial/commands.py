@@ -1,0 +1,213 @@
+"""``designopt chain`` (print a serial chain as imported and check a URDF import against
+the parser's own forward kinematics) and ``designopt export`` (a run's best design written
+back into the user's URDF). docs/urdf.md shows both."""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from designopt.errors import ConfigError
+
+N_CHECK = 8
+"""Random joint configurations of the import check."""
+
+
+def _serial(cfg: Any, where: str):
+    s = cfg.study
+    if getattr(s, "name", None) != "serial":
+        raise ConfigError(f"{where}: key 'study.name': `designopt chain` needs a serial study, "
+                          f"got '{s.name}'")  # fmt: skip
+    return s
+
+
+def design_values(s: Any, given: dict[str, float], where: str) -> dict[str, float]:
+    """Every design variable's value: ``given`` or the middle of its box."""
+    bad = sorted(set(given) - set(s.variables))
+    if bad:
+        raise ConfigError(f"{where}: --design {bad[0]}: not a design variable "
+                          f"(variables: {', '.join(s.variables)})")  # fmt: skip
+    return {k: given.get(k, 0.5 * (lo + hi)) for k, (lo, hi) in s.variables.items()}
+
+
+def set_values(s: Any, design: dict[str, float]) -> dict[tuple[str, str], float]:
+    """{(joint, field): number in the URDF's units (rad, file lengths)} of ``set``."""
+    from designopt.kinematics.urdf import ANGLE_FIELDS
+
+    vals = design | {k: float(v) for k, v in s.fixed.items()}
+    out = {}
+    for (joint, fld), v in s.chain.bound().items():
+        x = vals[v] if isinstance(v, str) else float(v)
+        out[(joint, fld)] = math.radians(x) if fld in ANGLE_FIELDS else x
+    return out
+
+
+def _fmt(v: np.ndarray) -> str:
+    return "[" + ", ".join(f"{x: .6g}" for x in np.asarray(v).ravel()) + "]"
+
+
+def _pose_lines(label: str, R: np.ndarray, p: np.ndarray) -> list[str]:
+    return [f"{label}: p = {_fmt(p)}",
+            f"{' ' * len(label)}  R = {_fmt(R[0])} {_fmt(R[1])} {_fmt(R[2])}"]  # fmt: skip
+
+
+def cmd_chain(args: argparse.Namespace, loaded: tuple[Any, str]) -> int:
+    """Print the chain as imported, its FK at zero and at ``--q``, and (URDF) the largest
+    difference to yourdfpy's FK at random joint values."""
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+    from designopt.cli import _parse_design
+    from designopt.studies.serial.mechanism import build
+    from designopt.studies.serial.settings import UrdfChain
+
+    cfg, _ = loaded
+    where = args.config
+    s = _serial(cfg, where)
+    design = design_values(s, _parse_design(args.design), where)
+    mech = build(s)
+    n = mech.n
+    full = np.concatenate([[design[k] for k in s.variables], mech.fixed]) * mech.scale
+    urdf_chain = isinstance(s.chain, UrdfChain)
+    lines: list[str] = []
+    if urdf_chain:
+        imp = s.chain.imported
+        rob = imp.robot
+        lines.append(f"URDF {s.chain.urdf_path} (robot '{rob.name}'): {imp.base} -> {imp.tip}, "
+                     f"{len(imp.path)} joints on the path, {n} active")  # fmt: skip
+        bound = s.chain.bound()
+        for j in imp.path:
+            lim = ""
+            if j.name in imp.active:
+                i = imp.active.index(j.name)
+                lo, hi = imp.lower[i], imp.upper[i]
+                if imp.types[i] == "R":
+                    lim = f" limits [{math.degrees(lo):.4g}, {math.degrees(hi):.4g}] deg"
+                else:
+                    lim = f" limits [{lo:.4g}, {hi:.4g}]"
+                lim = f" q{i + 1}" + lim
+            mim = f" mimics {j.mimic[0]} (x{j.mimic[1]:g} {j.mimic[2]:+g})" if j.mimic else ""
+            axis = f" axis {_fmt(j.axis)}" if j.type != "fixed" else ""
+            lines.append(f"  {j.name:<16} {j.type:<10} {j.parent} -> {j.child}{axis}{lim}{mim}")
+            lines.append(f"  {'':<16} origin xyz {_fmt(j.xyz)} rpy {_fmt(j.rpy)}")
+            for (jn, f), v in bound.items():
+                if jn == j.name:
+                    unit = " deg" if f in ("roll", "pitch", "yaw") else ""
+                    what = (f"variable {v} = {design[v]:.6g}{unit}" if v in s.variables else
+                            f"fixed {v} = {s.fixed[v]:.6g}{unit}" if isinstance(v, str) else
+                            f"fixed {v:.6g}{unit}")  # fmt: skip
+                    lines.append(f"  {'':<16} origin.{f}: {what}")
+        lines.append(f"off the path (ignored): {len(rob.joints) - len(imp.path)} joints")
+    else:
+        lines.append(f"DH chain ({s.chain.convention}), {n} joints")
+        for i, j in enumerate(s.chain.joints):
+            lines.append(f"  q{i + 1}: {j.type} a={j.a} alpha={j.alpha} d={j.d} theta={j.theta} "
+                         f"limits {list(j.limits)}")  # fmt: skip
+    lines.append("design: " + ", ".join(f"{k} = {v:g}" for k, v in design.items()))
+    R0, p0 = (np.asarray(a) for a in mech.model.fk(full, np.zeros(n)))
+    lines += _pose_lines("FK at q = 0", R0, p0)
+    if args.q is not None:
+        try:
+            qv = [float(x) for x in args.q.split(",")]
+        except ValueError:
+            raise ConfigError(f"--q {args.q}: expected {n} numbers separated by commas") from None
+        if len(qv) != n or not all(math.isfinite(x) for x in qv):
+            raise ConfigError(f"--q {args.q}: expected {n} finite numbers (one per active joint)")
+        q = np.array([math.radians(x) if t == "R" else x for x, t in zip(qv, _active_types(mech, s), strict=True)])  # fmt: skip
+        Rq, pq = (np.asarray(a) for a in mech.model.fk(full, q))
+        lines += _pose_lines(f"FK at --q {args.q}", Rq, pq)
+    status = 0
+    if urdf_chain:
+        err = check_import(s, design, mech, full, cfg.seed)
+        ok = err < 1e-9
+        lines.append(f"check against yourdfpy's FK at {N_CHECK} random joint values in the "
+                     f"limits: max |ΔT| = {err:.2e} ({'OK' if ok else 'MISMATCH'})")  # fmt: skip
+        status = 0 if ok else 1
+    print("\n".join(lines))
+    return status
+
+
+def _active_types(mech: Any, s: Any) -> tuple[str, ...]:
+    return tuple(j.type for j in s.chain.joints)
+
+
+def check_import(s: Any, design: dict[str, float], mech: Any, full: np.ndarray,
+                 seed: int) -> float:  # fmt: skip
+    """Largest |Δ| over the 4×4 tip transform between the kernel and yourdfpy (reading the
+    URDF with this design's values written in), at random joint values in the box."""
+    from designopt.kinematics import urdf
+
+    text = urdf.export_text(s.chain.urdf_text, set_values(s, design), s.chain.urdf_path or "")
+    ref = urdf.Reference(text)
+    rng = np.random.default_rng(seed)
+    lo, hi = np.asarray(mech.lower), np.asarray(mech.upper)
+    Q = lo + (hi - lo) * rng.random((N_CHECK, mech.n))
+    R, p = (np.asarray(a) for a in mech.model.fk(full, Q))
+    err = 0.0
+    for i, q in enumerate(Q):
+        T = ref.fk(s.chain.imported, q)
+        err = max(err, float(np.abs(R[i] - T[:3, :3]).max()), float(np.abs(p[i] - T[:3, 3]).max()))
+    return err
+
+
+def _best(a: dict[str, Any], where: str) -> tuple[list[str], np.ndarray]:
+    kind = a["attrs"].get("kind")
+    if kind == "run":
+        names = [n.decode() if isinstance(n, bytes) else str(n) for n in a["problem"]["names"]]
+        return names, np.asarray(a["final"]["x"], np.float64)
+    if kind == "scan":
+        sc = a["scan"]
+        names = [n.decode() if isinstance(n, bytes) else str(n) for n in sc["names"]]
+        f = np.asarray(sc["f"], np.float64)
+        if "violation" in sc:
+            ok = np.asarray(sc["violation"]) <= 0
+            if not ok.any():
+                raise ConfigError(f"{where}: no feasible design in the scan to export")
+            f = np.where(ok, f, np.inf)
+        return names, np.asarray(sc["x"], np.float64)[int(np.nanargmin(f))]
+    raise ConfigError(f"{where}: a '{kind}' archive; export takes a run or scan archive")
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    """Write the URDF of a run (final design) or scan (lowest f) archive."""
+    import h5py
+
+    from designopt import archive, output
+    from designopt.kinematics import urdf
+    from designopt.studies.serial.settings import SerialSettings, UrdfChain
+
+    where = args.archive
+    p = Path(where)
+    if not p.is_file():
+        raise ConfigError(f"{where}: archive not found")
+    try:
+        a = archive.read(p)
+    except (OSError, KeyError, ValueError) as e:
+        raise ConfigError(f"{where}: not a designopt archive ({e})") from None
+    except h5py.h5e.HDF5ExtError as e:  # pragma: no cover - h5py's own errors
+        raise ConfigError(f"{where}: not a designopt archive ({e})") from None
+    cfg = a["attrs"].get("config_resolved")
+    if not isinstance(cfg, dict) or cfg.get("study", {}).get("name") != "serial":
+        raise ConfigError(f"{where}: not an archive of a serial study")
+    if not isinstance(cfg["study"].get("chain"), dict) or "urdf" not in cfg["study"]["chain"]:
+        raise ConfigError(f"{where}: the run's chain is a DH table, not a URDF (chain.urdf)")
+    s = SerialSettings.model_validate(cfg["study"])
+    assert isinstance(s.chain, UrdfChain)
+    names, x = _best(a, where)
+    design = dict(zip(names, (float(v) for v in x), strict=True))
+    text = urdf.export_text(
+        s.chain.urdf_text or "", set_values(s, design), s.chain.urdf_path or where
+    )
+    out = Path(args.urdf)
+    if out.exists() and not getattr(args, "overwrite", False):
+        raise ConfigError(f"output '{out}': a file is already there; give --overwrite to "
+                          "replace it, or another --urdf")  # fmt: skip
+    output.check(out, overwrite=getattr(args, "overwrite", False), make=True)
+    output.write_file(out, text.encode("utf-8"), "URDF")
+    print(f"{out}: {s.chain.urdf} with " + ", ".join(
+        f"{k} = {v:.6g}" for k, v in design.items()))  # fmt: skip
+    return 0
