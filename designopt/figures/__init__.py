@@ -8,15 +8,20 @@ written at ``DPI`` with fast compression, and axes titles are placed with ``y=1.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 
 import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
 
 DPI = 110  # PNG resolution (dots per inch); rasterised artists in PDFs use the same
 MAP_RESOLUTION = 121  # grid points per axis of the studies' index maps
+RECORD: list[tuple[str, plt.Figure]] | None = None
+"""When a list (the figure test sets it), :func:`save` appends (name, figure) and leaves
+the figure open, so its axes can be walked after drawing."""
 
 
 def save(fig: plt.Figure, folder: Path, name: str, dpi: int | None = None) -> list[Path]:
@@ -26,24 +31,35 @@ def save(fig: plt.Figure, folder: Path, name: str, dpi: int | None = None) -> li
     png, pdf = folder / f"{name}.png", folder / f"{name}.pdf"
     fig.savefig(png, dpi=dpi, pil_kwargs={"compress_level": 1})
     fig.savefig(pdf, dpi=dpi)
+    if RECORD is not None:
+        RECORD.append((name, fig))
     plt.close(fig)
     return [png, pdf]
 
 
-def convergence(best_run: dict, indices: list[str], folder: Path, title: str) -> list[Path]:
+def convergence(best_run: dict, indices: list[str], folder: Path, title: str,
+                units: Mapping[str, str] | None = None, rates: Mapping[str, float | None] | None = None
+                ) -> list[Path]:  # fmt: skip
     """One panel per index along the best run (``best_run/<index>`` of a run archive), with
-    a ± 2 SE band where ``<index>_se`` exists; saved as ``convergence``."""
-    fig, axes = plt.subplots(1, len(indices), figsize=(3.4 * len(indices), 3), squeeze=False)
+    a ± 2 SE band where ``<index>_se`` exists; ``units`` labels the axes; ``rates`` names
+    the success rates (clipped to [0, 1], Wilson band; value: the number of trials, or None
+    to infer it from the SE). Saved as ``convergence``."""
+    from designopt.figures import style
+
+    units, rates = units or {}, rates or {}
+    n = len(indices)
+    fig, axes = style.subplots(1, n, figsize=(3.4 * n, 3), squeeze=False)
     it = best_run["iteration"]
     for ax, k in zip(axes[0], indices, strict=True):
-        y = best_run[k]
-        ax.plot(it, y, marker=".", lw=1)
-        if k + "_se" in best_run:
-            se = best_run[k + "_se"]
-            ax.fill_between(it, y - 2 * se, y + 2 * se, alpha=0.25, lw=0)
-        ax.set_xlabel("iteration")
-        ax.set_ylabel(k)
+        y = np.asarray(best_run[k], np.float64)
+        se = best_run.get(k + "_se")
+        if k in rates:
+            style.rate_band(ax, it, y, se, rates[k], marker=".", lw=1)
+        else:
+            style.band(ax, it, y, se, marker=".", lw=1)
+        ax.set_xlabel(style.label("iteration", style.DIMENSIONLESS))
+        ax.set_ylabel(style.label(k, style.unit_of(k, units)))
         ax.grid(alpha=0.3)
-    fig.suptitle(f"{title} (band: ± 2 SE)", fontsize=10)
-    fig.tight_layout()
+    fig.suptitle(f"{title} (band: ± 2 SE; rates: Wilson interval)" if rates
+                 else f"{title} (band: ± 2 SE)", fontsize=10)  # fmt: skip
     return save(fig, folder, "convergence")

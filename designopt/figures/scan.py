@@ -1,70 +1,206 @@
-"""Figure of a scan archive: a curve (± 2 SE band) for one varied variable, a heat map for
-a grid over two, and f against the design number otherwise."""
+"""Figure of a scan archive: curves (± 2 SE bands) for one varied variable, heat maps for a
+grid over two, and f against the design number otherwise.
+
+Axes carry the study's units (``Study.units``). A study's ``figures`` module may declare
+``SCAN_PANELS`` ({panel title: indices drawn together}), ``RATES`` (success rates: clipped
+to [0, 1] with a Wilson band) and ``UNDEFINED_WHEN_ZERO`` ({index: index}: not drawn where
+the other is 0, e.g. η over the reached part of a cone where nothing is reached). Curves
+that are the same quantity (equal, or equal up to sign) are drawn once and named together.
+Infeasible designs (``scan/violation`` > 0) are drawn as hollow grey markers or hatched
+cells, named in the legend.
+"""
 
 from __future__ import annotations
 
+import importlib
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from matplotlib.colors import LogNorm
+from matplotlib.patches import Patch
 
-from designopt.figures import plt, save
+from designopt.figures import save, style
+
+INFEASIBLE = {"marker": "o", "mfc": "none", "mec": "0.45", "ls": "none", "ms": 5}
 
 
 def _indices(sc: dict[str, Any]) -> list[str]:
-    skip = {"names", "x", "varied", "attrs"}
+    skip = {"names", "x", "varied", "attrs", "violation"}
     return [k for k in sc if k not in skip and not k.endswith("_se")]
 
 
-def draw(a: dict[str, Any], folder: Path) -> list[Path]:
+def study_hints(a: dict[str, Any]) -> tuple[dict[str, str], Any]:
+    """(units, the study's figures module or None) of an archive's study."""
+    from designopt.studies import get
+
+    try:
+        st = get(a["attrs"].get("study", ""))
+        s = st.settings.model_validate(a["attrs"]["config_resolved"]["study"])
+        units = dict(st.units(s))
+    except (ValueError, KeyError, TypeError):
+        return {}, None
+    home = st.figures.__module__  # a study package ("designopt.studies.rcm") or a module in it
+    for name in (home + ".figures", home.rsplit(".", 1)[0] + ".figures"):
+        try:
+            return units, importlib.import_module(name)
+        except ImportError:
+            continue
+    return units, None
+
+
+def _same(y0: np.ndarray, y1: np.ndarray) -> int:
+    """+1 when y1 equals y0, −1 when it equals −y0, 0 otherwise."""
+    if y0.shape != y1.shape or not (np.all(np.isfinite(y0)) and np.all(np.isfinite(y1))):
+        return 0
+    tol = 1e-9 * max(float(np.max(np.abs(y0))), 1e-300)
+    if np.allclose(y0, y1, rtol=0, atol=tol):
+        return 1
+    return -1 if np.allclose(y0, -y1, rtol=0, atol=tol) else 0
+
+
+def merged(sc: Mapping[str, Any], inds: list[str]) -> list[tuple[str, str]]:
+    """[(index drawn, its name with every index equal to it or its negative)]."""
+    out: list[tuple[str, list[str]]] = []
+    for k in inds:
+        y = np.asarray(sc[k], np.float64)
+        for rep, names in out:
+            s = _same(np.asarray(sc[rep], np.float64), y)
+            if s:
+                names.append(k if s > 0 else f"−{k}")
+                break
+        else:
+            out.append((k, [k]))
+    return [(rep, " = ".join(names)) for rep, names in out]
+
+
+def _masked(sc: Mapping[str, Any], k: str, undefined: Mapping[str, str]) -> np.ndarray:
+    y = np.asarray(sc[k], np.float64).copy()
+    if k in undefined and undefined[k] in sc:
+        y[np.asarray(sc[undefined[k]]) == 0] = np.nan
+    return y
+
+
+def _curves(a: dict[str, Any], folder: Path, units: dict[str, str], mod: Any) -> list[Path]:
+    sc = a["scan"]
+    names = [n.decode() for n in sc["names"]]
+    var = sc["varied"][0].decode()
+    study = a["attrs"].get("study", "")
+    x = sc["x"][:, names.index(var)]
+    order = np.argsort(x)
+    x = x[order]
+    rates = set(getattr(mod, "RATES", ()))
+    undefined = dict(getattr(mod, "UNDEFINED_WHEN_ZERO", {}))
+    groups = dict(getattr(mod, "SCAN_PANELS", {}))
+    drawn = merged(sc, _indices(sc))
+    label_of = dict(drawn)
+    panels: list[tuple[str, list[str]]] = []
+    placed: set[str] = set()
+    for title, members in groups.items():
+        ks = [k for k, _ in drawn if k in members or any(m in label_of[k].split(" = ") for m in members)]  # fmt: skip
+        if ks:
+            panels.append((title, ks))
+            placed |= set(ks)
+    panels += [(label_of[k], [k]) for k, _ in drawn if k not in placed]
+    bad = np.asarray(sc["violation"])[order] > 0 if "violation" in sc else None
+    n = len(panels)
+    cols = min(3, n)
+    rows = -(-n // cols)
+    fig, axes = style.subplots(rows, cols, figsize=(4.2 * cols, 3.2 * rows), squeeze=False)
+    notes = []
+    for ax, (title, ks) in zip(axes.flat, panels, strict=False):
+        for k in ks:
+            y = _masked(sc, k, undefined)[order]
+            se = np.asarray(sc[k + "_se"])[order] if k + "_se" in sc else None
+            kw = {"lw": 1.2, "marker": "." if len(x) < 60 else None, "label": label_of[k]}
+            if k in rates:
+                line = style.rate_band(ax, x, y, se, **kw)
+            else:
+                line = style.band(ax, x, y, se, **kw)
+            if bad is not None and bad.any():
+                ax.plot(x[bad], y[bad], **INFEASIBLE, label="infeasible (violation > 0)")
+            if k in undefined and np.isnan(y).any():
+                notes.append(f"{k} undefined (not drawn) where {undefined[k]} = 0")
+            del line
+        unit = style.unit_of(ks[0], units)
+        ax.set_ylabel(style.label(title if len(ks) > 1 else ks[0], unit), fontsize=9)
+        ax.set_xlabel(style.label(var, style.unit_of(var, units)))
+        ax.grid(alpha=0.3)
+        if len(ks) > 1 or " = " in title or (bad is not None and bad.any()):
+            h, lab = ax.get_legend_handles_labels()
+            keep = dict(zip(lab, h, strict=True))  # one infeasible entry
+            ax.legend(keep.values(), keep.keys(), fontsize=7)
+    for ax in list(axes.flat)[n:]:
+        ax.set_visible(False)
+    sub = f"{study}: indices along {var} (band: ± 2 SE; rates: Wilson interval)"
+    if notes:
+        sub += "\n" + "; ".join(dict.fromkeys(notes))
+    fig.suptitle(sub, fontsize=10)
+    return save(fig, folder, f"scan_{var}")
+
+
+def _grid(a: dict[str, Any], folder: Path, units: dict[str, str], mod: Any) -> list[Path]:
     sc = a["scan"]
     names = [n.decode() for n in sc["names"]]
     varied = [n.decode() for n in sc["varied"]]
-    X = sc["x"]
-    inds = _indices(sc)
     study = a["attrs"].get("study", "")
-    if len(varied) == 1:
-        x = X[:, names.index(varied[0])]
-        order = np.argsort(x)
-        n = len(inds)
-        cols = min(3, n)
-        rows = -(-n // cols)
-        fig, axes = plt.subplots(rows, cols, figsize=(4 * cols, 3 * rows), squeeze=False)
-        for ax, k in zip(axes.flat, inds, strict=False):
-            y = sc[k][order]
-            ax.plot(x[order], y, lw=1.2, marker="." if len(x) < 60 else None)
-            if k + "_se" in sc:
-                se = sc[k + "_se"][order]
-                ax.fill_between(x[order], y - 2 * se, y + 2 * se, alpha=0.25, lw=0)
-            ax.set_xlabel(varied[0])
-            ax.set_ylabel(k)
-            ax.grid(alpha=0.3)
-        for ax in list(axes.flat)[n:]:
-            ax.set_visible(False)
-        fig.suptitle(f"{study}: indices along {varied[0]} (band: ± 2 SE)", fontsize=10)
-        fig.tight_layout()
-        return save(fig, folder, f"scan_{varied[0]}")
-    shape = a["scan"]["attrs"].get("shape", [])
-    if len(varied) == 2 and a["scan"]["attrs"].get("mode") == "grid":
-        n0, n1 = shape
-        i0, i1 = names.index(varied[0]), names.index(varied[1])
-        g0 = X[:, i0].reshape(n0, n1)[:, 0]
-        g1 = X[:, i1].reshape(n0, n1)[0, :]
-        show = ["f"] + [k for k in inds if k != "f"][:2]
-        fig, axes = plt.subplots(1, len(show), figsize=(4.6 * len(show), 3.8), squeeze=False)
-        for ax, k in zip(axes[0], show, strict=True):
-            z = sc[k].reshape(n0, n1)
-            im = ax.pcolormesh(g1, g0, z, shading="auto", cmap="viridis", rasterized=True)
-            fig.colorbar(im, ax=ax, label=k)
-            ax.set_xlabel(varied[1])
-            ax.set_ylabel(varied[0])
-            ax.set_title(k, fontsize=9, y=1.0)
-        fig.suptitle(f"{study}: scan over {varied[0]} × {varied[1]}", fontsize=10)
-        fig.tight_layout()
-        return save(fig, folder, f"scan_{varied[0]}_{varied[1]}")
-    fig, ax = plt.subplots(figsize=(6, 3.5))
-    ax.errorbar(np.arange(len(sc["f"])), sc["f"], yerr=2 * sc.get("f_se", 0 * sc["f"]), fmt=".")
-    ax.set_xlabel("design number")
-    ax.set_ylabel("f")
-    fig.tight_layout()
+    n0, n1 = sc["attrs"]["shape"]
+    X = sc["x"]
+    i0, i1 = names.index(varied[0]), names.index(varied[1])
+    g0 = X[:, i0].reshape(n0, n1)[:, 0]
+    g1 = X[:, i1].reshape(n0, n1)[0, :]
+    undefined = dict(getattr(mod, "UNDEFINED_WHEN_ZERO", {}))
+    rates = set(getattr(mod, "RATES", ()))
+    drawn = merged(sc, _indices(sc))
+    show = [d for d in drawn if d[0] == "f"] + [d for d in drawn if d[0] != "f"][:2]
+    bad = np.asarray(sc["violation"]).reshape(n0, n1) > 0 if "violation" in sc else None
+    fig, axes = style.subplots(1, len(show), figsize=(4.6 * len(show), 3.9), squeeze=False)
+    for ax, (k, lab) in zip(axes[0], show, strict=True):
+        z = _masked(sc, k, undefined).reshape(n0, n1)
+        fin = z[np.isfinite(z)]
+        log = k not in rates and fin.size and np.all(fin > 0) and fin.max() / fin.min() > style.LOG_RATIO  # fmt: skip
+        kw = {"norm": LogNorm()} if log else ({"vmin": 0, "vmax": 1} if k in rates else {})
+        im = ax.pcolormesh(g1, g0, z, shading="auto", cmap="viridis", rasterized=True, **kw)
+        fig.colorbar(im, ax=ax, label=style.label(lab, style.unit_of(k, units)))
+        if bad is not None and bad.any():
+            ax.contourf(g1, g0, bad.astype(float), levels=[0.5, 1.5], colors="none",
+                        hatches=["///"])  # fmt: skip
+            ax.legend(handles=[Patch(facecolor="none", edgecolor="0.3", hatch="///",
+                                     label="infeasible")], fontsize=7, loc="upper right")  # fmt: skip
+        ax.set_xlabel(style.label(varied[1], style.unit_of(varied[1], units)))
+        ax.set_ylabel(style.label(varied[0], style.unit_of(varied[0], units)))
+        ax.set_title(lab, fontsize=9)
+    fig.suptitle(f"{study}: scan over {varied[0]} × {varied[1]}", fontsize=10)
+    return save(fig, folder, f"scan_{varied[0]}_{varied[1]}")
+
+
+def _designs(a: dict[str, Any], folder: Path) -> list[Path]:
+    sc = a["scan"]
+    study = a["attrs"].get("study", "")
+    f = np.asarray(sc["f"], np.float64)
+    i = np.arange(len(f))
+    se = np.asarray(sc["f_se"]) if "f_se" in sc else None
+    fig, ax = style.subplots(figsize=(6, 3.5))
+    ax.errorbar(i, f, yerr=None if se is None else style.Z_SE * se, fmt=".", capsize=2,
+                label="f ± 2 SE")  # fmt: skip
+    if "violation" in sc and (np.asarray(sc["violation"]) > 0).any():
+        bad = np.asarray(sc["violation"]) > 0
+        ax.plot(i[bad], f[bad], **INFEASIBLE, label="infeasible (violation > 0)")
+    ax.legend(fontsize=7)
+    ax.set_xlabel(style.label("design number (row of scan/x)", style.DIMENSIONLESS))
+    ax.set_ylabel(style.label("f", style.DIMENSIONLESS))
+    ax.grid(alpha=0.3)
+    ax.set_title(f"{study}: f of every scanned design", fontsize=9)
     return save(fig, folder, "scan_designs")
+
+
+def draw(a: dict[str, Any], folder: Path) -> list[Path]:
+    """The figure of a scan archive (``archive.read``) into ``folder``."""
+    units, mod = study_hints(a)
+    varied = a["scan"]["varied"]
+    if len(varied) == 1:
+        return _curves(a, folder, units, mod)
+    if len(varied) == 2 and a["scan"]["attrs"].get("mode") == "grid":
+        return _grid(a, folder, units, mod)
+    return _designs(a, folder)

@@ -18,6 +18,8 @@ from designopt.studies.davinci.settings import UNITS, DavinciSettings
 
 INDICES = ("f", "gci", "coverage", "ik_success", "reach")
 SUMMARY = ("gci", "coverage", "ik_success", "reach")
+INDEX_UNITS = dict.fromkeys(INDICES, "-")
+"""Units of every index: all dimensionless (f, GCI, and rates in [0, 1])."""
 
 
 def _problem(settings: DavinciSettings, keys, dtype):
@@ -50,7 +52,7 @@ STUDY = Study(
     indices=lambda s: INDICES,
     figures=_figures,
     sweep_aliases=_aliases,
-    units=lambda s: {k: UNITS[k] for k in s.variables},
+    units=lambda s: {k: UNITS[k] for k in s.variables} | INDEX_UNITS,
     example_config="configs/davinci.yaml",
     tiny={
         "name": "davinci",

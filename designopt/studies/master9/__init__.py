@@ -17,6 +17,11 @@ SUMMARY = ("f_k", "f_l", "f_p", "gci", "gcsei", "gpi")
 INDICES = ("f", "f_k", "f_l", "f_p", "gci", "gcsei", "gpi", "volume", "L")
 
 
+INDEX_UNITS = {"f": "-", "f_k": "-", "f_l": "-", "f_p": "mm", "gci": "-", "gcsei": "-",
+               "gpi": "mm", "volume": "mm³", "L": "mm"}  # fmt: skip
+"""Units of every index (figures label their axes with them)."""
+
+
 def _problem(settings: Master9Settings, keys, dtype):
     from designopt.studies.master9 import objective
 
@@ -50,7 +55,7 @@ STUDY = Study(
     indices=lambda s: INDICES,
     figures=_figures,
     sweep_aliases=_aliases,
-    units=lambda s: dict.fromkeys(s.variables, "mm"),
+    units=lambda s: dict.fromkeys(s.variables, "mm") | INDEX_UNITS,
     extra_lines=_extra,
     example_config="configs/master9.yaml",
     tiny={"name": "master9", "indices": {"n_samples": 2048}, "n_norm": 8},

@@ -1,10 +1,12 @@
 """Figures of the 9-DOF haptic master (IEEE Access 2019, Fig. 12-15) for the initial and
 final design of a run.
 
-Fig. 12: f and the sub-objectives f_k, f_l, f_p along the best run; Fig. 13: 1/k of J_v
-over pairs of (q1, q2, q3), the third joint at mid-range; Fig. 14: e_max (backlash
-error) over the same pairs; Fig. 15: workspace point clouds with volume and L. Every map
-and cloud comes from one jitted call of the index kernels (one XLA program per run).
+Fig. 12: f and the sub-objectives f_k, f_l, f_p (± 2 SE) along the best run; Fig. 13: 1/k
+of J_v over pairs of (q1, q2, q3), the third joint held at mid-range (:data:`HELD`: the
+middle of its limits, away from the box's singular edges), initial and final design on one
+colour scale; Fig. 14: e_max (backlash error) over the same pairs, one colour scale;
+Fig. 15: workspace point clouds with volume and L on common axes and colour limits. Every
+map and cloud comes from one jitted call of the index kernels (one XLA program per run).
 """
 
 from __future__ import annotations
@@ -15,13 +17,17 @@ from typing import Any
 
 import jax
 import numpy as np
+from matplotlib.ticker import MaxNLocator
 
 from designopt import montecarlo as mc
-from designopt.figures import MAP_RESOLUTION, plt, save
+from designopt.figures import MAP_RESOLUTION, save, style
 from designopt.studies.master9 import indices as ind
 from designopt.studies.master9 import mechanism as m
 
 PAIRS = ((0, 1), (0, 2), (1, 2))
+HELD = "mid-range"
+"""Where a map holds the third position joint: the middle of its limits (q1 −5°, q2 0°,
+q3 0°), inside the box and away from its singular edges (1/k > 0 there)."""
 
 
 def joint_grid(pair: tuple[int, int], n: int = MAP_RESOLUTION):
@@ -77,22 +83,28 @@ def _extent(a: np.ndarray, b: np.ndarray) -> tuple[float, float, float, float]:
     return a[0] - da, a[-1] + da, b[0] - db, b[-1] + db
 
 
-def _maps(z_all, axes_deg, title: str, unit: str, labels: list[str], cmap: str):
-    fig, axes = plt.subplots(len(labels), 3, figsize=(11, 3.3 * len(labels)), squeeze=False)
+def _maps(z_all, axes_deg, title: str, name: str, unit: str, labels: list[str], cmap: str):
+    """Rows: designs; columns: joint pairs; one colour scale over every panel."""
+    fig, axes = style.subplots(len(labels), 3, figsize=(11, 3.1 * len(labels) + 0.6),
+                               squeeze=False)  # fmt: skip
     names = ("q1", "q2", "q3")
+    mid = np.rad2deg(m.POSITION_LIMITS.mean(axis=1))
+    ims = []
     for r, label in enumerate(labels):
         for c, pair in enumerate(PAIRS):
             a, b = axes_deg[c]
             z = z_all[r, c]
             ax = axes[r, c]
-            im = ax.imshow(z, origin="lower", extent=_extent(a, b), aspect="auto",
-                           interpolation="nearest", cmap=cmap, rasterized=True)  # fmt: skip
-            fig.colorbar(im, ax=ax, label=unit)
-            ax.set_xlabel(f"{names[pair[0]]} (deg)")
-            ax.set_ylabel(f"{names[pair[1]]} (deg)")
-            ax.set_title(f"{label}: mean {z.mean():.4g}", fontsize=9, y=1.0)
-    fig.suptitle(title, fontsize=10)
-    fig.subplots_adjust(left=0.06, right=0.95, bottom=0.09, top=0.89, wspace=0.45, hspace=0.5)
+            ims.append(ax.imshow(z, origin="lower", extent=_extent(a, b), aspect="auto",
+                                 interpolation="nearest", cmap=cmap, rasterized=True))  # fmt: skip
+            ax.set_xlabel(style.label(names[pair[0]], "deg"))
+            ax.set_ylabel(style.label(names[pair[1]], "deg"))
+            held = ({0, 1, 2} - set(pair)).pop()
+            ax.set_title(f"{label}: mean {z.mean():.4g}\n{names[held]} held at {mid[held]:.0f}° "
+                         f"({HELD})", fontsize=8)  # fmt: skip
+    style.shared_scale(fig, ims)
+    fig.colorbar(ims[0], ax=axes, label=style.label(name, unit), shrink=0.8)
+    fig.suptitle(title + " — one colour scale for all panels", fontsize=10)
     return fig
 
 
@@ -110,43 +122,50 @@ def draw(
     to a full design dict; ``sub_history`` holds f, f_k, f_l, f_p, volume, L per iteration;
     the maps have ``resolution`` × ``resolution`` points."""
     out = []
-    fig, axes = plt.subplots(2, 2, figsize=(9, 6))
-    for ax, k, lab in zip(axes.flat, ("f", "f_k", "f_l", "f_p"),
-                          ("composite f (eq. 43)", "f_k = GCSEI − GCI", "f_l = L / V^(1/3)",
-                           "f_p = GPI (mm)"), strict=True):  # fmt: skip
-        ax.plot(iters, sub_history[k], marker=".", lw=1)
-        ax.set_xlabel("iteration")
-        ax.set_ylabel(lab)
+    fig, axes = style.subplots(2, 2, figsize=(9, 6))
+    for ax, k, lab, u in zip(axes.flat, ("f", "f_k", "f_l", "f_p"),
+                             ("composite f, eq. (43)", "f_k = GCSEI − GCI", "f_l = L / V^(1/3)",
+                              "f_p = GPI"), ("-", "-", "-", "mm"), strict=True):  # fmt: skip
+        se = sub_history.get(k + "_se")
+        style.band(ax, iters, np.asarray(sub_history[k], np.float64), se, marker=".", lw=1)
+        ax.set_xlabel(style.label("iteration", style.DIMENSIONLESS))
+        ax.set_ylabel(style.label(lab, u))
         ax.grid(alpha=0.3)
-    fig.suptitle("Best run: objective and sub-objectives (IEEE Access 2019, Fig. 12)", fontsize=10)
-    fig.subplots_adjust(left=0.09, right=0.98, bottom=0.09, top=0.92, wspace=0.3, hspace=0.35)
+    fig.suptitle("Best run: objective and sub-objectives, band ± 2 SE (IEEE Access 2019, "
+                 "Fig. 12)", fontsize=10)  # fmt: skip
     out += save(fig, folder, "fig12_convergence")
     d = figure_data(designs, backlash_deg, key_data, resolution, n_cloud)
     labels = list(designs)
     fig = _maps(d["inv_cond"], d["axes"], "Dexterity 1/k of J_v (Frobenius; IEEE Access 2019, "
-                "Fig. 13)", "1/k", labels, "viridis")  # fmt: skip
+                "Fig. 13)", "1/k", "-", labels, "viridis")  # fmt: skip
     out += save(fig, folder, "fig13_dexterity_maps")
     fig = _maps(d["emax"], d["axes"], f"Backlash error e_max for {tuple(backlash_deg)}° (IEEE "
-                "Access 2019, Fig. 14)", "e_max (mm)", labels, "magma")  # fmt: skip
+                "Access 2019, Fig. 14)", "e_max", "mm", labels, "magma")  # fmt: skip
     out += save(fig, folder, "fig14_backlash_maps")
-    fig = plt.figure(figsize=(5.2 * len(designs), 4.6))
+    fig = style.figure(figsize=(5.0 * len(designs) + 0.8, 4.8))
+    P_all = d["cloud"]
+    lo, hi = P_all.reshape(-1, 3).min(axis=0), P_all.reshape(-1, 3).max(axis=0)
+    scs = []
     for i, (label, x) in enumerate(designs.items()):
         ax = fig.add_subplot(1, len(designs), i + 1, projection="3d")
         full, P = d["designs"][i], d["cloud"][i]
-        ax.scatter(
-            P[:, 0], P[:, 1], P[:, 2], s=0.5, alpha=0.4, c=P[:, 2], cmap="viridis", rasterized=True
-        )
-        ax.set_xlabel("x (mm)", fontsize=8)
-        ax.set_ylabel("y (mm)", fontsize=8)
-        ax.set_zlabel("z (mm)", fontsize=8)
+        scs.append(ax.scatter(P[:, 0], P[:, 1], P[:, 2], s=2, alpha=0.8, c=P[:, 2],
+                              cmap="viridis", rasterized=True, depthshade=False))  # fmt: skip
+        ax.set(xlim=(lo[0], hi[0]), ylim=(lo[1], hi[1]), zlim=(lo[2], hi[2]))
+        for a in (ax.xaxis, ax.yaxis, ax.zaxis):
+            a.set_major_locator(MaxNLocator(4))
+        ax.set_xlabel(style.label("x", "mm"), fontsize=8, labelpad=2)
+        ax.set_ylabel(style.label("y", "mm"), fontsize=8, labelpad=2)
+        ax.set_zlabel(style.label("z", "mm"), fontsize=8, labelpad=2)
         L = full["a1"] + full["a3"] + full["d3"]
         vol = x.get("volume")
         vtxt = f"V = {vol:.4e} mm³, " if vol is not None else ""
-        ax.set_title(f"{label}: {vtxt}L = {L:.3f} mm", fontsize=9, y=1.0)
-        ax.tick_params(labelsize=6)
+        ax.set_title(f"{label}:\n{vtxt}L = {L:.3f} mm", fontsize=9)
+        ax.tick_params(labelsize=6, pad=0)
+    style.shared_scale(fig, scs)
+    fig.colorbar(scs[0], ax=fig.axes, label=style.label("tip height z", "mm"), shrink=0.6)
     fig.suptitle(f"Workspace of the position mechanism ({n_cloud} uniform joint samples; IEEE "
-                 "Access 2019, Fig. 15)", fontsize=10)  # fmt: skip
-    fig.subplots_adjust(left=0.02, right=0.98, bottom=0.04, top=0.88, wspace=0.08)
+                 "Access 2019, Fig. 15): common axes and colours", fontsize=10)  # fmt: skip
     out += save(fig, folder, "fig15_workspace")
     return out
 

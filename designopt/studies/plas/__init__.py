@@ -38,6 +38,13 @@ def _aliases(s: PlasSettings) -> dict[str, str]:
     return out
 
 
+INDEX_UNITS = {"f": "-", "vel_rel": "-", "vel_reduction": "-", "vel_abs": "mm/s",
+               "vel_max": "mm/s", "pos_mean": "mm", "pos_max": "mm", "k2_min": "-", "k2_max": "-",
+               "k3_min": "-", "k3_max": "-", "k4": "-", "reach": "mm", "counterweight": "g",
+               "inertia": "g·cm²"}  # fmt: skip
+"""Units of every index (figures label their axes with them)."""
+
+
 def _extra(s: PlasSettings, fin) -> list[str]:
     return [
         f"  max mismatch over the samples (no SE, docs/plas.md): |Δv| {float(fin['vel_max']):.3g} mm/s, "
@@ -58,7 +65,7 @@ STUDY = Study(
     indices=lambda s: INDICES,
     figures=_figures,
     sweep_aliases=_aliases,
-    units=lambda s: dict.fromkeys(s.variables, "mm"),
+    units=lambda s: dict.fromkeys(s.variables, "mm") | INDEX_UNITS,
     extra_lines=_extra,
     example_config="configs/plas.yaml",
     tiny={

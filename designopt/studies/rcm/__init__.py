@@ -18,6 +18,11 @@ SUMMARY = ("eta", "eta_box", "eta_cone", "eta_reach", "reach")
 INDICES = ("f", "eta", "eta_box", "eta_cone", "eta_reach", "reach", "eq19_margin")
 
 
+INDEX_UNITS = {"f": "-", "eta": "-", "eta_box": "-", "eta_cone": "-", "eta_reach": "-",
+               "reach": "-", "eq19_margin": "mm"}  # fmt: skip
+"""Units of every index (figures label their axes with them; reach is a fraction)."""
+
+
 def _problem(settings: RcmSettings, keys, dtype):
     from designopt.studies.rcm import objective
 
@@ -51,7 +56,7 @@ STUDY_RCM = Study(
         "study.n_samples": "study.eta.n_samples",
         **{f"design.{k}": f"study.fixed.{k}" for k in ("a", "b", "c") if k not in s.variables},
     },
-    units=lambda s: dict.fromkeys(s.variables, "mm"),
+    units=lambda s: dict.fromkeys(s.variables, "mm") | INDEX_UNITS,
     extra_lines=_extra,
     example_config="configs/rcm.yaml",
     tiny={"name": "rcm", "eta": {"n_samples": 1024}},

@@ -23,6 +23,14 @@ def _figures(archive: dict[str, Any], folder: Path) -> list[Path]:
     return figures.draw_run(archive, folder)
 
 
+def _units(s: SerialSettings) -> dict[str, str]:
+    """Angles in deg, lengths in L (the chain's own length unit, e.g. m for the PUMA 560);
+    gci, gcsei dimensionless, manipulability and volume in powers of L (and rad)."""
+    ang = s.angle_names()
+    out = {k: "deg" if k in ang else "L" for k in s.variables}
+    return out | {"gci": "-", "gcsei": "-", "manipulability": "L-based", "volume": "L-based"}
+
+
 def _aliases(s: SerialSettings) -> dict[str, str]:
     out = {f"study.{k}": f"study.indices.{k}" for k in ("n_samples", "length_scale")}
     out |= {f"design.{k}": f"study.fixed.{k}" for k in s.fixed}
@@ -39,6 +47,7 @@ STUDY = Study(
     indices=lambda s: ("f", *s.index_names()),
     figures=_figures,
     sweep_aliases=_aliases,
+    units=_units,
     example_config="configs/planar2r.yaml",
     tiny={
         "name": "serial",

@@ -1,6 +1,12 @@
 """Figures of a serial-study run: convergence of f and its indices along the best run,
-1/k over the first two joints (the others at mid-range) for the initial and final design,
-and the final design's workspace coloured by 1/k."""
+1/k over two joints for the initial and final design (one colour scale), and the final
+design's workspace coloured by 1/k.
+
+The map's joints are q2, q3 for chains of three or more joints (q1 turns the whole arm
+about the base axis and leaves 1/k unchanged), else q1, q2. The other joints are held at
+:func:`held`: each at its mid-range or a quarter point (mid ± range/4), whichever gives the
+final design the most dexterous slice, joint by joint, so a slice never sits on a
+singularity such as the PUMA 560's wrist at q5 = 0. The figure states where they are."""
 
 from __future__ import annotations
 
@@ -10,12 +16,19 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
+from matplotlib.ticker import MaxNLocator
 
 from designopt import montecarlo as mc
-from designopt.figures import MAP_RESOLUTION, convergence, plt, save
+from designopt.figures import MAP_RESOLUTION, convergence, save, style
 from designopt.studies.serial.mechanism import Mechanism, build
 from designopt.studies.serial.objective import measures
 from designopt.studies.serial.settings import ROWS, SerialSettings
+
+
+def STUDY_UNITS(s: SerialSettings) -> dict[str, str]:  # noqa: N802
+    from designopt.studies.serial import STUDY
+
+    return STUDY.units(s)
 
 
 def _full(mech: Mechanism, x: np.ndarray) -> np.ndarray:
@@ -44,7 +57,45 @@ def inv_k(mech: Mechanism, s: SerialSettings, x: np.ndarray, q: np.ndarray) -> n
 
 
 def _unit(mech: Mechanism, i: int, s: SerialSettings) -> tuple[float, str]:
-    return (180 / np.pi, "deg") if s.chain.joints[i].type == "R" else (1.0, "")
+    return (180 / np.pi, "deg") if _revolute(s, i) else (1.0, "L")
+
+
+def _revolute(s: SerialSettings, i: int) -> bool:
+    j = getattr(s.chain, "joints", None)
+    return j[i].type == "R" if j is not None else True
+
+
+def map_joints(n: int) -> tuple[int, int]:
+    """The two joints a map is drawn over (see the module docstring)."""
+    return (1, 2) if n >= 3 else (0, min(1, n - 1))
+
+
+def _grid(lo, hi, pair, held, n):
+    ga, gb = np.linspace(lo[pair[0]], hi[pair[0]], n), np.linspace(lo[pair[1]], hi[pair[1]], n)
+    A, B = np.meshgrid(ga, gb, indexing="xy")
+    q = np.tile(held, (A.size, 1))
+    q[:, pair[0]], q[:, pair[1]] = A.ravel(), B.ravel()
+    return ga, gb, q
+
+
+def held(mech: Mechanism, s: SerialSettings, X: np.ndarray, pair: tuple[int, int],
+         n: int = 15) -> np.ndarray:  # fmt: skip
+    """Where the joints off the map are held (rad / length): joint by joint, the mid-range
+    or quarter point (mid ± range/4) with the largest mean 1/k of design ``X`` (1, P) over
+    a coarse n×n slice."""
+    lo, hi = mech.lower, mech.upper
+    q = 0.5 * (lo + hi)
+    kern = _kernel(mech, s)
+    for j in (j for j in range(mech.n) if j not in pair):
+        cands = q[j] + np.array([0.0, 0.25, -0.25]) * (hi[j] - lo[j])
+        qs = []
+        for v in cands:
+            h = q.copy()
+            h[j] = v
+            qs.append(_grid(lo, hi, pair, h, n)[2])
+        z = np.asarray(kern(X, np.concatenate(qs).astype(X.dtype))[0][0]).reshape(len(cands), -1)
+        q[j] = cands[int(np.argmax(z.mean(axis=1) - 1e-9 * np.arange(len(cands))))]
+    return q
 
 
 def draw_run(a: dict[str, Any], folder: Path, resolution: int = MAP_RESOLUTION) -> list[Path]:
@@ -59,57 +110,61 @@ def draw_run(a: dict[str, Any], folder: Path, resolution: int = MAP_RESOLUTION) 
         "final": a["final"]["x"],
     }
     out = []
-    out += convergence(br, ["f", *s.index_names()], folder, "Best run: objective and indices")
+    out += convergence(br, ["f", *s.index_names()], folder, "Best run: objective and indices",
+                       units=STUDY_UNITS(s))  # fmt: skip
 
     rows_txt = ", ".join(ROWS[r] for r in s.indices.rows())
+    units = STUDY_UNITS(s)
     lo, hi = mech.lower, mech.upper
-    mid = 0.5 * (lo + hi)
+    X = _full(mech, np.stack(list(designs.values())))
+    pair = map_joints(mech.n)
     n = resolution if mech.n >= 2 else 0  # the map needs two joints
-    ga, gb = (
-        np.linspace(lo[0], hi[0], n),
-        np.linspace(lo[min(1, mech.n - 1)], hi[min(1, mech.n - 1)], n),
-    )
-    A, B = np.meshgrid(ga, gb, indexing="xy")
-    qg = np.tile(mid, (A.size, 1))
-    if n:
-        qg[:, 0], qg[:, 1] = A.ravel(), B.ravel()
+    hq = held(mech, s, X[-1:], pair) if n else 0.5 * (lo + hi)
+    ga, gb, qg = _grid(lo, hi, pair, hq, n)
     rng = np.random.default_rng(np.asarray(a["attrs"]["keys"]["figures"], np.uint32))
     qc = lo + (hi - lo) * rng.uniform(size=(4000, mech.n))  # NumPy: no threefry compile
-    X = _full(mech, np.stack(list(designs.values())))
     z, P = _kernel(mech, s)(X, np.concatenate([qg, qc]).astype(X.dtype))  # one XLA program
     z, P = np.asarray(z), np.asarray(P)
+    m2 = ga.size * gb.size
     if mech.n >= 2:
-        fa, ua = _unit(mech, 0, s)
-        fb, ub = _unit(mech, 1, s)
-        fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
+        fa, ua = _unit(mech, pair[0], s)
+        fb, ub = _unit(mech, pair[1], s)
+        fig, axes = style.subplots(1, 2, figsize=(10, 4.0))
+        ims = []
         for i, (ax, lab) in enumerate(zip(axes, designs, strict=True)):
-            zi = z[i, : A.size].reshape(A.shape)
-            im = ax.pcolormesh(ga * fa, gb * fb, zi, shading="auto", cmap="viridis",
-                               rasterized=True)  # fmt: skip
-            fig.colorbar(im, ax=ax, label="1/k")
-            ax.set_xlabel(f"q1 ({ua})" if ua else "q1")
-            ax.set_ylabel(f"q2 ({ub})" if ub else "q2")
-            ax.set_title(f"{lab}: mean {zi.mean():.4g}", fontsize=9, y=1.0)
-        fig.suptitle(f"1/k ({s.indices.norm}-norm; rows {rows_txt}) over q1, q2, others at mid-range",
-                     fontsize=10)  # fmt: skip
-        fig.tight_layout()
+            zi = z[i, :m2].reshape(gb.size, ga.size)
+            ims.append(ax.pcolormesh(ga * fa, gb * fb, zi, shading="auto", cmap="viridis",
+                                     rasterized=True))  # fmt: skip
+            ax.set_xlabel(style.label(f"q{pair[0] + 1}", ua))
+            ax.set_ylabel(style.label(f"q{pair[1] + 1}", ub))
+            ax.set_title(f"{lab}: mean {zi.mean():.4g}", fontsize=9)
+        style.shared_scale(fig, ims)
+        fig.colorbar(ims[0], ax=list(axes), label=style.label("1/k", style.DIMENSIONLESS))
+        others = [j for j in range(mech.n) if j not in pair]
+        txt = style.held_text({f"q{j + 1}": f"{hq[j] * _unit(mech, j, s)[0]:.3g} "
+                               f"{_unit(mech, j, s)[1]}" for j in others})  # fmt: skip
+        fig.suptitle(f"1/k ({s.indices.norm}-norm; rows {rows_txt}) over q{pair[0] + 1}, "
+                     f"q{pair[1] + 1}" + (f"\nother joints {txt}" if txt else ""), fontsize=10)  # fmt: skip
         out += save(fig, folder, "dexterity_map")
 
-    p, c = P[-1, A.size :], z[-1, A.size :]  # the final design's cloud
+    p, c = P[-1, m2:], z[-1, m2:]  # the final design's cloud
     planar = np.ptp(p[:, 2]) <= 1e-9 * max(np.ptp(p[:, :2]), 1e-300)
-    fig = plt.figure(figsize=(5.2, 4.6))
+    fig = style.figure(figsize=(5.4, 4.8))
+    L = units.get("__length__", "L")
     if planar:
         ax = fig.add_subplot(1, 1, 1)
-        sc = ax.scatter(p[:, 0], p[:, 1], s=1, c=c, cmap="viridis", rasterized=True)
+        sc = ax.scatter(p[:, 0], p[:, 1], s=2, c=c, cmap="viridis", rasterized=True)
         ax.set_aspect("equal")
     else:
         ax = fig.add_subplot(1, 1, 1, projection="3d")
-        sc = ax.scatter(p[:, 0], p[:, 1], p[:, 2], s=0.5, c=c, cmap="viridis", rasterized=True)
-        ax.set_zlabel("z")
-    ax.set_xlabel("x")
-    ax.set_ylabel("y")
-    fig.colorbar(sc, ax=ax, label="1/k", shrink=0.7)
-    ax.set_title("final design: tip positions of 4000 uniform joint samples", fontsize=9, y=1.0)
-    fig.tight_layout()
+        sc = ax.scatter(p[:, 0], p[:, 1], p[:, 2], s=1, c=c, cmap="viridis", rasterized=True)
+        ax.set_zlabel(style.label("z", L))
+        for a_ in (ax.xaxis, ax.yaxis, ax.zaxis):
+            a_.set_major_locator(MaxNLocator(5))
+    ax.set_xlabel(style.label("x", L))
+    ax.set_ylabel(style.label("y", L))
+    fig.colorbar(sc, ax=ax, label=style.label("1/k", style.DIMENSIONLESS), shrink=0.7, pad=0.1)
+    ax.set_title("final design: tip positions of 4000 uniform joint samples\n"
+                 "(L: the chain's length unit)", fontsize=9)  # fmt: skip
     out += save(fig, folder, "workspace")
     return out
