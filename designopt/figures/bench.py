@@ -1,6 +1,9 @@
 """Benchmark-suite figures (one bar or curve per compared optimizer) of the haptic master
-paper (IEEE Access 2019): Fig. 10 (final values, mean ± std), Fig. 11 (convergence
-iteration, mean ± std) and median/IQR convergence curves."""
+paper (IEEE Access 2019): Fig. 10 (final values: median and interquartile range with every
+run as a dot, the paper's mean ± std being in the printed tables), Fig. 11 (convergence
+iteration, mean ± std) and median/IQR convergence curves. Value axes are logarithmic when
+the data span more than two decades (values ≤ 0, e.g. an optimum reached exactly, are drawn
+at a floor a decade below the smallest positive value, as stated in the title)."""
 
 from __future__ import annotations
 
@@ -9,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from designopt.figures import plt, save
+from designopt.figures import save, style
 
 
 def _grid(n: int) -> tuple[int, int]:
@@ -17,59 +20,105 @@ def _grid(n: int) -> tuple[int, int]:
     return (n + cols - 1) // cols, cols
 
 
-def _bars(stats: dict[str, Any], mean: str, std: str, ylabel: str, title: str, log: bool):
+def _floor(values: list[np.ndarray]) -> float | None:
+    """A log-axis floor for values ≤ 0: a decade below the smallest positive value (None
+    when every value is positive or none is)."""
+    v = np.concatenate([np.ravel(x) for x in values])
+    pos = v[v > 0]
+    return float(pos.min()) / 10 if (v <= 0).any() and pos.size else None
+
+
+def _final(stats: dict[str, Any], histories: dict[str, dict[str, np.ndarray]], n_runs: int):
     cases = list(stats)
     rows, cols = _grid(len(cases))
-    fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols, 2.8 * rows), squeeze=False)
+    fig, axes = style.subplots(rows, cols, figsize=(3.3 * cols, 2.9 * rows + 0.4),
+                               squeeze=False)  # fmt: skip
+    floors = []
+    for ax, case in zip(axes.flat, cases, strict=False):
+        names = list(stats[case]["rows"])
+        fin = [np.asarray(histories[case][v], np.float64)[:, -1] for v in names]
+        fl = _floor(fin)
+        if fl is not None:
+            fin = [np.maximum(f, fl) for f in fin]
+            floors.append(case)
+        x = np.arange(len(names))
+        q25, q50, q75 = (np.array([np.percentile(f, q) for f in fin]) for q in (25, 50, 75))
+        ax.bar(x, q50, color="tab:blue", alpha=0.5, label="median")
+        ax.errorbar(x, q50, yerr=[q50 - q25, q75 - q50], fmt="none", ecolor="k", capsize=3,
+                    lw=1, label="IQR")  # fmt: skip
+        for i, f in enumerate(fin):
+            jit = np.random.default_rng(i).uniform(-0.25, 0.25, f.size)
+            ax.plot(i + jit, f, ".", ms=2, color="0.25", alpha=0.6)
+        style.auto_log(ax, fin)
+        ax.set_xticks(x, names, rotation=45, fontsize=7)
+        ax.set_title(case.replace("_", " "), fontsize=9)
+        ax.set_ylabel(style.label("final best f(x)", style.DIMENSIONLESS), fontsize=8)
+        ax.tick_params(labelsize=7)
+    for ax in list(axes.flat)[len(cases) :]:
+        ax.set_visible(False)
+    note = (
+        f"; values ≤ 0 drawn at 1/10 of the least positive ({', '.join(floors)})" if floors else ""
+    )
+    fig.suptitle(f"Final values over {n_runs} runs: median (bar), IQR (whisker), runs (dots); "
+                 f"IEEE Access 2019, Fig. 10{note}", fontsize=9)  # fmt: skip
+    return fig
+
+
+def _bars(stats: dict[str, Any], mean: str, std: str, ylabel: str, title: str):
+    cases = list(stats)
+    rows, cols = _grid(len(cases))
+    fig, axes = style.subplots(rows, cols, figsize=(3.3 * cols, 2.9 * rows), squeeze=False)
     for ax, case in zip(axes.flat, cases, strict=False):
         r = stats[case]["rows"]
         names = list(r)
         m = np.array([r[v][mean] for v in names])
         s = np.array([r[v][std] for v in names])
-        lo = np.minimum(s, m * 0.999) if log else s  # keep log-scale error bars positive
-        ax.bar(names, m, yerr=[lo, s], capsize=3, color="tab:blue", alpha=0.8)
-        if log and np.all(m > 0):
-            ax.set_yscale("log")
-        ax.set_title(case.replace("_", " "), fontsize=9, y=1.0)
+        ax.bar(names, m, yerr=[np.minimum(s, m), s], capsize=3, color="tab:blue", alpha=0.8)
+        ax.set_title(case.replace("_", " "), fontsize=9)
         ax.set_ylabel(ylabel, fontsize=8)
         ax.tick_params(labelsize=7)
         ax.tick_params(axis="x", labelrotation=45)
     for ax in list(axes.flat)[len(cases) :]:
-        ax.axis("off")
+        ax.set_visible(False)
     fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
     return fig
 
 
 def draw(folder: Path, stats: dict[str, Any], histories: dict[str, dict[str, np.ndarray]],
          n_runs: int) -> list[Path]:  # fmt: skip
     """Draw every benchmark figure into ``folder``; returns the files written."""
-    out = []
-    fig = _bars(stats, "mean", "std", "final best value f(x)",
-                f"Final values over {n_runs} runs (mean ± std; IEEE Access 2019, Fig. 10)", log=True)  # fmt: skip
-    out += save(fig, folder, "fig10_final_values")
-    fig = _bars(stats, "conv_mean", "conv_std", "convergence iteration",
-                f"Convergence iteration over {n_runs} runs (mean ± std; Fig. 11)", log=False)  # fmt: skip
+    out = save(_final(stats, histories, n_runs), folder, "fig10_final_values")
+    fig = _bars(stats, "conv_mean", "conv_std", style.label("convergence iteration", "-"),
+                f"Convergence iteration over {n_runs} runs (mean ± std, clipped at 0; Fig. 11)")  # fmt: skip
     out += save(fig, folder, "fig11_convergence_iterations")
     cases = list(histories)
     rows, cols = _grid(len(cases))
-    fig, axes = plt.subplots(rows, cols, figsize=(3.4 * cols, 2.8 * rows), squeeze=False)
+    fig, axes = style.subplots(rows, cols, figsize=(3.4 * cols, 2.8 * rows + 0.6),
+                               squeeze=False)  # fmt: skip
+    floors = []
     for ax, case in zip(axes.flat, cases, strict=False):
-        for v, h in histories[case].items():
-            h = np.asarray(h, np.float64)
+        hs = [np.asarray(h, np.float64) for h in histories[case].values()]
+        fl = _floor(hs)
+        if fl is not None:
+            hs = [np.maximum(h, fl) for h in hs]
+            floors.append(case)
+        for v, h in zip(histories[case], hs, strict=True):
             q25, q50, q75 = np.percentile(h, [25, 50, 75], axis=0)
             it = np.arange(h.shape[1])
             (line,) = ax.plot(it, q50, lw=1, label=v)
             ax.fill_between(it, q25, q75, color=line.get_color(), alpha=0.2, lw=0)
-        if np.all(np.concatenate([np.ravel(h) for h in histories[case].values()]) > 0):
-            ax.set_yscale("log")
-        ax.set_title(case.replace("_", " "), fontsize=9, y=1.0)
-        ax.set_xlabel("iteration", fontsize=8)
-        ax.set_ylabel("best f (median, IQR)", fontsize=8)
+        style.auto_log(ax, hs)
+        ax.set_title(case.replace("_", " "), fontsize=9)
+        ax.set_xlabel(style.label("iteration", "-"), fontsize=8)
+        ax.set_ylabel(style.label("best f (median, IQR)", "-"), fontsize=8)
         ax.tick_params(labelsize=7)
     for ax in list(axes.flat)[len(cases) :]:
-        ax.axis("off")
-    axes.flat[0].legend(fontsize=6, ncol=2)
-    fig.tight_layout()
+        ax.set_visible(False)
+    h, lab = axes.flat[0].get_legend_handles_labels()
+    fig.legend(h, lab, fontsize=7, ncol=min(len(lab), 8), loc="outside lower center")
+    note = (
+        f"; values ≤ 0 drawn at 1/10 of the least positive ({', '.join(floors)})" if floors else ""
+    )
+    fig.suptitle(f"Convergence over {n_runs} runs (median, band IQR){note}", fontsize=9)
     out += save(fig, folder, "convergence_curves")
     return out

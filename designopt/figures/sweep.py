@@ -1,4 +1,5 @@
-"""Figure of a sweep archive: final f per member and the members' convergence curves."""
+"""Figure of a sweep archive: the final f of every member (± 2 SE, where the archive holds
+it) and the members' convergence curves (median over runs, band: interquartile range)."""
 
 from __future__ import annotations
 
@@ -7,22 +8,43 @@ from typing import Any
 
 import numpy as np
 
-from designopt.figures import plt, save
+from designopt.figures import save, style
 
 
 def draw(a: dict[str, Any], folder: Path) -> list[Path]:
+    """The figure of a sweep archive (``archive.read``) into ``folder``."""
     mem = {k: v for k, v in a["members"].items() if k != "attrs"}
     labels = [", ".join(f"{kk.split('.')[-1]}={vv:g}" for kk, vv in m["attrs"]["overrides"].items())
               for m in mem.values()]  # fmt: skip
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.5))
-    axes[0].bar(range(len(mem)), [float(m["final"]["f"]) for m in mem.values()])
-    axes[0].set_xticks(range(len(mem)), labels, rotation=60, ha="right", fontsize=7)
-    axes[0].set_ylabel("final objective f")
+    study = a["attrs"].get("study", "")
+    f = np.array([float(m["final"]["f"]) for m in mem.values()])
+    se = np.array([float(m["final"].get("f_se", np.nan)) for m in mem.values()])
+    n = len(mem)
+    fig, axes = style.subplots(1, 2, figsize=(11, 0.9 + max(2.8, 0.32 * n)),
+                               width_ratios=[1, 1.3])  # fmt: skip
+    y = np.arange(n)
+    axes[0].errorbar(f, y, xerr=None if np.isnan(se).all() else style.Z_SE * se, fmt="o",
+                     capsize=3, ms=4)  # fmt: skip
+    axes[0].set_yticks(y, labels, fontsize=7)
+    axes[0].invert_yaxis()
+    axes[0].set_xlabel(style.label("final objective f (± 2 SE)", style.DIMENSIONLESS))
+    axes[0].grid(alpha=0.3, axis="x")
+    same = np.ptp(f) <= 1e-9 * max(np.abs(f).max(), 1e-300)
+    axes[0].set_title("every member reaches the same f" if same else "final f per member",
+                      fontsize=9)  # fmt: skip
+    ax = axes[1]
+    hs = []
     for lab, m in zip(labels, mem.values(), strict=True):
-        h = m["optimizer"]["history"]
-        axes[1].plot(np.median(h, axis=0), label=lab, lw=1)
-    axes[1].set_xlabel("iteration")
-    axes[1].set_ylabel("best f (median over runs)")
-    axes[1].legend(fontsize=6)
-    fig.tight_layout()
+        h = np.asarray(m["optimizer"]["history"], np.float64)
+        it = np.arange(h.shape[1])
+        q25, q50, q75 = np.percentile(h, [25, 50, 75], axis=0)
+        (line,) = ax.plot(it, q50, lw=1, label=lab)
+        ax.fill_between(it, q25, q75, color=line.get_color(), alpha=0.15, lw=0)
+        hs.append(h)
+    style.auto_log(ax, hs)
+    ax.set_xlabel(style.label("iteration", style.DIMENSIONLESS))
+    ax.set_ylabel(style.label("best f (median over runs; band IQR)", style.DIMENSIONLESS))
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=6, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0)
+    fig.suptitle(f"Sweep of {study}: {n} members, {hs[0].shape[0]} runs each", fontsize=10)
     return save(fig, folder, "sweep_members")

@@ -11,9 +11,10 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
+from matplotlib.ticker import MaxNLocator
 
 from designopt import montecarlo as mc
-from designopt.figures import convergence, plt, save
+from designopt.figures import convergence, save, style
 from designopt.studies.base import archived_keys
 from designopt.studies.davinci import mechanism as mech
 from designopt.studies.davinci import objective
@@ -21,6 +22,7 @@ from designopt.studies.davinci.settings import TABLE1, DavinciSettings
 
 N_LINE = 41
 N_POINTS = 3000
+RATES = ("coverage", "ik_success", "reach")  # success rates: clipped to [0, 1], Wilson band
 
 
 def _full(s: DavinciSettings, params, x: np.ndarray) -> jnp.ndarray:
@@ -36,7 +38,7 @@ def workspace(s: DavinciSettings, params, x: np.ndarray, folder: Path, title: st
     c = np.asarray(objective.inv_k(s, xf, q))
     _, p = mech.ARM.fk(xf, q)
     p = np.asarray(p) - np.asarray(mech.rcm_point(xf))
-    fig = plt.figure(figsize=(5.6, 4.8))
+    fig = style.figure(figsize=(6.2, 5.2))
     ax = fig.add_subplot(1, 1, 1, projection="3d")
     sc = ax.scatter(p[inside, 0], p[inside, 1], p[inside, 2], s=1, c=c[inside], cmap="viridis",
                     vmin=0, vmax=1, rasterized=True)  # fmt: skip
@@ -44,11 +46,17 @@ def workspace(s: DavinciSettings, params, x: np.ndarray, folder: Path, title: st
         ax.scatter(p[~inside, 0], p[~inside, 1], p[~inside, 2], s=1, c="0.7", rasterized=True)
     ax.scatter([0], [0], [0], s=40, c="red", marker="x")
     ax.text(0, 0, 0, " H", color="red")
-    ax.set_xlabel("x − H (mm)")
-    ax.set_ylabel("y − H (mm)")
-    ax.set_zlabel("z − H (mm)")
-    fig.colorbar(sc, ax=ax, label="1/k (Frobenius, normalised)", shrink=0.7)
-    ax.set_title(title, fontsize=9, y=1.0)
+    for a_, n in ((ax.xaxis, "x − H"), (ax.yaxis, "y − H"), (ax.zaxis, "z − H")):
+        a_.set_major_locator(MaxNLocator(5))
+        a_.set_label_text(style.label(n, "mm"), fontsize=9)
+    ax.tick_params(labelsize=7, pad=0)
+    ax.set_box_aspect(None, zoom=0.85)
+    fig.colorbar(sc, ax=ax, label=style.label("1/k (Frobenius, normalised)", "-"), shrink=0.6,
+                 pad=0.12, location="left")  # fmt: skip
+    if (~inside).any():
+        ax.scatter([], [], [], s=4, c="0.7", label="outside the cone (grey)")
+        ax.legend(fontsize=7, loc="upper right")
+    ax.set_title(title, fontsize=9)
     return save(fig, folder, "workspace")
 
 
@@ -63,19 +71,17 @@ def gci_line(s: DavinciSettings, params, x: np.ndarray, names: tuple[str, ...], 
     X[:, 3] = ls
     est = jax.jit(jax.vmap(lambda xf: objective.dexterity(s, params, xf, dt)))(jnp.asarray(X, dt))
     g, se = np.asarray(est[0]), np.asarray(est[1])
-    fig, ax = plt.subplots(figsize=(5.2, 3.6))
-    ax.plot(ls, g, lw=1.2)
-    ax.fill_between(ls, g - 2 * se, g + 2 * se, alpha=0.25, lw=0)
-    for lab, v in marks.items():
-        ax.axvline(v, ls="--", lw=0.8, color="0.4")
-        ax.text(v, ax.get_ylim()[1], f" {lab}", fontsize=8, va="top", rotation=90)
-    ax.set_xlabel("wrist offset l_IJ (mm)")
-    ax.set_ylabel("GCI (mean 1/k over the cone)")
+    fig, ax = style.subplots(figsize=(5.6, 3.8))
+    style.band(ax, ls, g, se, lw=1.2, label="GCI ± 2 SE")
+    for (lab, v), ls_ in zip(marks.items(), ("--", ":"), strict=False):
+        ax.axvline(v, ls=ls_, lw=1.0, color="0.3", label=f"{lab}: l_IJ = {v:.3g} mm")
+    ax.legend(fontsize=7, loc="best")
+    ax.set_xlabel(style.label("wrist offset l_IJ", "mm"))
+    ax.set_ylabel(style.label("GCI (mean 1/k over the cone)", "-"))
     beta = math.degrees(float(base[1]))
     ax.set_title(f"da Vinci arm (Applied Sciences 2019): GCI vs l_IJ at β = {beta:.2f}°",
-                 fontsize=9, y=1.0)  # fmt: skip
+                 fontsize=9)  # fmt: skip
     ax.grid(alpha=0.3)
-    fig.tight_layout()
     return save(fig, folder, "gci_vs_lij")
 
 
@@ -85,8 +91,10 @@ def draw_run(a: dict[str, Any], folder: Path) -> list[Path]:
     params = objective.make_params(s, archived_keys(a), mc.out_dtype())
     names = tuple(s.variables)
     x = np.asarray(a["final"]["x"], np.float64)
+    units = {k: "-" for k in ("f", "gci", *RATES)}
     out = convergence(a["best_run"], ["f", "gci", "ik_success"], folder,
-                      "da Vinci arm: objective, GCI and IK success along the best run")  # fmt: skip
+                      "da Vinci arm: objective, GCI and IK success along the best run",
+                      units=units, rates={"ik_success": s.indices.n_ik})  # fmt: skip
     desc = ", ".join(f"{n} = {v:.3g}" for n, v in zip(names, x, strict=True))
     out += workspace(s, params, x, folder, f"final design ({desc}): jaw points around H")
     marks = {"Table 1": TABLE1["l_IJ"]}

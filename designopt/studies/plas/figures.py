@@ -13,7 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from designopt import montecarlo as mc
-from designopt.figures import convergence, plt, save
+from designopt.figures import convergence, save, style
 from designopt.studies.plas import mechanism as m
 from designopt.studies.plas.objective import pointwise
 from designopt.studies.plas.settings import PlasSettings
@@ -60,7 +60,9 @@ def draw_run(a: dict[str, Any], folder: Path, resolution: int = N_GRID) -> list[
 
     br = a["best_run"]
     inds = [k for k in ("f", "vel_rel", "pos_mean") if k in br]
-    out += convergence(br, inds, folder, "Best run")
+    from designopt.studies.plas import INDEX_UNITS
+
+    out += convergence(br, inds, folder, "Best run", units=INDEX_UNITS)
 
     designs = np.stack([np.array([m.BUILT[k] for k in m.MASTER_KEYS]), _master(s, names, x)])
     labels = ["built master (a2' = 138, d6 = 60)",
@@ -75,29 +77,31 @@ def draw_maps(s: PlasSettings, designs: np.ndarray, labels: list[str], folder: P
               name: str = "mismatch_map", resolution: int = N_GRID) -> list[Path]:  # fmt: skip
     g2, g3, rel, dp = mismatch_maps(s, designs, resolution)
     M = designs.shape[0]
-    fig, axes = plt.subplots(2, M, figsize=(4.6 * M, 7.0), squeeze=False)
+    fig, axes = style.subplots(2, M, figsize=(4.6 * M + 0.6, 7.2), squeeze=False)
     vmax = [max(100 * rel.max(), 1e-9), max(dp.max(), 1e-9)]
-    for j in range(M):
-        for i, (z, lab) in enumerate(((100 * rel[j], "|Δv| / |v_m| (%), joint-2 motion"),
-                                      (dp[j], "|Δp| (mm) after home → θ"))):  # fmt: skip
+    for i, (zs, lab, unit) in enumerate(((100 * rel, "|Δv| / |v_m|, joint-2 motion", "%"),
+                                         (dp, "|Δp| after home → θ", "mm"))):  # fmt: skip
+        ims = []
+        for j in range(M):
+            z = zs[j]
             ax = axes[i, j]
-            im = ax.pcolormesh(g2, g3, z, shading="auto", cmap="viridis", vmin=0, vmax=vmax[i],
-                               rasterized=True)  # fmt: skip
+            ims.append(ax.pcolormesh(g2, g3, z, shading="auto", cmap="viridis", vmin=0,
+                                     vmax=vmax[i], rasterized=True))  # fmt: skip
             cs = ax.contour(g2, g3, z, levels=6, colors="w", linewidths=0.5)
             ax.clabel(cs, fontsize=6, fmt="%.3g")
-            fig.colorbar(im, ax=ax, label=lab)
-            ax.set_xlabel("θ2 (deg)")
-            ax.set_ylabel("θ3 (deg)")
-            ax.set_title(f"{labels[j]}\nmean {z.mean():.3g}, max {z.max():.3g}", fontsize=8, y=1.0)
-    fig.suptitle("Master-slave tip mismatch over (θ2, θ3), θ4 = 0", fontsize=10)
-    fig.tight_layout()
+            ax.set_xlabel(style.label("θ2", "deg"))
+            ax.set_ylabel(style.label("θ3", "deg"))
+            ax.set_title(f"{labels[j]}\nmean {z.mean():.3g}, max {z.max():.3g} {unit}", fontsize=8)
+        style.shared_scale(fig, ims, 0.0, vmax[i])
+        fig.colorbar(ims[0], ax=list(axes[i]), label=style.label(lab, unit))
+    fig.suptitle("Master-slave tip mismatch over (θ2, θ3), θ4 held at 0° (mid-range)", fontsize=10)
     return save(fig, folder, name)
 
 
 def draw_counterbalance(s: PlasSettings, d6s: list[float], folder: Path) -> list[Path]:
     cb = s.counterbalance
     th = np.linspace(0.0, 45.0, 91)
-    fig, axes = plt.subplots(1, 2, figsize=(8.4, 3.2))
+    fig, axes = style.subplots(1, 2, figsize=(8.8, 3.4))
     for d6 in dict.fromkeys(d6s):
         L = cb.L_mm + cb.L_per_d6 * (d6 - m.BUILT["d6"])
         mass = np.asarray(m.counterbalance_mass(cb.M_g, L, cb.r_mm, cb.l_mm, np.deg2rad(th)))
@@ -106,12 +110,11 @@ def draw_counterbalance(s: PlasSettings, d6s: list[float], folder: Path) -> list
         axes[1].plot(th, inertia / 1e3, label=f"d6 = {d6:.1f} mm")
     for ax in axes:
         ax.axvline(cb.theta_deg, color="k", lw=0.6, ls=":")
-        ax.set_xlabel("tilt θ of joint 4 (deg)")
+        ax.set_xlabel(style.label("tilt θ of joint 4", "deg"))
         ax.grid(alpha=0.3)
     axes[0].axhline(460, color="r", lw=0.6, ls="--", label="thesis: about 460 g at 25°")
-    axes[0].set_ylabel("counterweight m (g)")
-    axes[1].set_ylabel("I = M L² + m l² (kg·cm²)")
+    axes[0].set_ylabel(style.label("counterweight m", "g"))
+    axes[1].set_ylabel(style.label("I = M L² + m l²", "kg·cm²"))
     axes[0].legend(fontsize=7)
     fig.suptitle("Counterbalance of joint 4 (§2.1.2, eq. 1)", fontsize=10)
-    fig.tight_layout()
     return save(fig, folder, "counterbalance")
