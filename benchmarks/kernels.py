@@ -6,7 +6,9 @@
   path), the hand closed form, the generic kernel; FK + J + 1/k and the dexterity part
   alone (J_v + 1/k_F + power sums) against study A's specialised kernel (the one
   benchmarks/swarm_scoring.py times); compile times; agreement with the closed form;
-- a 6-joint textbook arm (PUMA 560, standard DH) and a da Vinci-like ET chain;
+- a 6-joint textbook arm (PUMA 560, standard DH), the same arm read from its URDF
+  (configs/robots/puma560.urdf; the URDF/DH speed ratio and the URDF compile time are
+  printed) and a da Vinci-like ET chain;
 - the Robotics Toolbox's jacob0 per configuration, where the ``bench`` extra is installed.
 Every timing is repeated; "best [median – worst]" is printed.
 
@@ -106,6 +108,20 @@ def puma_model():
         theta=[0.0] * 6,
         variables=("a2", "a3", "d3", "d4"),
     )
+
+
+def puma_urdf_model():
+    """The same PUMA 560 read from its URDF (configs/robots/puma560.urdf, frames matched to
+    the DH table), a2, a3, d3, d4 bound to the joint origins (the kernel's URDF import)."""
+    from pathlib import Path
+
+    from designopt.kinematics import urdf
+
+    path = Path(__file__).resolve().parents[1] / "configs" / "robots" / "puma560.urdf"
+    imp = urdf.import_path(urdf.parse(path.read_text(), str(path)), None, "tool0")
+    names = ("a2", "a3", "d3", "d4")
+    keys = [("joint3", "x"), ("joint4", "x"), ("joint4", "z"), ("joint5", "z")]
+    return urdf.lower(imp, {k: (0.0, ((i, 1.0),)) for i, k in enumerate(keys)}, names)
 
 
 def davinci_model():
@@ -270,9 +286,13 @@ def main() -> None:
         )
 
     # ------------------------------------------------------------ other chains
+    puma_X = PUMA_X * rng.uniform(0.8, 1.2, (M, 4))
+    puma_q = lambda n: np.random.default_rng(7).uniform(-np.pi, np.pi, (n, 6))  # noqa: E731
+    best: dict[str, float] = {}
     for label, mdl, Xc, qgen in (
-        ("6-joint textbook arm (PUMA 560, standard DH)", puma_model(),
-         PUMA_X * rng.uniform(0.8, 1.2, (M, 4)), lambda n: rng.uniform(-np.pi, np.pi, (n, 6))),
+        ("6-joint textbook arm (PUMA 560, standard DH)", puma_model(), puma_X, puma_q),
+        ("the same PUMA 560 from its URDF (configs/robots/puma560.urdf)", puma_urdf_model(),
+         puma_X, puma_q),
         ("da Vinci-like ET chain (6 joints, 1 prismatic)", davinci_model(),
          np.array([784.29, 10.0, 50.0]) * rng.uniform(0.8, 1.2, (M, 3)),
          lambda n: np.concatenate([rng.uniform(-1.5, 0, (n, 2)), rng.uniform(50, 300, (n, 1)),
@@ -299,6 +319,15 @@ def main() -> None:
                 print(
                     f"   generic {lab} ({jnp.dtype(dtype).name}): {fmt(total, t)}  compile {tc:5.2f} s"
                 )
+                tag = "DH" if "standard DH" in label else "URDF" if "URDF" in label else ""
+                best[(tag, lab.strip(), jnp.dtype(dtype).name)] = (t, tc)
+    for (_tag, lab, dt), (t_dh, _) in [(k, v) for k, v in best.items() if k[0] == "DH"]:
+        t_u, tc_u = best[("URDF", lab, dt)]
+        print(
+            f"PUMA 560 {lab} ({dt}): URDF chain at {t_dh[0] / t_u[0]:.2f}x the DH chain's speed "
+            f"(medians {t_dh[1] / t_u[1]:.2f}x; target >= 0.8), URDF compile {tc_u:.2f} s "
+            "(target <= 2 s)"
+        )
 
     try:
         import roboticstoolbox as rtb

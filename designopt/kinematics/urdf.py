@@ -125,11 +125,6 @@ def parse(text: str, where: str) -> Robot:
         el = f'<joint name="{j.name}">'
         if j.name in joints:
             raise ConfigError(f"{where}: {el}: a second joint of that name")
-        if j.type not in SUPPORTED:
-            raise ConfigError(
-                f"{where}: {el}: type '{j.type}' is not supported on a serial chain "
-                f"(supported: {', '.join(SUPPORTED)})"
-            )
         for side in ("parent", "child"):
             if getattr(j, side) not in links:
                 raise ConfigError(
@@ -237,6 +232,10 @@ def import_path(
         path.append(j)
         link = j.parent
     path.reverse()
+    for j in path:
+        if j.type not in SUPPORTED:
+            raise ConfigError(f"{where}: <joint name=\"{j.name}\">: type '{j.type}' is not "
+                              f"supported on a serial chain (supported: {', '.join(SUPPORTED)})")  # fmt: skip
     chain = tuple(j.name for j in path if j.type in MOVABLE)
     if not chain:
         raise ConfigError(f"{where}: no movable joint on the path from '{base}' to '{tip}'")
