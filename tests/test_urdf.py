@@ -322,17 +322,44 @@ def test_export_refuses_a_dh_archive_and_a_missing_archive(tmp_path, capsys):
 # --------------------------------------------------- Robotics Toolbox (bench extra)
 
 
-@pytest.mark.parametrize("name,tip", [("LBR", None), ("Puma560", None)])
-def test_against_robotics_toolbox_jacob0(name, tip):
+def _rtb_robot_and_text(rtb, cls: str, monkeypatch):
+    """An rtb-data URDF model and the (xacro-expanded) URDF text it was built from."""
+    import importlib
+
+    try:
+        mod = importlib.import_module("roboticstoolbox.models.URDF.URDFRobot")
+    except ImportError:
+        mod = None
+    seen: list[str] = []
+    if mod is not None and hasattr(mod, "_parse_urdf"):  # Robotics Toolbox ≥ 1.5
+        orig = mod._parse_urdf
+
+        def spy(text, *a, **k):
+            seen.append(text)
+            return orig(text, *a, **k)
+
+        monkeypatch.setattr(mod, "_parse_urdf", spy)
+    robot = getattr(rtb.models.URDF, cls)()
+    text = getattr(robot, "urdf_string", None) or (seen[-1] if seen else None)
+    if not isinstance(text, str):
+        pytest.skip("this Robotics Toolbox gives no access to the URDF text it read")
+    return robot, text
+
+
+@pytest.mark.parametrize("cls", ["LBR", "Puma560"])
+def test_against_robotics_toolbox_jacob0(cls, monkeypatch):
+    """The KUKA iiwa and PUMA 560 URDFs of rtb-data: our geometric Jacobian against the
+    Robotics Toolbox's jacob0 on the same (xacro-expanded) URDF."""
     rtb = pytest.importorskip("roboticstoolbox", reason="the bench extra is not installed")
-    robot = getattr(rtb.models.URDF, name)()
-    path = Path(robot.urdf_filepath) if hasattr(robot, "urdf_filepath") else None
-    if path is None or not path.is_file() or path.suffix != ".urdf":
-        pytest.skip(f"rtb-data has no plain URDF file for {name}")
-    rob = U.parse(path.read_text(), str(path))
-    imp = U.import_path(rob, robot.base_link.name, robot.ee_links[0].name)
+    robot, text = _rtb_robot_and_text(rtb, cls, monkeypatch)
+    rob = U.parse(text, cls)
+    leaves = [lk for lk in rob.links if lk not in {j.parent for j in rob.joints.values()}]
+    imp = U.import_path(rob, None, leaves[0] if len(leaves) == 1 else robot.ee_links[0].name)
+    assert robot.n == len(imp.active)
     model = U.lower(imp, {}, ())
-    q = np.random.default_rng(0).uniform(-1, 1, (5, len(imp.active)))
+    lo, hi = np.asarray(imp.lower), np.asarray(imp.upper)
+    q = lo + (hi - lo) * np.random.default_rng(0).random((5, len(lo)))
     J = np.asarray(model.jacobian(np.zeros(0), q))
     for i in range(len(q)):
-        np.testing.assert_allclose(J[i], robot.jacob0(q[i], end=robot.ee_links[0]), atol=1e-9)
+        Jr = robot.jacob0(q[i], end=imp.tip, start=imp.base)
+        np.testing.assert_allclose(J[i], Jr, atol=1e-9)

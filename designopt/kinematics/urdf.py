@@ -423,7 +423,7 @@ def lower(imp: Imported, bindings: Bindings, variables: Sequence[str]):
             ax, sign = k, (1.0 if d[k] > 0 else -1.0)
         else:  # oblique: A e_z = d with A = Rz(φ) Ry(θ); Rc becomes Aᵀ Rc after the joint
             flush_t()
-            th, ph = math.acos(max(-1.0, min(1.0, d[2]))), math.atan2(d[1], d[0])
+            th, ph = math.atan2(math.hypot(d[0], d[1]), d[2]), math.atan2(d[1], d[0])
             A = _rot(2, ph) @ _rot(1, th)
             steps.append(_Step("R", 2, _Lin(ph, (), zq), None))
             steps.append(_Step("R", 1, _Lin(th, (), zq), None))
