@@ -51,6 +51,7 @@ def _final(stats: dict[str, Any], histories: dict[str, dict[str, np.ndarray]], n
             ax.plot(i + jit, f, ".", ms=2, color="0.25", alpha=0.6)
         style.auto_log(ax, fin)
         ax.set_xticks(x, names, rotation=45, fontsize=7)
+        ax.set_xlabel("optimizer (category)", fontsize=8)
         ax.set_title(case.replace("_", " "), fontsize=9)
         ax.set_ylabel(style.label("final best f(x)", style.DIMENSIONLESS), fontsize=8)
         ax.tick_params(labelsize=7)
@@ -78,6 +79,7 @@ def _bars(stats: dict[str, Any], mean: str, std: str, ylabel: str, title: str):
         ax.set_ylabel(ylabel, fontsize=8)
         ax.tick_params(labelsize=7)
         ax.tick_params(axis="x", labelrotation=45)
+        ax.set_xlabel("optimizer (category)", fontsize=8)
     for ax in list(axes.flat)[len(cases) :]:
         ax.set_visible(False)
     fig.suptitle(title, fontsize=10)

@@ -18,8 +18,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from matplotlib.collections import PatchCollection
 from matplotlib.colors import LogNorm
-from matplotlib.patches import Patch
+from matplotlib.patches import Patch, Rectangle
 
 from designopt.figures import save, style
 
@@ -32,13 +33,14 @@ def _indices(sc: dict[str, Any]) -> list[str]:
 
 
 def study_hints(a: dict[str, Any]) -> tuple[dict[str, str], Any]:
-    """(units, the study's figures module or None) of an archive's study."""
+    """(units, the study's figures module or None) of an archive's study; the units also
+    hold ``"__summary__"``: the study's summary indices (the maps drawn first)."""
     from designopt.studies import get
 
     try:
         st = get(a["attrs"].get("study", ""))
         s = st.settings.model_validate(a["attrs"]["config_resolved"]["study"])
-        units = dict(st.units(s))
+        units = dict(st.units(s)) | {"__summary__": tuple(st.summary(s))}
     except (ValueError, KeyError, TypeError):
         return {}, None
     home = st.figures.__module__  # a study package ("designopt.studies.rcm") or a module in it
@@ -153,7 +155,10 @@ def _grid(a: dict[str, Any], folder: Path, units: dict[str, str], mod: Any) -> l
     undefined = dict(getattr(mod, "UNDEFINED_WHEN_ZERO", {}))
     rates = set(getattr(mod, "RATES", ()))
     drawn = merged(sc, _indices(sc))
-    show = [d for d in drawn if d[0] == "f"] + [d for d in drawn if d[0] != "f"][:2]
+    first = list(units.get("__summary__", ()))
+    rest = sorted((d for d in drawn if d[0] != "f"),
+                  key=lambda d: first.index(d[0]) if d[0] in first else len(first))  # fmt: skip
+    show = [d for d in drawn if d[0] == "f"] + rest[:2]
     bad = np.asarray(sc["violation"]).reshape(n0, n1) > 0 if "violation" in sc else None
     fig, axes = style.subplots(1, len(show), figsize=(4.6 * len(show), 3.9), squeeze=False)
     for ax, (k, lab) in zip(axes[0], show, strict=True):
@@ -163,9 +168,12 @@ def _grid(a: dict[str, Any], folder: Path, units: dict[str, str], mod: Any) -> l
         kw = {"norm": LogNorm()} if log else ({"vmin": 0, "vmax": 1} if k in rates else {})
         im = ax.pcolormesh(g1, g0, z, shading="auto", cmap="viridis", rasterized=True, **kw)
         fig.colorbar(im, ax=ax, label=style.label(lab, style.unit_of(k, units)))
-        if bad is not None and bad.any():
-            ax.contourf(g1, g0, bad.astype(float), levels=[0.5, 1.5], colors="none",
-                        hatches=["///"])  # fmt: skip
+        if bad is not None and bad.any():  # hatch the infeasible cells themselves
+            e1, e0 = _edges(g1), _edges(g0)
+            cells = [Rectangle((e1[j], e0[i]), e1[j + 1] - e1[j], e0[i + 1] - e0[i])
+                     for i, j in zip(*np.nonzero(bad), strict=True)]  # fmt: skip
+            ax.add_collection(PatchCollection(cells, facecolor="none", edgecolor="0.15",
+                                              hatch="///", lw=0))  # fmt: skip
             ax.legend(handles=[Patch(facecolor="none", edgecolor="0.3", hatch="///",
                                      label="infeasible")], fontsize=7, loc="upper right")  # fmt: skip
         ax.set_xlabel(style.label(varied[1], style.unit_of(varied[1], units)))
@@ -173,6 +181,15 @@ def _grid(a: dict[str, Any], folder: Path, units: dict[str, str], mod: Any) -> l
         ax.set_title(lab, fontsize=9)
     fig.suptitle(f"{study}: scan over {varied[0]} × {varied[1]}", fontsize=10)
     return save(fig, folder, f"scan_{varied[0]}_{varied[1]}")
+
+
+def _edges(g: np.ndarray) -> np.ndarray:
+    """Cell edges around the grid points g (midpoints; half a step beyond the ends)."""
+    g = np.asarray(g, np.float64)
+    if g.size == 1:
+        return np.array([g[0] - 0.5, g[0] + 0.5])
+    mid = 0.5 * (g[1:] + g[:-1])
+    return np.concatenate([[2 * g[0] - mid[0]], mid, [2 * g[-1] - mid[-1]]])
 
 
 def _designs(a: dict[str, Any], folder: Path) -> list[Path]:

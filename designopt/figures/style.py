@@ -2,7 +2,8 @@
 
 - Axis labels carry a unit: ``label("c", "mm")`` → ``"c [mm]"``; a dimensionless quantity
   is marked ``[-]`` (:data:`DIMENSIONLESS`), so a label without a unit is a bug the figure
-  test catches.
+  test catches. A categorical axis (optimizers, sweep members) is labelled
+  ``"<what> (category)"``.
 - Panels meant to be compared share one colour scale: :func:`shared_scale` sets one norm
   on all their mappables and records the group on the figure (``fig.designopt_shared``),
   where the figure test checks it.

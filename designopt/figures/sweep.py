@@ -26,6 +26,7 @@ def draw(a: dict[str, Any], folder: Path) -> list[Path]:
     axes[0].errorbar(f, y, xerr=None if np.isnan(se).all() else style.Z_SE * se, fmt="o",
                      capsize=3, ms=4)  # fmt: skip
     axes[0].set_yticks(y, labels, fontsize=7)
+    axes[0].set_ylabel("member (category)")
     axes[0].invert_yaxis()
     axes[0].set_xlabel(style.label("final objective f (± 2 SE)", style.DIMENSIONLESS))
     axes[0].grid(alpha=0.3, axis="x")

@@ -156,8 +156,9 @@ def draw_workspace(key: jax.Array, folder: Path) -> list[Path]:
     for a_, n in ((ax.xaxis, "x"), (ax.yaxis, "y"), (ax.zaxis, "z")):
         a_.set_major_locator(MaxNLocator(3))
         a_.set_label_text(style.label(n, "mm"), fontsize=8)
+        a_.labelpad = 0
     ax.tick_params(labelsize=6, pad=0)
-    ax.set_box_aspect(None, zoom=0.8)
+    ax.set_box_aspect(None, zoom=0.7)
     for k, (i, j) in enumerate(((0, 1), (0, 2), (1, 2))):
         a2 = fig.add_subplot(1, 4, k + 2)
         a2.scatter(P[:, i], P[:, j], s=0.2, alpha=0.3, rasterized=True)
