@@ -141,33 +141,32 @@ def test_branched_tree_needs_the_tip_and_the_root_is_the_default_base():
     assert imp.base == "world" and imp.chain == ("j1", "js")
 
 
-def _puma_cfg(tmp_path, **study):
-    s = {"name": "serial",
-         "chain": {"urdf": str(PUMA_URDF), "tip": "tool0",
-                   "set": {"joint3.origin.x": "a2", "joint5.origin.z": "d4"}},
-         "variables": {"a2": [0.3, 0.6], "d4": [0.3, 0.6]},
-         "indices": {"jacobian": "full", "length_scale": 0.5, "norm": "fro",
-                     "normalized": True, "n_samples": 2048},
-         "objective": {"gci": -1.0}} | study  # fmt: skip
-    return {"study": s, "precision": "float64", "seed": 0,
-            "output": str(tmp_path / "p.h5")}  # fmt: skip
+def _config(name: str, tmp_path, n_samples: int = 2048) -> dict:
+    """A shipped config with small sampling, float64, its URDF path made absolute."""
+    raw = yaml.safe_load((ROOT / "configs" / name).read_text())
+    st = raw["study"]
+    if "urdf" in st["chain"]:
+        st["chain"]["urdf"] = str(ROOT / "configs" / st["chain"]["urdf"])
+    st["indices"]["n_samples"] = n_samples
+    st["objective"] = {"gci": -1.0}
+    return raw | {"precision": "float64", "output": str(tmp_path / f"{name}.h5")}
 
 
 def test_puma560_urdf_gives_the_dh_chains_gci(tmp_path):
-    """configs/puma560.yaml's DH chain and the PUMA 560 URDF (frames matched): the same
-    FK and Jacobian, so the same GCI within its standard error (here: to rounding)."""
+    """configs/puma560.yaml's DH chain and configs/urdf_puma560.yaml (the PUMA 560 URDF,
+    frames matched): the same FK and Jacobian, so the same GCI within its standard error
+    (here: to rounding)."""
     from designopt import pipeline
 
-    dh = yaml.safe_load((ROOT / "configs" / "puma560.yaml").read_text())
-    dh["study"]["indices"]["n_samples"] = 2048
-    dh["study"]["objective"] = {"gci": -1.0}
-    dh["output"] = str(tmp_path / "d.h5")
-    dh["precision"] = "float64"
-    cu, cd = validate(_puma_cfg(tmp_path), "u"), validate(dh, "d")
+    cu = validate(_config("urdf_puma560.yaml", tmp_path), "u")
+    cd = validate(_config("puma560.yaml", tmp_path), "d")
     mu, md = build(cu.study), build(cd.study)
+    assert mu.names == md.names == ("a2", "d4", "a3", "d3")
+    np.testing.assert_array_equal(mu.lower, md.lower)
+    np.testing.assert_allclose(mu.upper, md.upper, rtol=1e-15)
     X = np.array([[0.4318, 0.4318, 0.0203, 0.15005], [0.35, 0.55, 0.0203, 0.15005]])
     q = np.random.default_rng(1).uniform(-3, 3, (50, 6))
-    Ru, pu, Ju = mu.model.fk_jacobian(X[:, :2], q)
+    Ru, pu, Ju = mu.model.fk_jacobian(X, q)
     Rd, pd, Jd = md.model.fk_jacobian(X, q)
     np.testing.assert_allclose(pu, pd, atol=1e-12)
     np.testing.assert_allclose(Ru, Rd, atol=1e-12)
@@ -203,8 +202,7 @@ def _arm_cfg(tmp_path, urdf=None, **chain):
          "set": {"wrist_pitch.origin.length": "l_wrist", "jaw.origin.length": "l_jaw"}} | chain  # fmt: skip
     cfg = {"study": {"name": "serial", "chain": c,
                      "variables": {"l_wrist": [0.004, 0.03], "l_jaw": [0.005, 0.03]},
-                     "indices": {"jacobian": "full", "length_scale": 0.02, "norm": "fro",
-                                 "normalized": True, "n_samples": 1024},
+                     "indices": {"jacobian": "position", "n_samples": 512},
                      "objective": {"gci": -1.0}},
            "optimizer": {"name": "ptpso", "n_particles": 6, "n_iters": 3, "n_runs": 1},
            "scan": {"vary": {"l_wrist": [0.01, 0.02], "l_jaw": [0.01, 0.02]}},
@@ -242,6 +240,15 @@ def test_eval_scan_run_chain_export(tmp_path, capsys):
         T = ref.fk(imp, q[i])
         np.testing.assert_allclose(R[i], T[:3, :3], atol=1e-12)
         np.testing.assert_allclose(p[i], T[:3, 3], atol=1e-12)
+    # a scan archive: the lowest f among the scanned designs
+    with h5py.File(tmp_path / "out" / "a_scan.h5") as h:
+        xs, fs = h["scan/x"][()], h["scan/f"][()]
+    best = xs[int(np.argmin(fs))]
+    assert main(["export", str(tmp_path / "out" / "a_scan.h5"), "--urdf",
+                 str(tmp_path / "scan.urdf")]) == 0  # fmt: skip
+    rob = U.parse((tmp_path / "scan.urdf").read_text(), "scan.urdf")
+    assert np.isclose(np.linalg.norm(rob.joints["wrist_pitch"].xyz), best[0], rtol=1e-15)
+    assert np.isclose(np.linalg.norm(rob.joints["jaw"].xyz), best[1], rtol=1e-15)
     # exporting again refuses to overwrite
     assert main(["export", str(tmp_path / "out" / "a.h5"), "--urdf", str(out_urdf)]) == 2
     assert "--overwrite" in capsys.readouterr().err
