@@ -267,6 +267,15 @@ def test_relative_urdf_path_is_read_from_the_config_folder(tmp_path):
     assert again.chain.urdf_text == s.chain.urdf_text
 
 
+def test_cli_reads_a_relative_urdf_path_from_the_config_folder(tmp_path, capsys, monkeypatch):
+    (tmp_path / "robots").mkdir()
+    (tmp_path / "robots" / "arm.urdf").write_text(ARM_URDF.read_text())
+    cfg = _arm_cfg(tmp_path, urdf="robots/arm.urdf")
+    monkeypatch.chdir(ROOT)
+    assert main(["chain", str(cfg)]) == 0
+    assert str((tmp_path / "robots" / "arm.urdf").resolve()) in capsys.readouterr().out
+
+
 def _bad_urdf(tmp_path, text):
     p = tmp_path / "bad.urdf"
     p.write_text(text)
