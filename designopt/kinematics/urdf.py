@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from designopt.errors import ConfigError
+from designopt.kinematics.kernel import SerialModel, _Lin, _Step
 
 FIELDS = ("x", "y", "z", "roll", "pitch", "yaw", "length")
 ANGLE_FIELDS = ("roll", "pitch", "yaw")
@@ -362,13 +363,11 @@ def _origin_lins(j: UJoint, b: Bindings, where: str) -> tuple[list[Lin], list[Li
     return xyz, rpy
 
 
-def lower(imp: Imported, bindings: Bindings, variables: Sequence[str]):
+def lower(imp: Imported, bindings: Bindings, variables: Sequence[str]) -> SerialModel:
     """The kernel model of the imported path: a ``SerialModel`` over ``variables``.
 
     ``bindings`` maps (joint, field) to const + Σ scale·X[k] (angles in rad after the
     design columns' deg→rad scale)."""
-    from designopt.kinematics.kernel import SerialModel, _Lin, _Step
-
     where = imp.robot.where
     chain = list(imp.chain)
     nA = len(imp.active)
