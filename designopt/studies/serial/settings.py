@@ -7,7 +7,6 @@ name of a design variable or fixed value.
 
 from __future__ import annotations
 
-import hashlib
 import math
 from functools import lru_cache
 from pathlib import Path
@@ -64,7 +63,8 @@ class ImportedJoint(NamedTuple):
 
 
 @lru_cache(maxsize=16)
-def _parsed(text: str, where: str, digest: str):
+def _parsed(text: str, where: str):
+    """The parsed URDF (kept: sweeps and archives validate the same text again)."""
     from designopt.kinematics import urdf
 
     return urdf.parse(text, where)
@@ -104,8 +104,7 @@ class UrdfChain(Section):
                 raise ConfigError(f"{p}: cannot read the URDF ({e})") from None
             self.urdf_path = str(p.resolve())
         where = self.urdf_path or self.urdf
-        digest = hashlib.sha256(self.urdf_text.encode("utf-8")).hexdigest()
-        robot = _parsed(self.urdf_text, where, digest)
+        robot = _parsed(self.urdf_text, where)
         for n, lim in self.limits.items():
             if not lim[0] < lim[1]:
                 raise ValueError(f"limits.{n}: lower limit {lim[0]} is not below upper {lim[1]}")
