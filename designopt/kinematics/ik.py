@@ -195,6 +195,9 @@ def solve_design(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Arra
     if mode != "position" and R_t is None:
         raise ValueError(f"mode {mode!r} needs target orientations R_t")
     T, n = p_t.shape[0], lower.shape[0]
+    # every configuration has its own joints: the per-design walk (no bases shared over a
+    # swarm) is about 4× faster here than the swarm-shared one
+    model = model.per_design()
     k_db, k_rand = jax.random.split(key)
     q_db, p_db, R_db = database(model, X, k_db, lower, upper, opts.n_db)
     L = jnp.maximum(jnp.max(jnp.linalg.norm(p_db - jnp.mean(p_db, 0), axis=-1)), 1e-12)
