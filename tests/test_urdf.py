@@ -329,6 +329,19 @@ def test_bad_input_one_line_exit_2_nothing_written(
     assert sorted(tmp_path.rglob("*")) == before
 
 
+@pytest.mark.parametrize(
+    "extra,needle",
+    [(["--q", "1,2"], "--q 1,2: expected 6 finite numbers"),
+     (["--q", "a,b"], "--q a,b: expected 6 numbers"),
+     (["--design", "nosuch=1"], "--design nosuch: not a design variable")],
+)  # fmt: skip
+def test_chain_bad_arguments(tmp_path, capsys, extra, needle):
+    cfg = _arm_cfg(tmp_path)
+    assert main(["chain", str(cfg), *extra]) == 2
+    err = capsys.readouterr().err
+    assert needle in err and err.count("\n") == 1
+
+
 def test_export_refuses_a_dh_archive_and_a_missing_archive(tmp_path, capsys):
     assert main(["export", str(tmp_path / "none.h5"), "--urdf", str(tmp_path / "o.urdf")]) == 2
     assert "archive not found" in capsys.readouterr().err

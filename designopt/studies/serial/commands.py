@@ -69,6 +69,7 @@ def cmd_chain(args: argparse.Namespace, loaded: tuple[Any, str]) -> int:
     where = args.config
     s = _serial(cfg, where)
     design = design_values(s, _parse_design(args.design), where)
+    q = _parse_q(args.q, tuple(j.type for j in s.chain.joints))
     mech = build(s)
     n = mech.n
     full = np.concatenate([[design[k] for k in s.variables], mech.fixed]) * mech.scale
@@ -110,14 +111,7 @@ def cmd_chain(args: argparse.Namespace, loaded: tuple[Any, str]) -> int:
     lines.append("design: " + ", ".join(f"{k} = {v:g}" for k, v in design.items()))
     R0, p0 = (np.asarray(a) for a in mech.model.fk(full, np.zeros(n)))
     lines += _pose_lines("FK at q = 0", R0, p0)
-    if args.q is not None:
-        try:
-            qv = [float(x) for x in args.q.split(",")]
-        except ValueError:
-            raise ConfigError(f"--q {args.q}: expected {n} numbers separated by commas") from None
-        if len(qv) != n or not all(math.isfinite(x) for x in qv):
-            raise ConfigError(f"--q {args.q}: expected {n} finite numbers (one per active joint)")
-        q = np.array([math.radians(x) if t == "R" else x for x, t in zip(qv, _active_types(mech, s), strict=True)])  # fmt: skip
+    if q is not None:
         Rq, pq = (np.asarray(a) for a in mech.model.fk(full, q))
         lines += _pose_lines(f"FK at --q {args.q}", Rq, pq)
     status = 0
@@ -131,8 +125,18 @@ def cmd_chain(args: argparse.Namespace, loaded: tuple[Any, str]) -> int:
     return status
 
 
-def _active_types(mech: Any, s: Any) -> tuple[str, ...]:
-    return tuple(j.type for j in s.chain.joints)
+def _parse_q(text: str | None, types: tuple[str, ...]) -> np.ndarray | None:
+    """--q as active joint values (rad for R joints, length units for P joints)."""
+    if text is None:
+        return None
+    n = len(types)
+    try:
+        qv = [float(x) for x in text.split(",")]
+    except ValueError:
+        raise ConfigError(f"--q {text}: expected {n} numbers separated by commas") from None
+    if len(qv) != n or not all(math.isfinite(x) for x in qv):
+        raise ConfigError(f"--q {text}: expected {n} finite numbers (one per active joint)")
+    return np.array([math.radians(x) if t == "R" else x for x, t in zip(qv, types, strict=True)])
 
 
 def check_import(s: Any, design: dict[str, float], mech: Any, full: np.ndarray,
