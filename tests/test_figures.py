@@ -212,7 +212,7 @@ def test_study_figures(name, tmp_path, record):
 
 def _scan(name: str, tmp_path: Path, scan: dict):
     cfg = _config(name, scan=scan)
-    rep = pipeline.scan(cfg, "tiny", "tiny", tmp_path / f"{name}.h5")
+    rep = pipeline.scan(cfg, "tiny", "tiny", tmp_path / f"{name}_{scan.get('mode', 'grid')}.h5")
     return archive.read(rep.out)
 
 
@@ -230,21 +230,25 @@ def test_scan_curves_merge_equal_indices(tmp_path, record):
     assert sum(y.startswith("η") for y in ys) == 1  # η of every workspace in one panel
 
 
-def test_scan_grid_and_designs(tmp_path, record):
-    a = _scan("plas", tmp_path, {"mode": "grid", "vary": {"a2p": {"from": 80, "to": 240, "num": 3},
-                                                          "d6": {"from": 30, "to": 120, "num": 2}}})  # fmt: skip
+def test_scan_grid_hatches_infeasible_cells_and_designs(tmp_path, record):
+    grid = {"a": {"from": 60, "to": 200, "num": 4}, "c": {"from": 200, "to": 400, "num": 3}}
+    a = _scan("rcm", tmp_path, {"mode": "grid", "vary": grid})
     scan_figs.draw(a, tmp_path / "f")
-    sc = a["scan"]
-    if "violation" in sc and (sc["violation"] > 0).any():  # infeasible cells hatched
-        ax = record[0][1].axes[0]
-        assert any("infeasible" in t.get_text() for t in ax.get_legend().get_texts())
-    a = _scan("serial", tmp_path, {"vary": {"l1": [0.3, 0.6, 0.9], "l2": [0.1, 0.2, 0.4]}})
+    assert (a["scan"]["violation"] > 0).any()  # eq. (19) fails for small a, large c
+    fig = record[0][1]
+    texts = [
+        t.get_text() for ax in fig.axes if ax.get_legend() for t in ax.get_legend().get_texts()
+    ]
+    assert "infeasible" in texts
+    a = _scan(
+        "rcm", tmp_path, {"mode": "list", "vary": {"a": [80, 120, 160], "c": [220, 250, 300]}}
+    )
     scan_figs.draw(a, tmp_path / "g")
     _assert_clean(record)
 
 
 def test_sweep_figure(tmp_path, record):
-    cfg = _config("master9", sweep={"vary": {"optimizer.gamma": [1e-7, 1e-3]}})
+    cfg = _config("rcm", sweep={"vary": {"optimizer.gamma": [1e-7, 1e-3]}})
     rep = pipeline.sweep(cfg, "tiny", "tiny", tmp_path / "s.h5")
     sweep_figs.draw(archive.read(rep.out), tmp_path / "f")
     _assert_clean(record)

@@ -63,9 +63,10 @@ def _same(y0: np.ndarray, y1: np.ndarray) -> int:
 
 
 def merged(sc: Mapping[str, Any], inds: list[str]) -> list[tuple[str, str]]:
-    """[(index drawn, its name with every index equal to it or its negative)]."""
+    """[(index drawn, its name with every index equal to it or its negative)]; f is named
+    after the index it equals (``gci = −f``)."""
     out: list[tuple[str, list[str]]] = []
-    for k in inds:
+    for k in sorted(inds, key=lambda k: k == "f"):
         y = np.asarray(sc[k], np.float64)
         for rep, names in out:
             s = _same(np.asarray(sc[rep], np.float64), y)
@@ -135,7 +136,8 @@ def _curves(a: dict[str, Any], folder: Path, units: dict[str, str], mod: Any) ->
             ax.legend(keep.values(), keep.keys(), fontsize=7)
     for ax in list(axes.flat)[n:]:
         ax.set_visible(False)
-    sub = f"{study}: indices along {var} (band: ± 2 SE; rates: Wilson interval)"
+    wil = "; rates: Wilson interval" if any(k in rates for _, ks in panels for k in ks) else ""
+    sub = f"{study}: indices along {var} (band: ± 2 SE{wil})"
     if notes:
         sub += "\n" + "; ".join(dict.fromkeys(notes))
     fig.suptitle(sub, fontsize=10)

@@ -144,7 +144,9 @@ def draw_run(a: dict[str, Any], folder: Path, resolution: int = MAP_RESOLUTION) 
         txt = style.held_text({f"q{j + 1}": f"{hq[j] * _unit(mech, j, s)[0]:.3g} "
                                f"{_unit(mech, j, s)[1]}" for j in others})  # fmt: skip
         fig.suptitle(f"1/k ({s.indices.norm}-norm; rows {rows_txt}) over q{pair[0] + 1}, "
-                     f"q{pair[1] + 1}" + (f"\nother joints {txt}" if txt else ""), fontsize=10)  # fmt: skip
+                     f"q{pair[1] + 1}" + (f"\nother joints {txt}" if txt else
+                                           "\n(q1 turns the whole arm: 1/k does not change along it)"),
+                     fontsize=10)  # fmt: skip
         out += save(fig, folder, "dexterity_map")
 
     p, c = P[-1, m2:], z[-1, m2:]  # the final design's cloud
