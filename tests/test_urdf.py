@@ -133,6 +133,32 @@ def test_designs_are_array_inputs_one_trace_and_a_gradient(feat):
         assert abs(float(grad[0, k]) - float(fd)) < 1e-6
 
 
+OFF_PATH_MASTER = f"""<robot name="m"><link name="a"/><link name="b"/><link name="c"/><link name="g"/>
+  <joint name="arm" type="revolute"><parent link="a"/><child link="b"/>
+    <origin xyz="0 0 0.2"/><axis xyz="0 1 0"/>{_LIM}</joint>
+  <joint name="grip" type="prismatic"><parent link="a"/><child link="g"/>
+    <axis xyz="1 0 0"/><limit lower="0" upper="0.04" effort="1" velocity="1"/></joint>
+  <joint name="finger" type="prismatic"><parent link="b"/><child link="c"/>
+    <origin xyz="0.1 0 0" rpy="0 0 0.3"/><axis xyz="0 -1 0"/>
+    <mimic joint="grip" multiplier="2" offset="0.01"/>
+    <limit lower="0" upper="0.1" effort="1" velocity="1"/></joint>
+</robot>"""
+
+
+def test_a_mimic_whose_master_is_off_the_path_makes_the_master_active():
+    rob = U.parse(OFF_PATH_MASTER, "m.urdf")
+    imp = U.import_path(rob, None, "c")
+    assert imp.chain == ("arm", "finger") and imp.active == ("arm", "grip")
+    assert imp.types == ("R", "P") and imp.upper == (1.1, 0.04)
+    model = U.lower(imp, {}, ())
+    ref = U.Reference(OFF_PATH_MASTER)
+    for q in np.random.default_rng(2).uniform([-1, 0], [1, 0.04], (4, 2)):
+        R, p = (np.asarray(a) for a in model.fk(np.zeros(0), q))
+        T = ref.fk(imp, q)
+        np.testing.assert_allclose(R, T[:3, :3], atol=1e-12)
+        np.testing.assert_allclose(p, T[:3, 3], atol=1e-12)
+
+
 def test_branched_tree_needs_the_tip_and_the_root_is_the_default_base():
     rob = U.parse(FEATURES, "features.urdf")
     with pytest.raises(ConfigError, match="branches"):
@@ -309,6 +335,10 @@ NAN = FEATURES.replace('xyz="0.05 0 0.4"', 'xyz="0.05 nan 0.4"')
         (STATIC, {"base": "a", "tip": "b", "set": {"f.origin.x": "l_wrist", "f.origin.y": "l_jaw"}},
          {}, "no movable joint"),
         (NAN, {"tip": "tip"}, {}, "nan is not a finite number"),
+        (FEATURES.replace('name="j2" type="continuous"', 'name="j2" type="floating"'),
+         {"tip": "tip"}, {}, "type 'floating' is not supported"),
+        (FEATURES, {"tip": "tip", "set": {"ft.origin.length": "l_wrist", "ft.origin.x": "l_jaw"}},
+         {}, "cannot be set together with x, y or z"),
         (FEATURES, {"tip": "tip", "set": {"j5.origin.x": "l_wrist", "j1.origin.z": "l_jaw"},
                     "limits": {"j1": [10, float("nan")]}}, {}, "nan"),
     ],
