@@ -215,16 +215,21 @@ def solve_design(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Arra
     S = q0.shape[1]
     pt = jnp.repeat(p_t, S, axis=0)
     Rt = None if R_t is None else jnp.repeat(R_t, S, axis=0)
-    q = q0.reshape(T * S, n)
-    ok = jnp.zeros(T * S, bool)
-    for r in range(opts.rounds):
-        if r:  # restart the unsolved seeds (stalled at a limit or in a local minimum)
-            u = jax.random.uniform(jax.random.fold_in(k_rand, r), q.shape, dtype=q.dtype)
-            q = jnp.where(ok[:, None], q, lower + u * (upper - lower))
-        q = iterate(model, X, q, pt, Rt, lower, upper, mode, L, opts.iters, opts.damping)
+
+    def converged(q):
         R, p = model.fk(X, q)
         pe, re = errors(p, R, pt, Rt, mode)
-        ok = (pe <= opts.tol_pos * L) & (re <= opts.tol_rot)
+        return (pe <= opts.tol_pos * L) & (re <= opts.tol_rot), pe, re
+
+    def round_(r, q):
+        # from the second round on, restart the seeds still unsolved (stalled at a limit
+        # or in a local minimum) from fresh uniform draws
+        u = jax.random.uniform(jax.random.fold_in(k_rand, r), q.shape, dtype=q.dtype)
+        q = jnp.where((r == 0) | converged(q)[0][:, None], q, lower + u * (upper - lower))
+        return iterate(model, X, q, pt, Rt, lower, upper, mode, L, opts.iters, opts.damping)
+
+    q = jax.lax.fori_loop(0, opts.rounds, round_, q0.reshape(T * S, n))
+    ok, pe, re = converged(q)
     ik = model.inv_cond(X, q, rows=(0, 1, 2), norm="2")  # the position block's 1/k
     pe, re, ik, ok, q = (a.reshape(T, S, *a.shape[1:]) for a in (pe, re, ik, ok, q))
     # converged seeds rank by 1/k (largest first), the others by their error after them
