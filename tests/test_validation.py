@@ -288,3 +288,8 @@ def test_other_numeric_flags(tmp_path, capsys, flag, value, needle):
     one_line_exit_2(capsys, ["run", str(p), flag, value, "--out", str(tmp_path / "o" / "a.h5")],
                     needle)  # fmt: skip
     assert written(tmp_path) == []
+
+
+def test_an_unused_fixed_value_is_an_error(tmp_path, capsys):
+    p = cfg_file(tmp_path, PLANAR, lambda r: r["study"].update(fixed={"l3": 0.3}))
+    one_line_exit_2(capsys, ["eval", str(p)], "fixed value(s) ['l3'] appear in no DH entry")

@@ -247,6 +247,7 @@ class SerialSettings(StudySettings):
         unused = sorted(set(info.data.get("variables", {})) - set(kinds))
         if unused:
             raise ValueError(f"design variable(s) {unused} appear in no DH entry of the chain")
+        _no_unused_fixed(info, kinds, "DH entry of the chain")
         return chain
 
     @model_validator(mode="after")
@@ -336,4 +337,13 @@ def _urdf_names(chain: UrdfChain, info: ValidationInfo, known: set[str]) -> Urdf
     unused = sorted(set(info.data.get("variables", {})) - set(kinds))
     if unused:
         raise ValueError(f"design variable(s) {unused} appear in no chain.set entry")
+    _no_unused_fixed(info, kinds, "chain.set entry")
     return chain
+
+
+def _no_unused_fixed(info: ValidationInfo, used: dict[str, str], where: str) -> None:
+    """A ``fixed`` value no entry uses is an error, like an unused design variable (a
+    typo would otherwise go unnoticed)."""
+    unused = sorted(set(info.data.get("fixed", {})) - set(used))
+    if unused:
+        raise ValueError(f"fixed value(s) {unused} appear in no {where}; use or remove them")
