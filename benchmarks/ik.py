@@ -1,5 +1,6 @@
 """IK of the da Vinci patient-side arm (Applied Sciences 2019): this package's batched
-solver against the paper's scan + Newton method, the closed form of the RCM geometry, and
+solver against the paper's scan + Newton method, the closed form of the RCM geometry, the
+generic solver for any chain (``designopt.kinematics.ik``, also on a PUMA 560) and
 (where installed) Robotics Toolbox ik_LM / ik_NR, on the same poses and tolerances.
 
     .venv/bin/python benchmarks/ik.py [--n 100000] [--paths 100] [--steps 10000]
@@ -107,6 +108,33 @@ def peers(T: np.ndarray) -> None:
               "(prismatic q3 between revolute joints) is not ported: not compared")  # fmt: skip
 
 
+def generic(n: int) -> None:
+    """The generic solver (``designopt.kinematics.ik``: any SerialModel, no chain-specific
+    seeding) on the same da Vinci poses and on a PUMA 560 (position and full pose)."""
+    from designopt.kinematics import ik as gik
+    from designopt.kinematics.kernel import dh_model
+
+    pi = np.pi
+    rng = np.random.default_rng(1)
+    q = rng.uniform(m.LOWER, m.UPPER, (n, 6))
+    R, p = m.ARM.fk(X, jnp.asarray(q))
+    lo, hi = jnp.asarray(m.LOWER), jnp.asarray(m.UPPER)
+    cases = [("da Vinci arm", m.ARM, X, lo, hi, p, R, "pose")]
+    puma = dh_model("standard", "RRRRRR", [pi / 2, 0, -pi / 2, pi / 2, -pi / 2, 0],
+                    [0, 0.4318, 0.0203, 0, 0, 0], [0, 0, 0.15005, 0.4318, 0, 0], [0] * 6)  # fmt: skip
+    plo = jnp.radians(jnp.array([-160, -110, -135, -266, -100, -266.0]))
+    qp = rng.uniform(plo, -plo, (n, 6))
+    Rp, pp = puma.fk(jnp.zeros(0), jnp.asarray(qp))
+    cases += [("PUMA 560", puma, jnp.zeros(0), plo, -plo, pp, Rp, mode)
+              for mode in ("position", "pose")]  # fmt: skip
+    for name, model, x, lo_, hi_, pt, Rt, mode in cases:
+        fn = jax.jit(lambda pt, Rt, model=model, x=x, lo_=lo_, hi_=hi_, mode=mode:
+                     gik.solve_design(model, x, pt, Rt, lo_, hi_, jax.random.key(0), mode))  # fmt: skip
+        r, c, run = timed(fn, pt, Rt)
+        row(f"generic LM ({name}, {mode})", n, run, r.success, r.pos_err, r.rot_err,
+            f"compile {c:.1f} s; own tolerance 1e-9·reach")  # fmt: skip
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=100_000)
@@ -114,6 +142,8 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=10_000)
     ap.add_argument("--paper", type=int, default=200, help="poses for the paper's method")
     ap.add_argument("--peers", type=int, default=200, help="poses for Robotics Toolbox")
+    ap.add_argument("--generic", type=int, default=4096,
+                    help="poses for the generic solver (designopt.kinematics.ik)")  # fmt: skip
     a = ap.parse_args()
     print(f"== da Vinci arm IK (Applied Sciences 2019) == backend={jax.default_backend()} "
           f"cores={os.cpu_count()} load={os.getloadavg()[0]:.1f} f64")  # fmt: skip
@@ -177,6 +207,7 @@ def main() -> None:
     err = np.abs(paper.to_deg(np.asarray(r2.q)) - paper.TABLE2_DEG).max()
     print(f"  Table 2: max |output − input| = {err:.1e} (deg / mm), step h "
           f"{np.asarray(r2.step_deg).tolist()}")  # fmt: skip
+    generic(a.generic)
     peers(np.asarray(T[: a.peers]))
 
 

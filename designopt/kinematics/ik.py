@@ -160,16 +160,20 @@ def iterate(model: SerialModel, X: jax.Array, q: jax.Array, p_t: jax.Array,
     n = q.shape[-1]
     wrap = jnp.asarray(revolute(model)) & (upper - lower >= 2 * jnp.pi)
 
+    rev = revolute(model)
+
     def step(_, q):
         e, J, _, _ = residual(model, X, q, p_t, R_t, mode, L)
         k = e.shape[-1]
         ec = [e[:, r] for r in range(k)]
-        Jc = [[J[:, r, i] for i in range(n)] for r in range(k)]
+        # prismatic joints in units of L (so the damping weighs every joint alike)
+        Jc = [[J[:, r, i] if rev[i] else J[:, r, i] * L for i in range(n)] for r in range(k)]
         lam = 0.5 * sum(x * x for x in ec) + damping
         A = [[sum(Jc[r][i] * Jc[r][j] for r in range(k)) + (lam if i == j else 0.0)
               for j in range(n)] for i in range(n)]  # fmt: skip
         g = [sum(Jc[r][i] * ec[r] for r in range(k)) for i in range(n)]
-        dq = jnp.stack(spd_solve(A, g), -1)
+        dq = spd_solve(A, g)
+        dq = jnp.stack([d if rev[i] else d * L for i, d in enumerate(dq)], -1)
         return project(q + dq, lower, upper, wrap)
 
     return jax.lax.fori_loop(0, iters, step, q)
