@@ -74,9 +74,8 @@ def draw_eta(
                 y[none] = np.nan  # undefined where nothing is reached
             style.band(ax, cs, y, se, label=lab)
         ax.plot([230], [0.64], "k*", ms=9, label="paper: 0.64 at c = 230")
-        for name, c in marks.items():
-            ax.axvline(c, color="gray", lw=0.7, ls=":")
-            ax.text(c, ax.get_ylim()[0], f" {name}", rotation=90, fontsize=7, va="bottom")
+        for (name, c), ls_ in zip(marks.items(), (":", "--"), strict=False):
+            ax.axvline(c, color="0.35", lw=0.9, ls=ls_, label=f"{name}: c = {c:.1f} mm")
         ax.set_xlabel(style.label("c", "mm"))
         ax.set_ylabel(style.label("η = mean 1/k", "-"))
         ax.set_title(f"{meas} measure, a = {a_val:.1f} mm", fontsize=9)
