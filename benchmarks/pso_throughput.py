@@ -4,10 +4,12 @@ designopt's PTPSO with its default settings (float32, x64 off, ``draws: mix32``)
 evosax's PSO and pyswarms' GlobalBestPSO on the same work, all measured in this run; the
 peers come from the ``bench`` extra and are skipped with a message if missing. Every
 timing is repeated (``--repeat``) on fresh keys after a first, compiling call, and printed
-as median [min–max]; compile time (first call minus a run) is printed separately. The last
-line is the ratio of medians:
+as median [min–max]; the repeats of the rows are interleaved (A B A B …) so that every row
+sees the same machine load, and the ratios are taken per repeat (paired) with their spread.
+Compile time (first call minus the fastest run) is printed separately; the CPU, its vector
+extensions and the load average are printed at the start and the end. The last line:
 
-    ptpso/evosax = R (default settings, compile excluded), compile = T s
+    ptpso/evosax = R [min–max] (median of per-repeat ratios, ...), compile = T s
 
 Not identical algorithms: evosax draws r1, r2 once per particle (shared across
 dimensions); seed 000 eq. (44) and designopt draw them per dimension (2·D numbers per
@@ -25,6 +27,7 @@ import os
 import statistics
 import tempfile
 import time
+from collections.abc import Callable
 
 import jax
 
@@ -42,32 +45,42 @@ D, M = 30, 50
 LO, HI = -5.12, 5.12
 
 
-def _timed(f, repeat: int) -> tuple[list[float], float, float]:
-    """(run times, compile time, mean best f): one compiling call, then ``repeat`` runs."""
+def _compiled(f) -> tuple[Callable[[int], float], float]:
+    """(f, time of its first, compiling call)."""
     t0 = time.perf_counter()
     f(0)
-    first = time.perf_counter() - t0
-    ts, fm = [], np.nan
+    return f, time.perf_counter() - t0
+
+
+def interleaved(
+    fns: dict[str, Callable[[int], float]], repeat: int, last: dict[str, float] | None = None
+) -> dict[str, list[float]]:
+    """Time every callable ``repeat`` times, interleaved (A B C A B C …) so that all of them
+    see the same machine load; returns the run times per name (compiling calls excluded) and
+    puts each callable's last value in ``last``."""
+    ts: dict[str, list[float]] = {k: [] for k in fns}
     for i in range(repeat):
-        t0 = time.perf_counter()
-        fm = f(i + 1)
-        ts.append(time.perf_counter() - t0)
-    return ts, max(first - min(ts), 0.0), fm
+        for k, f in fns.items():
+            t0 = time.perf_counter()
+            y = f(i + 1)
+            ts[k].append(time.perf_counter() - t0)
+            if last is not None:
+                last[k] = y
+    return ts
 
 
-def ours(
-    name: str, runs: int, iters: int, repeat: int, **settings
-) -> tuple[list[float], float, float]:
+def ours(name: str, runs: int, iters: int, **settings) -> Callable[[int], float]:
+    """designopt's ``name`` on Rastrigin-30: seed → mean best f of ``runs`` runs."""
     P = benchmark("rastrigin", D)
 
     def f(seed):
         r = optim.run(name, P, jax.random.key(seed), M, iters, runs, dtype=jnp.float32, **settings)
         return float(r.best_f.mean())
 
-    return _timed(f, repeat)
+    return f
 
 
-def evosax_pso(runs: int, iters: int, repeat: int) -> tuple[list[float], float, float] | None:
+def evosax_pso(runs: int, iters: int) -> Callable[[int], float] | None:
     try:
         from evosax.algorithms import PSO
     except ImportError:
@@ -95,7 +108,7 @@ def evosax_pso(runs: int, iters: int, repeat: int) -> tuple[list[float], float, 
     def f(seed):
         return float(jax.block_until_ready(g(jax.random.split(jax.random.key(seed), runs))).mean())
 
-    return _timed(f, repeat)
+    return f
 
 
 def pyswarms_pso(runs: int, iters: int) -> tuple[float, float] | None:
@@ -131,34 +144,64 @@ def pyswarms_pso(runs: int, iters: int) -> tuple[float, float] | None:
     return t, float(np.mean(best))
 
 
-def _row(label: str, ts: list[float], runs: int, comp: float, fm: float) -> None:
+def _row(label: str, ts: list[float], runs: int, comp: float, fm: float | None = None) -> None:
     med = statistics.median(ts)
-    print(f"  {label:<34} {1e3 * med / runs:7.2f} ms/run  total {med:5.2f} s "
-          f"[{min(ts):.2f}–{max(ts):.2f}]  compile {comp:4.1f} s  mean f {fm:7.2f}")  # fmt: skip
+    tail = "" if fm is None else f"  mean f {fm:7.2f}"
+    print(f"  {label:<36} {1e3 * med / runs:7.2f} ms/run  total {med:5.2f} s "
+          f"[{min(ts):.2f}–{max(ts):.2f}]  compile {comp:4.1f} s{tail}")  # fmt: skip
 
 
-def breakdown(runs: int, iters: int, repeat: int) -> None:
-    """Time PTPSO with parts of its step replaced: what each part costs."""
+def _ratios(label: str, ts: list[float], base: list[float]) -> float:
+    """Print the per-repeat ratios ts/base (paired: the same repeat round) and their spread;
+    return their median."""
+    r = [x / y for x, y in zip(ts, base, strict=True)]
+    med = statistics.median(r)
+    print(f"  {label}: median {med:.2f}  [{min(r):.2f}–{max(r):.2f}]  per repeat "
+          f"{', '.join(f'{x:.2f}' for x in r)}")  # fmt: skip
+    return med
+
+
+def machine() -> str:
+    """The CPU model and its vector extensions (Linux), and the load average now."""
+    model, flags = "unknown CPU", set()
+    try:
+        for line in open("/proc/cpuinfo"):
+            if line.startswith("model name") and model == "unknown CPU":
+                model = line.split(":", 1)[1].strip()
+            elif line.startswith("flags") and not flags:
+                flags = set(line.split(":", 1)[1].split())
+    except OSError:
+        pass
+    ext = "/".join(f for f in ("avx2", "avx512f") if f in flags) or "no avx2"
+    load = "/".join(f"{x:.1f}" for x in os.getloadavg())
+    return f"{model}, {os.cpu_count()} cores, {ext}; load average {load} (1/5/15 min)"
+
+
+def breakdown(runs: int, iters: int, repeat: int, evo) -> None:
+    """Time PTPSO with parts of its step replaced (interleaved with evosax): what each costs."""
     from designopt.optim import draws as rng
 
-    print("  breakdown of PTPSO's step (medians; each row swaps one part out):")
+    print("  breakdown of PTPSO's step (each row swaps one part out; interleaved repeats):")
+    fns = {"p3": _compiled(ours("p3", runs, iters))[0]}
     orig = rng.uniform, rng.uniform_pair
-    med = statistics.median
-    try:
-        ts, _, _ = ours("p3", runs, iters, repeat)
-        print(f"    PTPSO, full step                       {med(ts):5.2f} s")
+    try:  # compiled under the patch (a fresh problem closure forces a new trace)
         rng.uniform = lambda kind, key, slot, shape, dt: jnp.full(shape, 0.5, dt)
         rng.uniform_pair = lambda kind, key, slot, shape, dt: (jnp.full(shape, 0.5, dt),) * 2
-        ts2, _, _ = ours("p3", runs, iters, repeat)
-        print(f"    PTPSO, draws replaced by constants     {med(ts2):5.2f} s "
-              f"(the draws ≈ {med(ts) - med(ts2):.2f} s)")  # fmt: skip
+        fns["p3, draws = constants"] = _compiled(ours("p3", runs, iters))[0]
     finally:
         rng.uniform, rng.uniform_pair = orig
-    ts3, _, _ = ours("p2", runs, iters, repeat)
-    print(f"    p2 (PTPSO without its penalty term)    {med(ts3):5.2f} s "
-          f"(the penalty term ≈ {med(ts) - med(ts3):.2f} s)")  # fmt: skip
-    ts4, _, _ = ours("p1", runs, iters, repeat)
-    print(f"    p1 (no constriction, no penalty)       {med(ts4):5.2f} s")
+    fns["p2 (no penalty)"] = _compiled(ours("p2", runs, iters))[0]
+    fns["p1 (no constriction, no penalty)"] = _compiled(ours("p1", runs, iters))[0]
+    if evo is not None:
+        fns["evosax"] = evo
+    ts = interleaved(fns, repeat)
+    med = statistics.median
+    for k, t in ts.items():
+        extra = f"  ratio to evosax {med(t) / med(ts['evosax']):.2f}" if "evosax" in ts else ""
+        print(f"    {k:<36} {med(t):5.2f} s [{min(t):.2f}–{max(t):.2f}]{extra}")
+    full = med(ts["p3"])
+    print(f"    → draws ≈ {full - med(ts['p3, draws = constants']):.2f} s, penalty term ≈ "
+          f"{full - med(ts['p2 (no penalty)']):.2f} s")  # fmt: skip
 
 
 def main() -> None:
@@ -173,31 +216,39 @@ def main() -> None:
     a = ap.parse_args()
     header(f"PSO throughput: {a.runs} runs × {a.iters} iterations × {M} particles, Rastrigin "
            f"D={D}, float32, x64 {'on' if jax.config.jax_enable_x64 else 'off'}")  # fmt: skip
-    print(f"  medians of {a.repeat} timed runs [min–max] after a compiling call")
-    ts, comp, fm = ours("ptpso", a.runs, a.iters, a.repeat)
-    _row("designopt PTPSO (defaults, mix32)", ts, a.runs, comp, fm)
-    t_ours = statistics.median(ts)
+    print(f"  {machine()}")
+    print(f"  medians of {a.repeat} timed runs [min–max] after a compiling call; the rows' "
+          f"repeats are interleaved (A B C A B C …) so that all see the same load")  # fmt: skip
+    rows: dict[str, tuple[Callable[[int], float], float]] = {}
+    rows["designopt PTPSO (defaults, mix32)"] = _compiled(ours("ptpso", a.runs, a.iters))
     if a.uniform:
-        t2, c2, f2 = ours("ptpso", a.runs, a.iters, a.repeat, draws="uniform")
-        _row("designopt PTPSO (draws: uniform)", t2, a.runs, c2, f2)
-    t2, c2, f2 = ours("p2", a.runs, a.iters, a.repeat)
-    _row("designopt p2 (defaults)", t2, a.runs, c2, f2)
-    ev = evosax_pso(a.runs, a.iters, a.repeat)
-    t_ev = None
-    if ev is not None:
-        _row("evosax PSO", *ev[:1], a.runs, ev[1], ev[2])
-        t_ev = statistics.median(ev[0])
-        print(f"  ratio per repeat (ours/evosax, paired by order): "
-              f"{', '.join(f'{x / y:.2f}' for x, y in zip(ts, ev[0], strict=True))}")  # fmt: skip
+        rows["designopt PTPSO (draws: uniform)"] = _compiled(
+            ours("ptpso", a.runs, a.iters, draws="uniform")
+        )
+    rows["designopt p2 (defaults)"] = _compiled(ours("p2", a.runs, a.iters))
+    evo = evosax_pso(a.runs, a.iters)
+    if evo is not None:
+        rows["evosax PSO"] = _compiled(evo)
+    fm: dict[str, float] = {}  # mean best f of the last repeat
+    ts = interleaved({k: f for k, (f, _) in rows.items()}, a.repeat, fm)
+    comp = {k: max(c - min(ts[k]), 0.0) for k, (_, c) in rows.items()}
+    for k in rows:
+        _row(k, ts[k], a.runs, comp[k], fm[k])
+    ptpso = "designopt PTPSO (defaults, mix32)"
+    t_ours = statistics.median(ts[ptpso])
+    ratio = None
+    if evo is not None:
+        ratio = _ratios("ptpso/evosax per repeat", ts[ptpso], ts["evosax PSO"])
+        _ratios("p2/evosax per repeat", ts["designopt p2 (defaults)"], ts["evosax PSO"])
     py = pyswarms_pso(a.pyswarms_runs, a.iters)
     if py is not None:
-        t, fm = py
+        t, fmp = py
         per = t / a.pyswarms_runs
-        print(f"  {'pyswarms GlobalBestPSO':<34} {1e3 * per:7.2f} ms/run  ({a.pyswarms_runs} runs "
-              f"timed)  mean f {fm:7.2f}")  # fmt: skip
+        print(f"  {'pyswarms GlobalBestPSO':<36} {1e3 * per:7.2f} ms/run  ({a.pyswarms_runs} runs "
+              f"timed)  mean f {fmp:7.2f}")  # fmt: skip
         print(f"  pyswarms/ptpso = {per / (t_ours / a.runs):.0f}× per run")
     if a.breakdown:
-        breakdown(a.runs, a.iters, a.repeat)
+        breakdown(a.runs, a.iters, a.repeat, evo)
     if a.suite:
         from designopt import benchsuite
 
@@ -208,11 +259,14 @@ def main() -> None:
         benchsuite.run_suite(cfg)
         print(f"  seed suite ({len(cfg.bench.variants)} optimizers × 4 functions × {a.runs} runs, "
               f"float32, defaults): {time.perf_counter() - t0:.1f} s incl. compile")  # fmt: skip
-    if t_ev is not None:
-        print(f"ptpso/evosax = {t_ours / t_ev:.2f} (default settings, compile excluded), "
-              f"compile = {comp:.1f} s")  # fmt: skip
+    print(f"  {machine()}")
+    c = comp[ptpso]
+    if ratio is not None:
+        r = [x / y for x, y in zip(ts[ptpso], ts["evosax PSO"], strict=True)]
+        print(f"ptpso/evosax = {ratio:.2f} [{min(r):.2f}–{max(r):.2f}] (median of per-repeat "
+              f"ratios, default settings, compile excluded), compile = {c:.1f} s")  # fmt: skip
     else:
-        print(f"ptpso/evosax = n/a (evosax missing), compile = {comp:.1f} s")
+        print(f"ptpso/evosax = n/a (evosax missing), compile = {c:.1f} s")
 
 
 if __name__ == "__main__":

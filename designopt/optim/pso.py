@@ -183,13 +183,10 @@ class PSO(Optimizer):
         lower, upper = task.lower, task.upper
         M, D = s.x.shape
         dt = s.x.dtype
-        r1, r2 = rng.uniform_pair(self.draws, key, _R1, (M, D), dt)  # streams _R1, _R2
         w = self.inertia(s, p, key)
-        v = p.chi * (w * s.v + p.c1 * r1 * (s.pbest_x - s.x) + p.c2 * r2 * (s.gbest_x - s.x))
         vmax = p.vmax_frac * (upper - lower)
 
-        # PTPSO penalty, eq. (46)-(49); computed only when the penalty is on (a real branch
-        # unless the settings are vmapped)
+        # PTPSO penalty, eq. (46)-(49)
         def kick():
             d = jnp.sqrt(jnp.sum((s.x - s.gbest_x) ** 2, axis=1))
             dmax = jnp.sqrt(jnp.sum((upper - lower) ** 2))
@@ -199,12 +196,23 @@ class PSO(Optimizer):
             r3 = jnp.where(p.symmetric_r3 > 0, 2.0 * u3 - 1.0, u3)
             return (p.penalty * pc * (1.0 - p.gamma) * vmax / jnp.sqrt(D) * r3).astype(dt)
 
-        v = v + jax.lax.cond(p.penalty != 0, kick, lambda: jnp.zeros((M, D), dt))
-        v = jnp.clip(v, -vmax, vmax)
-        # materialise v here: without the barrier XLA fuses the draws and the velocity
-        # update into each of v's consumers (position, bounds, fitness, personal best) and
-        # recomputes them there, which doubled the step's time on CPU (docs/optimizers.md)
-        v = jax.lax.optimization_barrier(v)
+        def velocity(penalised: bool):
+            def new_v():  # eq. (44) [+ the penalty], clamped to ±v_max
+                r1, r2 = rng.uniform_pair(self.draws, key, _R1, (M, D), dt)  # _R1, _R2
+                v = p.chi * (
+                    w * s.v + p.c1 * r1 * (s.pbest_x - s.x) + p.c2 * r2 * (s.gbest_x - s.x)
+                )
+                v = v + (kick() if penalised else jnp.zeros((M, D), dt))
+                return jnp.clip(v, -vmax, vmax)
+
+            return new_v
+
+        # v is the output of a conditional, so XLA materialises it once: fused into its
+        # consumers (position, bounds, fitness, personal best) the draws and the update were
+        # recomputed in each of them (five times per step; an optimization_barrier no longer
+        # prevents that). The penalty branch runs only when the penalty is on (a real branch
+        # unless the settings are vmapped).
+        v = jax.lax.cond(p.penalty != 0, velocity(True), velocity(False))
         x = s.x + v
         out = (x < lower) | (x > upper)
         if self.bounds == "clip":
