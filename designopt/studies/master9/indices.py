@@ -32,7 +32,8 @@ class IndexSettings:
 
     n_samples: joint-space samples per design (shared by the swarm); chunk: samples per
     step of the memory-bounded scan; measure: 'cartesian' (seed's ∫_W dW, weights
-    |det J_v|) or 'joint'; sampler: 'uniform' or 'halton'; backlash_deg: backlash of
+    |det J_v|) or 'joint'; sampler: 'uniform', 'rqmc' or 'halton' with ``replicates``
+    (montecarlo.plan); backlash_deg: backlash of
     (q1, q2, q3) in degrees (not in the seed; default 0.1°); norm/normalized: condition
     number convention (default raw Frobenius, seed 000 eq. 51-53).
     """
@@ -41,6 +42,7 @@ class IndexSettings:
     chunk: int = 32_768
     measure: mc.Measure = "cartesian"
     sampler: mc.Sampler = "uniform"
+    replicates: int | None = None  # rqmc: randomisations (default mc.DEFAULT_REPLICATES)
     backlash_deg: tuple[float, float, float] = (0.1, 0.1, 0.1)
     norm: Literal["fro", "2"] = "fro"
     normalized: bool = False
@@ -58,6 +60,7 @@ class IndexSettings:
             raise ValueError(f"measure must be 'cartesian' or 'joint', got {self.measure!r}")
         if self.norm not in ("fro", "2"):
             raise ValueError(f"norm must be 'fro' or '2', got {self.norm!r}")
+        mc.check_sampling(self.sampler, self.replicates)
 
     @property
     def box(self) -> tuple[np.ndarray, np.ndarray]:
@@ -65,9 +68,15 @@ class IndexSettings:
         return lim[:, 0], lim[:, 1]
 
     @property
+    def plan(self) -> mc.Plan:
+        if self.sampler != "rqmc" and self.replicates in (None, 1):  # today's layout
+            c = min(self.chunk, self.n_samples)
+            return mc.Plan(self.sampler, 1, -(-self.n_samples // c), c)
+        return mc.plan(self.n_samples, self.chunk, self.sampler, self.replicates)
+
+    @property
     def n_used(self) -> int:
-        c = min(self.chunk, self.n_samples)
-        return -(-self.n_samples // c) * c
+        return self.plan.n_used
 
 
 def features(q: Array) -> dict[str, Array]:
@@ -168,26 +177,25 @@ def index_sums(x: dict[str, Array], key: jax.Array, s: IndexSettings, dtype=None
     dtype = mc.out_dtype(dtype)
     lo, hi = s.box
     lo, hi = jnp.asarray(lo, dtype), jnp.asarray(hi, dtype)
-    chunk = min(s.chunk, s.n_samples)
-    n_chunks = -(-s.n_samples // chunk)
+    p = s.plan
     delta = jnp.deg2rad(jnp.asarray(s.backlash_deg, dtype))
     x = {k: jnp.asarray(x[k], dtype) for k in LINEAR_KEYS}
     M = x["a1"].shape[0]
 
     def sums(k):
-        u = mc.unit_samples(key, k * chunk, chunk, 3, s.sampler, dtype)
+        u = mc.chunk_points(key, k, p, 3, dtype)
         q = lo + (hi - lo) * u
-        return _chunk_sums(x, q, delta, s)
+        return mc.to_replicate(_chunk_sums(x, q, delta, s), k, p)
 
-    z = jnp.zeros((M, 5), dtype)
-    init = tuple(mc.PowerSums(z, z, jnp.asarray(0.0, dtype)) for _ in range(3))
-    return mc.scan_chunks(sums, init, n_chunks, mesh)
+    init = tuple(mc.zero_sums((M,), p, dtype) for _ in range(3))
+    return mc.scan_chunks(sums, init, p.n_chunks, mesh)
 
 
-def swarm_indices(
+def replicate_indices(
     design: dict[str, Array], key: jax.Array, s: IndexSettings, dtype=None, mesh=None
 ) -> dict[str, Array]:
-    """All indices of eq. (35)-(42) for a swarm: design values of shape (M,). Returns (M,) arrays."""
+    """The indices of :func:`swarm_indices` per replicate: (M, R) arrays (with R = 1, (M,)
+    arrays and the delta-method ``*_se``); reduce with ``mc.combine(v, se, s.plan)``."""
     dtype = mc.out_dtype(dtype)
     ps_k, ps_p, ps_v = index_sums(design, key, s, dtype, mesh)
     lo, hi = s.box
@@ -200,6 +208,8 @@ def swarm_indices(
         + jnp.asarray(design["a3"], dtype)
         + jnp.asarray(design["d3"], dtype)
     )
+    if s.plan.replicates > 1:
+        L = L[:, None]
     has_vol = vol.value > 0
     v_safe = jnp.where(has_vol, vol.value, 1.0)
     fl = jnp.where(has_vol, L / jnp.cbrt(v_safe), jnp.inf)  # no workspace: f_l = +inf
@@ -213,3 +223,23 @@ def swarm_indices(
         "volume": vol.value, "volume_se": vol.se,
         "L": L, "f_l": fl, "f_l_se": fl_se,
     }  # fmt: skip
+
+
+REPORTED = ("gci", "gcsei", "f_k", "gpi", "f_p", "volume", "f_l")
+
+
+def reduce_replicates(rep: dict[str, Array], p: mc.Plan) -> dict[str, Array]:
+    """(M,) values and SEs from :func:`replicate_indices` (mean and SD/√R of the replicates)."""
+    out = {"L": rep["L"][:, 0] if p.replicates > 1 else rep["L"]}
+    for n in REPORTED:
+        e = mc.combine(rep[n], rep[n + "_se"], p)
+        out[n], out[n + "_se"] = e.value, e.se
+    return out
+
+
+def swarm_indices(
+    design: dict[str, Array], key: jax.Array, s: IndexSettings, dtype=None, mesh=None
+) -> dict[str, Array]:
+    """All indices of eq. (35)-(42) for a swarm: design values of shape (M,). Returns (M,) arrays."""
+    rep = replicate_indices(design, key, s, dtype, mesh)
+    return reduce_replicates(rep, s.plan)

@@ -12,6 +12,18 @@ DESIGN_KEYS: tuple[str, ...] = ("a1", "a3", "d3", "a4", "a5", "d2", "d5", "d6")
 """The master's lengths (mm); mirrors ``mechanism.DESIGN_KEYS`` (kept import-light)."""
 
 
+def check_replicates(sampler: str, replicates: int | None) -> int | None:
+    """``replicates`` against the sampler (mirrors ``montecarlo.check_sampling``, kept
+    import-light): ``rqmc`` needs at least 2, ``halton`` only 1."""
+    if replicates is None:
+        return None
+    if sampler == "rqmc" and replicates < 2:
+        raise ValueError(f"must be at least 2 for sampler 'rqmc', got {replicates}")
+    if sampler == "halton" and replicates != 1:
+        raise ValueError("replicated Halton points are sampler 'rqmc'; 'halton' takes 1")
+    return replicates
+
+
 class Indices(BaseModel):
     """How the indices of seed 000 eq. (35)-(43) are estimated."""
 
@@ -20,11 +32,19 @@ class Indices(BaseModel):
     n_samples: int = Field(20_000, gt=1)
     chunk: int = Field(8_192, gt=0)  # (50, 8192) arrays stay in cache: 1.3-1.6× faster than 32768
     measure: Literal["cartesian", "joint"] = "cartesian"
-    sampler: Literal["uniform", "halton"] = "uniform"
+    # rqmc in configs/master9.yaml; uniform here keeps tiny runs (short replicates) bitwise
+    # equal under particle sharding (docs/indices.md)
+    sampler: Literal["uniform", "halton", "rqmc"] = "uniform"
+    replicates: int | None = Field(None, ge=1)  # rqmc: 16 by default (docs/indices.md)
     backlash_deg: float | list[float] = 0.1
     norm: Literal["fro", "2"] = "fro"
     normalized: bool = False
     weights: list[float] = [4.0, 2.0, 1.0]
+
+    @field_validator("replicates")
+    @classmethod
+    def _replicates(cls, v: int | None, info) -> int | None:
+        return check_replicates(info.data.get("sampler", "uniform"), v)
 
     @field_validator("backlash_deg", "weights")
     @classmethod
