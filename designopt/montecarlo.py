@@ -174,6 +174,17 @@ def to_replicate(sums, k: Array | int, p: Plan):
     return jax.tree.map(place, sums, is_leaf=lambda x: isinstance(x, PowerSums))
 
 
+def place(x: Array, k: Array | int, p: Plan, axis: int = 1) -> Array:
+    """A chunk's additive array placed in replicate k // per_rep along a new ``axis``."""
+    if p.replicates == 1:
+        return x
+    hot = (jnp.arange(p.replicates) == k // p.per_rep).astype(x.dtype)
+    x = jnp.expand_dims(x, axis)
+    shape = [1] * x.ndim
+    shape[axis] = p.replicates
+    return x * hot.reshape(shape)
+
+
 def combine(value: Array, se: Array | None, p: Plan) -> Estimate:
     """The estimate from per-replicate values (..., R): their mean and SD/√R. With one
     replicate (no axis), the value and its delta-method ``se`` as they are."""

@@ -148,8 +148,9 @@ def full_design(params: Mapping[str, Any], X: jnp.ndarray) -> jnp.ndarray:
 def build_fn(s: PlasSettings, dtype: Any):
     """The pure swarm function fn(params, X, key) -> (f, indices with *_se)."""
     mm = s.mismatch
-    chunk = min(mm.chunk, mm.n_samples)
-    n_chunks = -(-mm.n_samples // chunk)
+    pl = mm.plan()
+    R = pl.replicates
+    MC = ("vel_rel", "vel_reduction", "vel_abs", "pos_mean")  # Monte-Carlo estimates
 
     def raw(params, master):
         """Indices of designs ``master`` (M, 3); the built master is appended as the last
@@ -159,25 +160,28 @@ def build_fn(s: PlasSettings, dtype: Any):
         M = master.shape[0]
 
         def body(acc, k):
-            theta, u = sample(params, k * chunk, chunk, mm.sampler, dtype)
+            w = mc.chunk_points(params["sample_key"], k, pl, 5, dtype)
+            lo, hi = params["q_lower"].astype(dtype), params["q_upper"].astype(dtype)
+            theta, u = lo + (hi - lo) * w[:, :3], directions(w[:, 3:])
             pw = pointwise(master, slave, theta, u, mm.n_path)
             a, w = pw["dv"], pw["vm"]
             z = jnp.stack(
                 [a, w, jnp.broadcast_to(a[-1], a.shape), jnp.broadcast_to(w[-1], w.shape)], -1
             )
             s1, s2 = _moments(z)
-            new = (s1, s2, mc.power_sums(1.0, a), mc.power_sums(1.0, pw["dp"]),
+            ps = mc.to_replicate((mc.power_sums(1.0, a), mc.power_sums(1.0, pw["dp"])), k, pl)
+            new = (mc.place(s1, k, pl), mc.place(s2, k, pl), *ps,
                    jnp.max(a, 1), jnp.max(pw["dp"], 1))  # fmt: skip
             return (acc[0] + new[0], acc[1] + new[1], mc.add(acc[2], new[2]),
                     mc.add(acc[3], new[3]), jnp.maximum(acc[4], new[4]),
                     jnp.maximum(acc[5], new[5])), None  # fmt: skip
 
-        z5 = jnp.zeros((M, 5), dtype)
-        ps0 = mc.PowerSums(z5, z5, jnp.asarray(0.0, dtype))
-        init = (jnp.zeros((M, 4), dtype), jnp.zeros((M, 4, 4), dtype), ps0, ps0,
+        ps0 = mc.zero_sums((M,), pl, dtype)
+        rep = (R,) if R > 1 else ()
+        init = (jnp.zeros((M, *rep, 4), dtype), jnp.zeros((M, *rep, 4, 4), dtype), ps0, ps0,
                 jnp.zeros((M,), dtype), jnp.zeros((M,), dtype))  # fmt: skip
-        (s1, s2, ps_v, ps_p, vmax, pmax), _ = jax.lax.scan(body, init, jnp.arange(n_chunks))
-        n = jnp.asarray(float(n_chunks * chunk), dtype)
+        (s1, s2, ps_v, ps_p, vmax, pmax), _ = jax.lax.scan(body, init, jnp.arange(pl.n_chunks))
+        n = jnp.asarray(float(pl.n_rep if R > 1 else pl.n_used), dtype)
         rate = params["rate"].astype(dtype)
         out = {}
         out["vel_rel"], out["vel_rel_se"] = _delta(s1, s2, n, _ratio)
@@ -207,12 +211,22 @@ def build_fn(s: PlasSettings, dtype: Any):
             "inertia",
         ):
             out[k + "_se"] = jnp.zeros_like(out[k])
-        return {k: v[:-1] for k, v in out.items()}, {k: v[-1] for k, v in out.items()}
+        reps = {k: out[k] for k in MC}  # (M, R) with replicates, else (M,)
+        for k in MC:  # mean of the replicates and SD/√R (or the delta-method SE)
+            out[k], out[k + "_se"] = mc.combine(out[k], out[k + "_se"], pl)
+        split = ({k: v[:-1] for k, v in d.items()} for d in (out, reps))
+        return *split, {k: v[-1] for k, v in out.items()}, {k: v[-1] for k, v in reps.items()}
 
     def fn(params, X, key):
         X = X.astype(dtype)
-        out, ref = raw(params, full_design(params, X))
+        out, rep, ref, ref_rep = raw(params, full_design(params, X))
         w = params["weights"].astype(dtype)
+        if R > 1:  # f per replicate (the built master's ratios too): SE from their spread
+            f_r = w[0] * (1.0 - rep["vel_reduction"])
+            f_r = f_r + w[1] * rep["pos_mean"] / ref_rep["pos_mean"]
+            f_r = f_r + w[2] * (out["inertia"] / ref["inertia"])[:, None]
+            e = mc.combine(f_r, None, pl)
+            return e.value, out | {"f_se": e.se}
         # velocity term: vel_rel / vel_rel(built) = 1 − vel_reduction, with its paired SE
         f = w[0] * (1.0 - out["vel_reduction"])
         f_se = w[0] * out["vel_reduction_se"]

@@ -58,13 +58,32 @@ class Mismatch(Section):
 
     n_samples: int = Field(4096, gt=1)
     chunk: int = Field(4096, gt=0)
-    sampler: Literal["uniform", "halton"] = "uniform"
+    sampler: Literal["uniform", "halton", "rqmc"] = "uniform"
+    replicates: int | None = Field(None, ge=1)  # rqmc: 16 unless given (docs/indices.md)
     n_path: int = Field(8, ge=1, le=64)  # midpoint rule along the home → θ path
     joint_rate_deg_s: float = Field(30.0, gt=0)  # norm of the master's joint-rate vector
 
+    @field_validator("replicates")
+    @classmethod
+    def _replicates(cls, v: int | None, info) -> int | None:
+        if v is not None and info.data.get("sampler") == "rqmc" and v < 2:
+            raise ValueError(f"must be at least 2 for sampler 'rqmc', got {v}")
+        if v is not None and info.data.get("sampler") == "halton" and v != 1:
+            raise ValueError("replicated Halton points are sampler 'rqmc'; 'halton' takes 1")
+        return v
+
+    def plan(self):
+        """The sample layout (``designopt.montecarlo.Plan``; one stream unless rqmc or
+        replicates are asked for)."""
+        from designopt import montecarlo as mc
+
+        if self.sampler != "rqmc" and self.replicates in (None, 1):
+            c = min(self.chunk, self.n_samples)
+            return mc.Plan(self.sampler, 1, -(-self.n_samples // c), c)
+        return mc.plan(self.n_samples, self.chunk, self.sampler, self.replicates)
+
     def n_used(self) -> int:
-        c = min(self.chunk, self.n_samples)
-        return -(-self.n_samples // c) * c
+        return self.plan().n_used
 
 
 class Constraints(Section):

@@ -11,8 +11,8 @@ one becomes the other by the weight |det J|^{±1}: |det J| = |1 − c/r| in the 
 (eq. 10), d²·v/r² for the arm (mechanism.arm_det). 1/k depends on the sample through
 r = |A1C| only, and r = c − d on the cone.
 
-Every estimate is a ratio estimator Σ w g / Σ w with its delta-method standard error
-(designopt.montecarlo); the samples are shared by the whole swarm and what depends on the
+Every estimate is a ratio estimator Σ w g / Σ w with its delta-method standard error, or
+with ``sampler: rqmc`` the mean of R replicate ratios and their SD/√R (designopt.montecarlo); the samples are shared by the whole swarm and what depends on the
 sample only (depths, directions) is computed once per sample.
 """
 
@@ -119,18 +119,22 @@ def estimates(s: RcmSettings, params: Mapping[str, Any], X: jnp.ndarray,
     over the ``samples`` axis of ``mesh`` when given)."""
     dt = X.dtype
     a, c = design_columns(s, params, X)
-    n_chunks, chunk = mc.chunking(s.eta.n_samples, CHUNK)
+    pl = sample_plan(s)
     p = {k: v.astype(dt) for k, v in params.items() if k not in ("sample_key", "design")}
 
     def sums(k):
-        u = mc.unit_samples(params["sample_key"], k * chunk, chunk, 3, s.eta.sampler, dt)
-        return chunk_sums(p, a, c, u, s)
+        u = mc.chunk_points(params["sample_key"], k, pl, 3, dt)
+        return mc.to_replicate(chunk_sums(p, a, c, u, s), k, pl)
 
-    z = jnp.zeros((X.shape[0], 5), dt)
     keys = ("box", "cone", "reach_eta", "reach")
-    init = {n: mc.PowerSums(z, z, jnp.asarray(0.0, dt)) for n in keys}
-    acc = mc.scan_chunks(sums, init, n_chunks, mesh)
-    return {n: mc.mean(ps) for n, ps in acc.items()} | {"a": a, "c": c}
+    init = {n: mc.zero_sums((X.shape[0],), pl, dt) for n in keys}
+    acc = mc.scan_chunks(sums, init, pl.n_chunks, mesh)
+    return {n: mc.finish(mc.mean(ps), pl) for n, ps in acc.items()} | {"a": a, "c": c}
+
+
+def sample_plan(s: RcmSettings) -> mc.Plan:
+    """Chunks of the η integrals: ``replicates`` × ⌈n/R⌉ samples (one stream for uniform)."""
+    return mc.plan(s.eta.n_samples, CHUNK, s.eta.sampler, s.eta.replicates)
 
 
 def eq19_margin(s: RcmSettings, p: Mapping[str, Any], a: jnp.ndarray, c: jnp.ndarray):
@@ -224,10 +228,12 @@ def problem(s: RcmSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Proble
     names = tuple(s.variables)
     lower = np.array([s.variables[k][0] for k in names])
     upper = np.array([s.variables[k][1] for k in names])
-    n_chunks, chunk = mc.chunking(s.eta.n_samples, CHUNK)
+    pl = sample_plan(s)
     info = {
         "study": "rcm",
-        "n_samples_used": n_chunks * chunk,
+        "n_samples_used": pl.n_used,
+        "sampler": pl.sampler,
+        "replicates": pl.replicates,
         "fixed": {k: v for k, v in s.design().items() if k not in s.variables},
         "workspace": s.eta.workspace,
         "measure": s.eta.measure,

@@ -67,7 +67,17 @@ class Eta(Section):
     workspace: Literal["box", "cone", "reach"] = "cone"
     measure: Literal["cartesian", "joint"] = "cartesian"
     n_samples: int = Field(65_536, ge=2)
-    sampler: Literal["uniform", "halton"] = "uniform"
+    sampler: Literal["uniform", "halton", "rqmc"] = "uniform"
+    replicates: int | None = Field(None, ge=1)  # rqmc: 16 unless given (docs/indices.md)
+
+    @field_validator("replicates")
+    @classmethod
+    def _replicates(cls, v: int | None, info) -> int | None:
+        if v is not None and info.data.get("sampler") == "rqmc" and v < 2:
+            raise ValueError(f"must be at least 2 for sampler 'rqmc', got {v}")
+        if v is not None and info.data.get("sampler") == "halton" and v != 1:
+            raise ValueError("replicated Halton points are sampler 'rqmc'; 'halton' takes 1")
+        return v
 
 
 class Constraints(Section):
