@@ -1,19 +1,15 @@
-"""Figure checks (docs/figures.md): every figure of every registered study's tiny config,
-and the scan, sweep and bench figures with tiny inputs. Each saved figure is walked axes
-by axes: every axis and colour-bar label carries a unit in [..] or (..) ([-]:
-dimensionless); no text overlaps another text, another panel or leaves the canvas
-(renderer-based window extents); panels declared comparable share their colour limits."""
+"""Figure checks (docs/figures.md, the checker in tests/figcheck.py): the scan, sweep and
+bench figures with tiny inputs, and the checker itself. Every registered study's run
+figures are checked by the contract test that draws them (tests/test_studies.py)."""
 
 from __future__ import annotations
 
-import re
 from pathlib import Path
 
 import matplotlib.pyplot as plt
 import numpy as np
 import pytest
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from mpl_toolkits.mplot3d import Axes3D
+from figcheck import assert_clean, problems
 
 from designopt import archive, figures, pipeline, stats
 from designopt.config import validate
@@ -24,106 +20,6 @@ from designopt.figures import sweep as sweep_figs
 from designopt.studies import STUDIES, get
 
 ROOT = Path(__file__).resolve().parents[1]
-UNIT = re.compile(r"(\[[^\[\]]+\]|\([^()]+\))$")
-TOL = 1.0  # px: touching boxes are not overlapping
-
-
-def _unit_ok(text: str) -> bool:
-    return bool(text.strip()) and bool(UNIT.search(text.strip()))
-
-
-def _visible(t) -> bool:
-    return t.get_visible() and bool(t.get_text().strip())
-
-
-def _axes_texts(ax) -> list:
-    """The frame texts of one axes: titles, axis labels, tick labels."""
-    axis = [ax.xaxis, ax.yaxis] + ([ax.zaxis] if isinstance(ax, Axes3D) else [])
-    out = [ax.title, ax._left_title, ax._right_title]
-    for a in axis:
-        if a.get_visible():  # the ticks drawn (those within the view interval); a 3-D axes'
-            out.append(a.label)  # tick labels have no reliable window extent: labels only
-            if not isinstance(ax, Axes3D):
-                out += [t for k in a._update_ticks() for t in (k.label1, k.label2)]
-    return [t for t in out if _visible(t)]
-
-
-def _overlap(a, b) -> bool:
-    w = min(a.x1, b.x1) - max(a.x0, b.x0)
-    h = min(a.y1, b.y1) - max(a.y0, b.y0)
-    return w > TOL and h > TOL
-
-
-def problems(fig) -> list[str]:
-    """What is wrong with ``fig`` (empty: it passes)."""
-    out = []
-    if not hasattr(fig.canvas, "get_renderer"):  # a closed pyplot figure: a fresh Agg canvas
-        FigureCanvasAgg(fig)
-    fig.canvas.draw()
-    r = fig.canvas.get_renderer()
-    canvas = fig.bbox
-    axes = [
-        ax for ax in fig.axes if ax.get_visible() and (ax.axison or getattr(ax, "_axis3don", False))
-    ]
-    frame = []  # (owner axes or None, text)
-    for ax in axes:
-        cb = getattr(ax, "_colorbar", None)
-        if cb is not None:
-            lab = (ax.yaxis if cb.orientation == "vertical" else ax.xaxis).label.get_text()
-            if not _unit_ok(lab):
-                out.append(f"colour bar label {lab!r} has no unit")
-        else:
-            labs = [("x", ax.get_xlabel()), ("y", ax.get_ylabel())]
-            if isinstance(ax, Axes3D):
-                labs.append(("z", ax.get_zlabel()))
-            for w, lab in labs:
-                if getattr(ax, f"{w}axis").get_visible() and not _unit_ok(lab):
-                    out.append(f"{w} label {lab!r} of {ax.get_title()!r} has no unit")
-        frame += [(ax, t) for t in _axes_texts(ax)]
-        leg = ax.get_legend()
-        if leg is not None and leg.get_visible():
-            frame.append((ax, leg))
-    if fig._suptitle is not None and _visible(fig._suptitle):
-        frame.append((None, fig._suptitle))
-    frame += [(None, leg) for leg in fig.legends]
-    data = [(ax, t) for ax in axes for t in ax.texts if _visible(t)]
-    boxes = [(ax, t, t.get_window_extent(r)) for ax, t in frame + data]
-    for _, t, b in boxes:
-        if b.x0 < canvas.x0 - TOL or b.y0 < canvas.y0 - TOL or b.x1 > canvas.x1 + TOL or \
-                b.y1 > canvas.y1 + TOL:  # fmt: skip
-            out.append(f"text {_name(t)} leaves the canvas")
-    nf = len(frame)
-    for i in range(nf):  # frame texts against frame texts and annotations
-        ai, ti, bi = boxes[i]
-        for _, tj, bj in boxes[i + 1 :]:
-            if _overlap(bi, bj) and not _in_legend(ti, tj):
-                out.append(f"text {_name(ti)} overlaps {_name(tj)}")
-        if ti is fig._suptitle:
-            continue
-        for ax in axes:  # a frame text over another 2-D panel (a colour bar included)
-            if (
-                ax is not ai
-                and not isinstance(ax, Axes3D)
-                and _overlap(bi, ax.get_window_extent(r))
-            ):
-                out.append(f"text {_name(ti)} lies over another panel")
-    for group in getattr(fig, "designopt_shared", []):
-        lims = {tuple(np.round(m.get_clim(), 12)) for m in group}
-        if len(lims) != 1:
-            out.append(f"panels meant to be compared have colour limits {sorted(lims)}")
-    return out
-
-
-def _in_legend(a, b) -> bool:
-    from matplotlib.legend import Legend
-
-    return (isinstance(a, Legend) and b in a.get_texts()) or (
-        isinstance(b, Legend) and a in b.get_texts()
-    )
-
-
-def _name(t) -> str:
-    return repr(t.get_text()) if hasattr(t, "get_text") else type(t).__name__
 
 
 @pytest.fixture
@@ -132,12 +28,6 @@ def record():
     yield figures.RECORD
     figures.RECORD = None
     plt.close("all")
-
-
-def _assert_clean(rec):
-    assert rec, "no figure was saved"
-    bad = {name: p for name, fig in rec if (p := problems(fig))}
-    assert not bad, "\n".join(f"{k}: {v}" for k, v in bad.items())
 
 
 # ----------------------------------------------------------------- the checker itself
@@ -201,13 +91,14 @@ def _config(name: str, **over):
     return validate(raw, str(ROOT / "configs" / "tiny.yaml"))
 
 
-@pytest.mark.parametrize("name", sorted(STUDIES))
-def test_study_figures(name, tmp_path, record):
+@pytest.mark.parametrize("name", sorted(n for n, st in STUDIES.items() if st.replay))
+def test_replay_figures(name, tmp_path, record):
+    """Studies whose run is a replay (the design studies' figures are checked by the
+    contract run test in tests/test_studies.py)."""
     cfg = _config(name)
     rep = pipeline.run(cfg, "tiny", str(ROOT / "configs" / "tiny.yaml"), tmp_path / "a.h5")
-    a = archive.read(rep.out)
-    get(name).figures(a, tmp_path / "figs")
-    _assert_clean(record)
+    get(name).figures(archive.read(rep.out), tmp_path / "figs")
+    assert_clean(record)
 
 
 def _scan(name: str, tmp_path: Path, scan: dict):
@@ -219,7 +110,7 @@ def _scan(name: str, tmp_path: Path, scan: dict):
 def test_scan_curves_merge_equal_indices(tmp_path, record):
     a = _scan("rcm", tmp_path, {"vary": {"c": {"from": 200, "to": 400, "num": 5}}})
     scan_figs.draw(a, tmp_path / "f")
-    _assert_clean(record)
+    assert_clean(record)
     (_, fig), = record  # fmt: skip
     ys = [ax.get_ylabel() for ax in fig.axes if ax.get_visible()]
     names = [
@@ -244,14 +135,14 @@ def test_scan_grid_hatches_infeasible_cells_and_designs(tmp_path, record):
         "rcm", tmp_path, {"mode": "list", "vary": {"a": [80, 120, 160], "c": [220, 250, 300]}}
     )
     scan_figs.draw(a, tmp_path / "g")
-    _assert_clean(record)
+    assert_clean(record)
 
 
 def test_sweep_figure(tmp_path, record):
     cfg = _config("rcm", sweep={"vary": {"optimizer.gamma": [1e-7, 1e-3]}})
     rep = pipeline.sweep(cfg, "tiny", "tiny", tmp_path / "s.h5")
     sweep_figs.draw(archive.read(rep.out), tmp_path / "f")
-    _assert_clean(record)
+    assert_clean(record)
 
 
 def test_bench_figures(tmp_path, record):
@@ -266,6 +157,6 @@ def test_bench_figures(tmp_path, record):
             rows[v] = stats.summary(h[:, -1], rng.integers(5, 30, 6), 1e-3)
         st[case] = {"threshold": 1e-3, "rows": rows}
     bench_figs.draw(tmp_path, st, hist, 6)
-    _assert_clean(record)
+    assert_clean(record)
     curves = dict(record)["convergence_curves"]
     assert all(ax.get_yscale() == "log" for ax in curves.axes if ax.get_visible() and ax.lines)

@@ -2,10 +2,12 @@
 
 import jax
 import jax.numpy as jnp
+import matplotlib.pyplot as plt
 import numpy as np
 import pytest
+from figcheck import assert_clean
 
-from designopt import archive, pipeline
+from designopt import archive, figures, pipeline
 from designopt.config import validate
 from designopt.studies import STUDIES, get, streams
 
@@ -94,8 +96,14 @@ def test_run_stays_in_box_resumes_bit_exact_and_round_trips(name, tmp_path):
     assert back == cfg
     assert set(a["attrs"]["keys"]) == {"optimizer", "samples", "normalisation", "figures"}
     np.testing.assert_array_equal(a["optimizer"]["history"], full.history)
-    figs = get(name).figures(a, tmp_path / "figs")
-    assert figs and all(p.exists() for p in figs)
+    figures.RECORD = []  # every figure drawn also passes the figure checks (docs/figures.md)
+    try:
+        figs = get(name).figures(a, tmp_path / "figs")
+        assert figs and all(p.exists() for p in figs)
+        assert_clean(figures.RECORD)
+    finally:
+        figures.RECORD = None
+        plt.close("all")
 
 
 @pytest.mark.parametrize("name", NAMES)

@@ -106,7 +106,9 @@ class Study:
     - ``figures(archive, folder) -> [paths]``: the figures of a run archive.
     - ``sweep_aliases(settings) -> {short path: full path}``: sweep short forms.
     - ``indices(settings) -> names``: what ``eval``/``scan`` report (f included).
-    - ``units(settings) -> {variable: unit}``: for printing designs.
+    - ``units(settings) -> {name: unit}``: every design variable and index (``"-"``:
+      dimensionless); printed with designs and used for every figure axis
+      (docs/figures.md).
     - ``tiny``: the ``study:`` section of a config that runs in seconds (contract tests).
     - ``replay(settings, keys, dtype, where) -> (tree, lines)``: for a study whose ``run``
       is not a design optimisation (e.g. replaying a teleoperation trajectory); the

@@ -1,5 +1,5 @@
-"""The generic ``serial`` study: any serial chain described in YAML (DH table, design
-variables, joint limits), scored by dexterity, manipulability and workspace volume on the
+"""The generic ``serial`` study: any serial chain described in YAML (a DH table or a
+robot's URDF, design variables, joint limits), scored by dexterity, manipulability and workspace volume on the
 generic frame kernel (``designopt.kinematics.kernel``)."""
 
 from __future__ import annotations
@@ -25,10 +25,21 @@ def _figures(archive: dict[str, Any], folder: Path) -> list[Path]:
 
 def _units(s: SerialSettings) -> dict[str, str]:
     """Angles in deg, lengths in L (the chain's own length unit, e.g. m for the PUMA 560);
-    gci, gcsei dimensionless, manipulability and volume in powers of L (and rad)."""
+    gci, gcsei dimensionless; the volume ∫|det Jv| dq in L^rows (an area for a planar
+    Jacobian); the manipulability sqrt(det J Jᵀ) in L^(rows in L) for an all-revolute
+    chain with no more rows than joints (angular rows count as L when ``length_scale``
+    scales them), else "mixed" (prismatic columns or more rows than joints mix units)."""
     ang = s.angle_names()
     out = {k: "deg" if k in ang else "L" for k in s.variables}
-    return out | {"gci": "-", "gcsei": "-", "manipulability": "L-based", "volume": "L-based"}
+    rows = s.indices.rows()
+    n_len = sum(r < 3 or s.indices.length_scale != 1.0 for r in rows)
+    all_r = all(j.type == "R" for j in s.chain.joints)
+    if all_r and len(rows) <= len(s.chain.joints):
+        man = "-" if n_len == 0 else ("L" if n_len == 1 else f"L^{n_len}")
+    else:
+        man = "mixed"
+    vol = "L" if len(rows) == 1 else f"L^{len(rows)}"
+    return out | {"gci": "-", "gcsei": "-", "manipulability": man, "volume": vol}
 
 
 def _aliases(s: SerialSettings) -> dict[str, str]:
@@ -40,7 +51,7 @@ def _aliases(s: SerialSettings) -> dict[str, str]:
 
 STUDY = Study(
     name="serial",
-    title="any serial chain from YAML (DH table with named design variables)",
+    title="any serial chain from YAML (DH table or URDF, with named design variables)",
     settings=SerialSettings,
     problem=_problem,
     summary=lambda s: s.index_names(),
@@ -71,7 +82,8 @@ STUDY = Study(
         "objective": {"gci": -1.0, "volume": -0.5, "normalize": True, "n_norm": 8},
     },
     meta={
-        "variables": "any names used in study.chain (DH a, d, alpha, theta)",
+        "variables": "any names used in study.chain (DH a, d, alpha, theta, or a URDF "
+        "chain's set values)",
         "indices": ", ".join(INDEX_NAMES) + " (volume for square position Jacobians)",
     },
 )
