@@ -150,3 +150,50 @@ def test_master9_rqmc_se_is_honest_and_smaller_than_uniform():
     assert 1 / 1.5 < pooled < 1.5, ratios
     zsd = np.sqrt(np.mean(np.concatenate(zs) ** 2))
     assert 0.75 < zsd < 1.33, zsd
+
+
+def _study_rows(study: str, section: str, upd: dict, keys: tuple[str, ...], n_seeds: int):
+    """Main indices of the config's design-box centre for ``n_seeds`` sample keys."""
+    import yaml
+
+    from designopt.studies import STUDIES, streams
+
+    st = STUDIES[study]
+    raw = yaml.safe_load(open(f"configs/{study}.yaml"))["study"]
+    s = st.settings.model_validate({**raw, section: {**raw[section], **upd}})
+    pr = st.problem(s, streams(0), jnp.float64)
+    X = jnp.asarray([(np.asarray(pr.lower) + np.asarray(pr.upper)) / 2], jnp.float64)
+    f = jax.jit(lambda p: pr.fn(p, X, None))
+    rows = []
+    for k in jax.random.split(jax.random.key(21), n_seeds):
+        fv, d = f(dict(pr.params, sample_key=k))
+        d = dict(d, f=fv)
+        rows.append({n: (float(d[n][0]), float(d[n + "_se"][0])) for n in keys})
+    return rows
+
+
+@pytest.mark.parametrize(
+    "study,section,keys,n,ref_n",
+    [
+        ("rcm", "eta", ("eta", "eta_box"), 4096, 1 << 19),
+        ("plas", "mismatch", ("vel_rel", "vel_reduction", "pos_mean"), 1024, 1 << 16),
+    ],
+)
+def test_study_se_is_honest_for_rqmc_and_uniform(study, section, keys, n, ref_n):
+    big = {"n_samples": ref_n, "sampler": "rqmc", "replicates": 16}
+    ref = _study_rows(study, section, big | ({"chunk": 8192} if study == "plas" else {}), keys,
+                      1)[0]  # fmt: skip
+    ratios, zs = [], []
+    for sampler, R in (("rqmc", 8), ("uniform", 1)):
+        rows = _study_rows(study, section, {"n_samples": n, "sampler": sampler,
+                                            "replicates": R}, keys, 12)  # fmt: skip
+        for k in keys:
+            v = np.array([r[k][0] for r in rows])
+            se = np.array([r[k][1] for r in rows])
+            assert ref[k][1] < 0.2 * se.mean(), (k, ref[k], se.mean())
+            ratios.append(np.sqrt(np.mean(se**2)) / np.std(v - ref[k][0]))
+            zs.append((v - ref[k][0]) / se)
+            assert abs(v.mean() - ref[k][0]) < 4 * np.sqrt(np.mean(se**2) / len(v) + ref[k][1] ** 2)
+    pooled = np.exp(np.mean(np.log(ratios)))
+    assert 1 / 1.5 < pooled < 1.5, ratios
+    assert 0.7 < np.sqrt(np.mean(np.concatenate(zs) ** 2)) < 1.4
