@@ -81,6 +81,16 @@ def penalty_coefficient(rho: Array, a: Array, rho_c: Array) -> Array:
     return (a ** (rho - rho_c) - a ** (-rho_c)) / (1.0 - a ** (-rho_c))
 
 
+def row_sum(e: Array) -> Array:
+    """Σ over the last axis of a 2-D array, as XLA's own loop reduction fused with its
+    producer. A two-operand reduce (the second carries nothing) is not handed to the CPU
+    backend's YNNPACK reduction, which materialised the broadcast global best as a full
+    (M, D) array before summing (PTPSO's distances cost ~10 % of a step that way)."""
+    zero = jnp.zeros((), e.dtype)
+    total, _ = jax.lax.reduce((e, e), (zero, zero), lambda a, b: (a[0] + b[0], a[1]), (1,))
+    return total
+
+
 # name: (preset over Params defaults, source)
 VARIANTS: dict[str, tuple[dict[str, float], str]] = {
     "p1": (dict(w=0.7, c1=1.5, c2=1.5, rule=0), "basic PSO, seed 000 eq. (44)-(45)"),
@@ -188,7 +198,7 @@ class PSO(Optimizer):
 
         # PTPSO penalty, eq. (46)-(49)
         def kick():
-            d = jnp.sqrt(jnp.sum((s.x - s.gbest_x) ** 2, axis=1))
+            d = jnp.sqrt(row_sum((s.x - s.gbest_x) ** 2))
             dmax = jnp.sqrt(jnp.sum((upper - lower) ** 2))
             rho = jnp.mean((d < p.gamma * dmax).astype(dt))
             pc = penalty_coefficient(rho, p.a, p.rho_c)
