@@ -136,7 +136,12 @@ def workspace_samples(s: DavinciSettings, params, x: jnp.ndarray, dtype: Any):
     """Joint samples (n, 6) over the surgical cone for design x and whether their
     (q1, q2) lie within the joint ranges."""
     ind = s.indices
-    u = mc.unit_samples(params["sample_key"], 0, ind.n_samples, 6, ind.sampler, dtype)
+    pl = sample_plan(s)
+    if pl.replicates == 1:
+        u = mc.unit_samples(params["sample_key"], 0, ind.n_samples, 6, ind.sampler, dtype)
+    else:  # R shifted Halton sets, replicate after replicate
+        pts = jax.vmap(lambda k: mc.chunk_points(params["sample_key"], k, pl, 6, dtype))
+        u = pts(jnp.arange(pl.n_chunks)).reshape(pl.n_used, 6)
     sdir = cone_dirs(params["basis"], params["cos_cone"], u[:, 0], u[:, 1])
     q12 = shaft_joints(x, sdir)
     q3 = params["depth"][0] + (params["depth"][1] - params["depth"][0]) * u[:, 2]
@@ -144,6 +149,12 @@ def workspace_samples(s: DavinciSettings, params, x: jnp.ndarray, dtype: Any):
     q = jnp.concatenate([q12, q3[:, None], wl + (wh - wl) * u[:, 3:]], -1)
     inside = jnp.all((q12 >= params["q_lower"][:2]) & (q12 <= params["q_upper"][:2]), -1)
     return q, inside
+
+
+def sample_plan(s: DavinciSettings) -> mc.Plan:
+    """The GCI samples: one stream, or ``replicates`` RQMC sets of ⌈n/R⌉ (one chunk each)."""
+    ind = s.indices
+    return mc.plan(ind.n_samples, ind.n_samples, ind.sampler, ind.replicates)
 
 
 def inv_k(s: DavinciSettings, x: jnp.ndarray, q: jnp.ndarray) -> jnp.ndarray:
@@ -158,7 +169,10 @@ def dexterity(s: DavinciSettings, params, x: jnp.ndarray, dtype: Any):
     """(gci, se, coverage, se) of one design x (4,) (kernel units)."""
     q, inside = workspace_samples(s, params, x, dtype)
     g = jnp.where(inside, inv_k(s, x, q), 0.0)
-    est = mc.mean(mc.power_sums(jnp.ones_like(g), g))
+    pl = sample_plan(s)
+    if pl.replicates > 1:
+        g = g.reshape(pl.replicates, pl.n_rep)
+    est = mc.finish(mc.mean(mc.power_sums(jnp.ones_like(g), g)), pl)
     cov, cov_se = _rate(inside.astype(dtype))
     return est.value, est.se, cov, cov_se
 
@@ -185,7 +199,8 @@ def build_fn(s: DavinciSettings, dtype: Any):
         gci, gci_se, cov, cov_se = jax.vmap(lambda x: dexterity(s, params, x, dtype))(full)
         iks, iks_se, rch, rch_se = jax.vmap(lambda x: solvability(params, x))(full)
         f = -(w.gci * gci + w.ik_success * iks)
-        f_se = w.gci * gci_se + w.ik_success * iks_se
+        # the GCI and the IK rate use independent samples: their errors add in quadrature
+        f_se = jnp.sqrt((w.gci * gci_se) ** 2 + (w.ik_success * iks_se) ** 2)
         out = {"gci": gci, "gci_se": gci_se, "coverage": cov, "coverage_se": cov_se,
                "ik_success": iks, "ik_success_se": iks_se, "reach": rch, "reach_se": rch_se,
                "f_se": f_se}  # fmt: skip
@@ -222,7 +237,9 @@ def problem(s: DavinciSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Pr
     upper = np.array([s.variables[k][1] for k in names], np.float64)
     info = {
         "study": "davinci",
-        "n_samples_used": s.indices.n_samples,
+        "n_samples_used": sample_plan(s).n_used,
+        "sampler": s.indices.sampler,
+        "replicates": sample_plan(s).replicates,
         "n_ik": s.indices.n_ik,
         "fixed": s.design(),
         "length_mm": s.indices.length_mm,

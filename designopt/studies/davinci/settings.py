@@ -67,8 +67,18 @@ class Indices(Section):
     n_samples: int = Field(4096, gt=1)  # joint samples for the GCI (shared by the swarm)
     n_ik: int = Field(512, gt=1)  # task poses for the IK success rate
     length_mm: float = Field(100.0, gt=0)  # characteristic length of the 6×6 Jacobian
-    sampler: Literal["uniform", "halton"] = "uniform"
+    sampler: Literal["uniform", "halton", "rqmc"] = "uniform"
+    replicates: int | None = Field(None, ge=1)  # rqmc: 16 unless given (docs/indices.md)
     solver: Literal["lm", "closed_form"] = "lm"  # which IK the success rate measures
+
+    @field_validator("replicates")
+    @classmethod
+    def _replicates(cls, v: int | None, info) -> int | None:
+        if v is not None and info.data.get("sampler") == "rqmc" and v < 2:
+            raise ValueError(f"must be at least 2 for sampler 'rqmc', got {v}")
+        if v is not None and info.data.get("sampler") == "halton" and v != 1:
+            raise ValueError("replicated Halton points are sampler 'rqmc'; 'halton' takes 1")
+        return v
 
 
 class Objective(Section):
