@@ -53,17 +53,23 @@ def _compiled(f) -> tuple[Callable[[int], float], float]:
 
 
 def interleaved(
-    fns: dict[str, Callable[[int], float]], repeat: int, last: dict[str, float] | None = None
+    fns: dict[str, Callable[[int], float]],
+    repeat: int,
+    last: dict[str, float] | None = None,
+    cpu: dict[str, list[float]] | None = None,
 ) -> dict[str, list[float]]:
     """Time every callable ``repeat`` times, interleaved (A B C A B C …) so that all of them
-    see the same machine load; returns the run times per name (compiling calls excluded) and
-    puts each callable's last value in ``last``."""
+    see the same machine load; returns the wall times per name (compiling calls excluded),
+    puts each callable's last value in ``last`` and its process CPU times (all threads) in
+    ``cpu`` — less sensitive than wall time to other jobs on a shared machine."""
     ts: dict[str, list[float]] = {k: [] for k in fns}
     for i in range(repeat):
         for k, f in fns.items():
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             y = f(i + 1)
             ts[k].append(time.perf_counter() - t0)
+            if cpu is not None:
+                cpu.setdefault(k, []).append(time.process_time() - c0)
             if last is not None:
                 last[k] = y
     return ts
@@ -230,7 +236,8 @@ def main() -> None:
     if evo is not None:
         rows["evosax PSO"] = _compiled(evo)
     fm: dict[str, float] = {}  # mean best f of the last repeat
-    ts = interleaved({k: f for k, (f, _) in rows.items()}, a.repeat, fm)
+    cpu: dict[str, list[float]] = {}
+    ts = interleaved({k: f for k, (f, _) in rows.items()}, a.repeat, fm, cpu)
     comp = {k: max(c - min(ts[k]), 0.0) for k, (_, c) in rows.items()}
     for k in rows:
         _row(k, ts[k], a.runs, comp[k], fm[k])
@@ -240,6 +247,11 @@ def main() -> None:
     if evo is not None:
         ratio = _ratios("ptpso/evosax per repeat", ts[ptpso], ts["evosax PSO"])
         _ratios("p2/evosax per repeat", ts["designopt p2 (defaults)"], ts["evosax PSO"])
+        for k in rows:
+            c = cpu[k]
+            print(f"  CPU time (all threads) {k:<34} {statistics.median(c):5.2f} s "
+                  f"[{min(c):.2f}–{max(c):.2f}]")  # fmt: skip
+        _ratios("ptpso/evosax in CPU time", cpu[ptpso], cpu["evosax PSO"])
     py = pyswarms_pso(a.pyswarms_runs, a.iters)
     if py is not None:
         t, fmp = py
