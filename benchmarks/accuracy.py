@@ -24,7 +24,7 @@ jax.config.update("jax_enable_x64", True)
 
 from designopt.studies import STUDIES, streams  # noqa: E402
 
-TARGET = {"master9": ("gci", 1e-4), "rcm": ("eta", 1e-5), "plas": ("vel_reduction", 2e-5)}
+TARGET = {"master9": ("gci", 1e-4), "rcm": ("eta", 1e-4), "plas": ("vel_reduction", 2e-5)}
 
 
 def evaluator(study: str, sampler: str, n: int):

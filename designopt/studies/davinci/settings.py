@@ -68,7 +68,7 @@ class Indices(Section):
     n_ik: int = Field(512, gt=1)  # task poses for the IK success rate
     length_mm: float = Field(100.0, gt=0)  # characteristic length of the 6×6 Jacobian
     sampler: Literal["uniform", "halton", "rqmc"] = "uniform"
-    replicates: int | None = Field(None, ge=1)  # rqmc: 16 unless given (docs/indices.md)
+    replicates: int | None = Field(None, ge=1, le=1024)  # rqmc: 16 unless given (docs/indices.md)
     solver: Literal["lm", "closed_form"] = "lm"  # which IK the success rate measures
 
     @field_validator("replicates")
@@ -78,6 +78,9 @@ class Indices(Section):
             raise ValueError(f"must be at least 2 for sampler 'rqmc', got {v}")
         if v is not None and info.data.get("sampler") == "halton" and v != 1:
             raise ValueError("replicated Halton points are sampler 'rqmc'; 'halton' takes 1")
+        n = info.data.get("n_samples")
+        if v is not None and v > 1 and n is not None and n < 2 * v:
+            raise ValueError(f"{v} replicates need n_samples ≥ {2 * v}, got {n}")
         return v
 
 

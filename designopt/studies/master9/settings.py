@@ -12,7 +12,9 @@ DESIGN_KEYS: tuple[str, ...] = ("a1", "a3", "d3", "a4", "a5", "d2", "d5", "d6")
 """The master's lengths (mm); mirrors ``mechanism.DESIGN_KEYS`` (kept import-light)."""
 
 
-def check_replicates(sampler: str, replicates: int | None) -> int | None:
+def check_replicates(
+    sampler: str, replicates: int | None, n_samples: int | None = None
+) -> int | None:
     """``replicates`` against the sampler (mirrors ``montecarlo.check_sampling``, kept
     import-light): ``rqmc`` needs at least 2, ``halton`` only 1."""
     if replicates is None:
@@ -21,6 +23,10 @@ def check_replicates(sampler: str, replicates: int | None) -> int | None:
         raise ValueError(f"must be at least 2 for sampler 'rqmc', got {replicates}")
     if sampler == "halton" and replicates != 1:
         raise ValueError("replicated Halton points are sampler 'rqmc'; 'halton' takes 1")
+    if n_samples is not None and replicates > 1 and n_samples < 2 * replicates:
+        raise ValueError(
+            f"{replicates} replicates need n_samples ≥ {2 * replicates}, got {n_samples}"
+        )
     return replicates
 
 
@@ -35,7 +41,7 @@ class Indices(BaseModel):
     # rqmc in configs/master9.yaml; uniform here keeps tiny runs (short replicates) bitwise
     # equal under particle sharding (docs/indices.md)
     sampler: Literal["uniform", "halton", "rqmc"] = "uniform"
-    replicates: int | None = Field(None, ge=1)  # rqmc: 16 by default (docs/indices.md)
+    replicates: int | None = Field(None, ge=1, le=1024)  # rqmc: 16 by default (docs/indices.md)
     backlash_deg: float | list[float] = 0.1
     norm: Literal["fro", "2"] = "fro"
     normalized: bool = False
@@ -44,7 +50,7 @@ class Indices(BaseModel):
     @field_validator("replicates")
     @classmethod
     def _replicates(cls, v: int | None, info) -> int | None:
-        return check_replicates(info.data.get("sampler", "uniform"), v)
+        return check_replicates(info.data.get("sampler", "uniform"), v, info.data.get("n_samples"))
 
     @field_validator("backlash_deg", "weights")
     @classmethod

@@ -59,7 +59,7 @@ class Mismatch(Section):
     n_samples: int = Field(4096, gt=1)
     chunk: int = Field(4096, gt=0)
     sampler: Literal["uniform", "halton", "rqmc"] = "uniform"
-    replicates: int | None = Field(None, ge=1)  # rqmc: 16 unless given (docs/indices.md)
+    replicates: int | None = Field(None, ge=1, le=1024)  # rqmc: 16 unless given (docs/indices.md)
     n_path: int = Field(8, ge=1, le=64)  # midpoint rule along the home → θ path
     joint_rate_deg_s: float = Field(30.0, gt=0)  # norm of the master's joint-rate vector
 
@@ -70,6 +70,9 @@ class Mismatch(Section):
             raise ValueError(f"must be at least 2 for sampler 'rqmc', got {v}")
         if v is not None and info.data.get("sampler") == "halton" and v != 1:
             raise ValueError("replicated Halton points are sampler 'rqmc'; 'halton' takes 1")
+        n = info.data.get("n_samples")
+        if v is not None and v > 1 and n is not None and n < 2 * v:
+            raise ValueError(f"{v} replicates need n_samples ≥ {2 * v}, got {n}")
         return v
 
     def plan(self):

@@ -68,7 +68,7 @@ class Eta(Section):
     measure: Literal["cartesian", "joint"] = "cartesian"
     n_samples: int = Field(65_536, ge=2)
     sampler: Literal["uniform", "halton", "rqmc"] = "uniform"
-    replicates: int | None = Field(None, ge=1)  # rqmc: 16 unless given (docs/indices.md)
+    replicates: int | None = Field(None, ge=1, le=1024)  # rqmc: 16 unless given (docs/indices.md)
 
     @field_validator("replicates")
     @classmethod
@@ -77,6 +77,9 @@ class Eta(Section):
             raise ValueError(f"must be at least 2 for sampler 'rqmc', got {v}")
         if v is not None and info.data.get("sampler") == "halton" and v != 1:
             raise ValueError("replicated Halton points are sampler 'rqmc'; 'halton' takes 1")
+        n = info.data.get("n_samples")
+        if v is not None and v > 1 and n is not None and n < 2 * v:
+            raise ValueError(f"{v} replicates need n_samples ≥ {2 * v}, got {n}")
         return v
 
 
