@@ -117,13 +117,15 @@ def mutants(draw) -> bytes:
                 parent = cfg
                 for k in path[:-1]:
                     parent = parent[k]
-            parent[path[-1]] = draw(HOSTILE)
+            parent[path[-1]] = copy.deepcopy(draw(HOSTILE))
         elif action == "delete":
             del parent[path[-1]]
         elif action == "value":
-            parent[path[-1]] = draw(VALUE)
+            parent[path[-1]] = copy.deepcopy(draw(VALUE))
         elif isinstance(parent, dict):
-            parent[draw(st.sampled_from(["bogus", "Name", "n_samples", "seed"]))] = draw(VALUE)
+            parent[draw(st.sampled_from(["bogus", "Name", "n_samples", "seed"]))] = copy.deepcopy(
+                draw(VALUE)
+            )
     text = yaml.safe_dump(cfg, allow_unicode=True, sort_keys=False)
     if draw(st.integers(0, 9)) == 0:  # a few raw bytes inside a valid file
         i = draw(st.integers(0, len(text)))

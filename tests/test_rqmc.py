@@ -153,13 +153,14 @@ def test_master9_rqmc_se_is_honest_and_smaller_than_uniform():
 
 
 def _study_rows(study: str, section: str, upd: dict, keys: tuple[str, ...], n_seeds: int):
-    """Main indices of the config's design-box centre for ``n_seeds`` sample keys."""
+    """Main indices of the config's design-box centre for ``n_seeds`` sample keys
+    (``study``: a config name under configs/, e.g. ``rcm`` or ``puma560``)."""
     import yaml
 
     from designopt.studies import STUDIES, streams
 
-    st = STUDIES[study]
     raw = yaml.safe_load(open(f"configs/{study}.yaml"))["study"]
+    st = STUDIES[raw["name"]]
     s = st.settings.model_validate({**raw, section: {**raw[section], **upd}})
     pr = st.problem(s, streams(0), jnp.float64)
     X = jnp.asarray([(np.asarray(pr.lower) + np.asarray(pr.upper)) / 2], jnp.float64)
@@ -177,6 +178,7 @@ def _study_rows(study: str, section: str, upd: dict, keys: tuple[str, ...], n_se
     [
         ("rcm", "eta", ("eta", "eta_box"), 4096, 1 << 19),
         ("plas", "mismatch", ("vel_rel", "vel_reduction", "pos_mean"), 1024, 1 << 16),
+        ("planar2r", "indices", ("gci", "manipulability"), 1024, 1 << 18),  # serial
     ],
 )
 def test_study_se_is_honest_for_rqmc_and_uniform(study, section, keys, n, ref_n):

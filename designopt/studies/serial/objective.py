@@ -6,9 +6,11 @@ Over the joint box Q (samples shared by the whole swarm, streamed in chunks):
 - ``manipulability``: mean of sqrt(det J Jᵀ) (sqrt(det JᵀJ) when rows > joints);
 - ``volume``: ∫_Q sqrt(det Jv Jvᵀ) dq = ∫_Q |det Jv| dq, for a square position Jacobian.
 Means use the joint measure (w = 1) or the Cartesian one (w = |det J|, square J).
-Each comes with its delta-method standard error (``designopt.montecarlo``). The objective
-is f = Σ w_i index_i (or of the indices normalised over a Halton sample of the design box,
-as in study A); ``f_se`` is the bound Σ |w_i| se_i (the estimates share samples).
+Each comes with its delta-method standard error (``designopt.montecarlo``), or, with the
+``rqmc`` sampler, the spread of R independently shifted replicates (docs/indices.md). The
+objective is f = Σ w_i index_i (or of the indices normalised over a Halton sample of the
+design box, as in study A); ``f_se`` is the bound Σ |w_i| se_i (the estimates share
+samples), or under rqmc the replicate spread of f itself.
 """
 
 from __future__ import annotations
@@ -103,7 +105,7 @@ def build_fn(mech: Mechanism, s: SerialSettings, dtype: Any, mesh: Any = None):
     lo = np.asarray(mech.lower)
     hi = np.asarray(mech.upper)
     qvol = float(np.prod(hi - lo))
-    n_chunks, chunk = mc.chunking(ind.n_samples, ind.chunk)
+    pl = mc.plan(ind.n_samples, ind.chunk, ind.sampler, ind.replicates)
 
     def indices(params, X):
         X = X.astype(dtype)
@@ -113,13 +115,12 @@ def build_fn(mech: Mechanism, s: SerialSettings, dtype: Any, mesh: Any = None):
         lo_, hi_ = params["q_lower"].astype(dtype), params["q_upper"].astype(dtype)
 
         def sums(k):
-            u = mc.unit_samples(params["sample_key"], k * chunk, chunk, mech.n, ind.sampler, dtype)
+            u = mc.chunk_points(params["sample_key"], k, pl, mech.n, dtype)
             q = lo_ + (hi_ - lo_) * u
-            return chunk_sums(mech, s, full, q)
+            return mc.to_replicate(chunk_sums(mech, s, full, q), k, pl)
 
-        z = jnp.zeros((M, 5), dtype)
-        init = tuple(mc.PowerSums(z, z, jnp.asarray(0.0, dtype)) for _ in range(3))
-        ps_k, ps_m, ps_v = mc.scan_chunks(sums, init, n_chunks, mesh)
+        init = tuple(mc.zero_sums((M,), pl, dtype) for _ in range(3))
+        ps_k, ps_m, ps_v = mc.scan_chunks(sums, init, pl.n_chunks, mesh)
         out = {}
         for k, est in (("gci", mc.mean(ps_k)), ("gcsei", mc.std(ps_k)),
                        ("manipulability", mc.mean(ps_m)), ("volume", mc.box_integral(ps_v, qvol))):  # fmt: skip
@@ -128,14 +129,20 @@ def build_fn(mech: Mechanism, s: SerialSettings, dtype: Any, mesh: Any = None):
         return out
 
     def fn(params, X, key):
-        out = indices(params, X)
+        rep = indices(params, X)  # per replicate (last axis) under rqmc
+        out = {}
+        for k in rep:
+            if not k.endswith("_se"):
+                out[k], out[k + "_se"] = mc.combine(rep[k], rep[k + "_se"], pl)
         b = params["bounds"]  # (len(weights), 2): min, max per weighted index
         f = 0.0
         f_se = 0.0
         for i, (k, w) in enumerate(weights.items()):
             span = b[i, 1] - b[i, 0]
-            f = f + w * (out[k] - b[i, 0]) / span
+            f = f + w * (rep[k] - b[i, 0]) / span
             f_se = f_se + abs(w) * out[k + "_se"] / jnp.abs(span)
+        if pl.replicates > 1:  # f per replicate: its SE from the replicates' spread
+            f, f_se = mc.combine(f, None, pl)
         return f, out | {"f_se": f_se}
 
     return fn
@@ -169,8 +176,8 @@ def problem(s: SerialSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Pro
         b[:, 1] = np.where(b[:, 1] > b[:, 0], b[:, 1], b[:, 0] + 1.0)  # flat index: no scaling
         params["bounds"] = jnp.asarray(b, dtype)
         norm_bounds = {k: b[i].tolist() for i, k in enumerate(weights)}
-    n_chunks, chunk = mc.chunking(s.indices.n_samples, s.indices.chunk)
-    n_used = n_chunks * chunk
+    ind = s.indices
+    n_used = mc.plan(ind.n_samples, ind.chunk, ind.sampler, ind.replicates).n_used
     info = {
         "study": "serial",
         "n_samples_used": n_used,

@@ -165,10 +165,23 @@ class SerialIndices(Section):
     norm: Literal["2", "fro"] = "2"
     normalized: bool = False  # fro only: report k_F/m (m = min(rows, joints)) so that k >= 1
     measure: Literal["joint", "cartesian"] = "joint"
-    sampler: Literal["uniform", "halton"] = "uniform"
+    sampler: Literal["uniform", "halton", "rqmc"] = "uniform"
     n_samples: int = Field(20_000, gt=1)
     chunk: int = Field(16_384, gt=0)
     length_scale: float = Field(1.0, gt=0)  # multiplies the angular rows (full Jacobian)
+    replicates: int | None = Field(None, ge=1, le=1024)  # rqmc: 16 unless given (docs/indices.md)
+
+    @field_validator("replicates")
+    @classmethod
+    def _replicates(cls, v: int | None, info: ValidationInfo) -> int | None:
+        if v is not None and info.data.get("sampler") == "rqmc" and v < 2:
+            raise ValueError(f"must be at least 2 for sampler 'rqmc', got {v}")
+        if v is not None and info.data.get("sampler") == "halton" and v != 1:
+            raise ValueError("replicated Halton points are sampler 'rqmc'; 'halton' takes 1")
+        n = info.data.get("n_samples")
+        if v is not None and v > 1 and n is not None and n < 2 * v:
+            raise ValueError(f"{v} replicates need n_samples ≥ {2 * v}, got {n}")
+        return v
 
     @field_validator("jacobian")
     @classmethod
