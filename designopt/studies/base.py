@@ -76,6 +76,22 @@ def known_lengths(v: Mapping[str, Any], known: tuple[str, ...], lengths: tuple[s
     return v
 
 
+def check_replicates(v: int | None, info: Any) -> int | None:
+    """The shared validator of a sampling section's ``replicates`` (its ``sampler`` and
+    ``n_samples`` fields come first): ``rqmc`` needs at least 2, ``halton`` takes only 1,
+    and every replicate at least 2 samples (docs/indices.md)."""
+    sampler, n = info.data.get("sampler", "uniform"), info.data.get("n_samples")
+    if v is None:
+        return None
+    if sampler == "rqmc" and v < 2:
+        raise ValueError(f"must be at least 2 for sampler 'rqmc', got {v}")
+    if sampler == "halton" and v != 1:
+        raise ValueError("replicated Halton points are sampler 'rqmc'; 'halton' takes 1")
+    if n is not None and v > 1 and n < 2 * v:
+        raise ValueError(f"{v} replicates need n_samples ≥ {2 * v}, got {n}")
+    return v
+
+
 def streams(seed: int) -> dict[str, jax.Array]:
     """One root key ``key(seed)`` split once into the named streams of :data:`STREAMS`."""
     keys = jax.random.split(jax.random.key(seed), len(STREAMS))

@@ -12,7 +12,7 @@ from typing import Literal
 
 from pydantic import Field, field_validator, model_validator
 
-from designopt.studies.base import Section, StudySettings, known_lengths, lo_hi
+from designopt.studies.base import Section, StudySettings, check_replicates, known_lengths, lo_hi
 
 KEYS: tuple[str, ...] = ("alpha_deg", "beta_deg", "l_QH", "l_IJ")
 TABLE1: dict[str, float] = {"alpha_deg": 20.0, "beta_deg": 30.45, "l_QH": 784.29, "l_IJ": 10.0}
@@ -71,17 +71,7 @@ class Indices(Section):
     replicates: int | None = Field(None, ge=1, le=1024)  # rqmc: 16 unless given (docs/indices.md)
     solver: Literal["lm", "closed_form"] = "lm"  # which IK the success rate measures
 
-    @field_validator("replicates")
-    @classmethod
-    def _replicates(cls, v: int | None, info) -> int | None:
-        if v is not None and info.data.get("sampler") == "rqmc" and v < 2:
-            raise ValueError(f"must be at least 2 for sampler 'rqmc', got {v}")
-        if v is not None and info.data.get("sampler") == "halton" and v != 1:
-            raise ValueError("replicated Halton points are sampler 'rqmc'; 'halton' takes 1")
-        n = info.data.get("n_samples")
-        if v is not None and v > 1 and n is not None and n < 2 * v:
-            raise ValueError(f"{v} replicates need n_samples ≥ {2 * v}, got {n}")
-        return v
+    _replicates = field_validator("replicates")(check_replicates)
 
 
 class Objective(Section):

@@ -6,28 +6,10 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from designopt.studies.base import StudySettings
+from designopt.studies.base import StudySettings, check_replicates
 
 DESIGN_KEYS: tuple[str, ...] = ("a1", "a3", "d3", "a4", "a5", "d2", "d5", "d6")
 """The master's lengths (mm); mirrors ``mechanism.DESIGN_KEYS`` (kept import-light)."""
-
-
-def check_replicates(
-    sampler: str, replicates: int | None, n_samples: int | None = None
-) -> int | None:
-    """``replicates`` against the sampler (mirrors ``montecarlo.check_sampling``, kept
-    import-light): ``rqmc`` needs at least 2, ``halton`` only 1."""
-    if replicates is None:
-        return None
-    if sampler == "rqmc" and replicates < 2:
-        raise ValueError(f"must be at least 2 for sampler 'rqmc', got {replicates}")
-    if sampler == "halton" and replicates != 1:
-        raise ValueError("replicated Halton points are sampler 'rqmc'; 'halton' takes 1")
-    if n_samples is not None and replicates > 1 and n_samples < 2 * replicates:
-        raise ValueError(
-            f"{replicates} replicates need n_samples ≥ {2 * replicates}, got {n_samples}"
-        )
-    return replicates
 
 
 class Indices(BaseModel):
@@ -47,10 +29,7 @@ class Indices(BaseModel):
     normalized: bool = False
     weights: list[float] = [4.0, 2.0, 1.0]
 
-    @field_validator("replicates")
-    @classmethod
-    def _replicates(cls, v: int | None, info) -> int | None:
-        return check_replicates(info.data.get("sampler", "uniform"), v, info.data.get("n_samples"))
+    _replicates = field_validator("replicates")(check_replicates)
 
     @field_validator("backlash_deg", "weights")
     @classmethod

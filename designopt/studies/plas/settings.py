@@ -11,7 +11,7 @@ from typing import Literal
 
 from pydantic import Field, field_validator, model_validator
 
-from designopt.studies.base import Section, StudySettings, lo_hi
+from designopt.studies.base import Section, StudySettings, check_replicates, lo_hi
 
 MASTER_KEYS: tuple[str, ...] = ("a2p", "a3p", "d6")
 """Mirrors ``mechanism.MASTER_KEYS`` (kept import-light): a2', a3' (offset between the
@@ -63,17 +63,7 @@ class Mismatch(Section):
     n_path: int = Field(8, ge=1, le=64)  # midpoint rule along the home → θ path
     joint_rate_deg_s: float = Field(30.0, gt=0)  # norm of the master's joint-rate vector
 
-    @field_validator("replicates")
-    @classmethod
-    def _replicates(cls, v: int | None, info) -> int | None:
-        if v is not None and info.data.get("sampler") == "rqmc" and v < 2:
-            raise ValueError(f"must be at least 2 for sampler 'rqmc', got {v}")
-        if v is not None and info.data.get("sampler") == "halton" and v != 1:
-            raise ValueError("replicated Halton points are sampler 'rqmc'; 'halton' takes 1")
-        n = info.data.get("n_samples")
-        if v is not None and v > 1 and n is not None and n < 2 * v:
-            raise ValueError(f"{v} replicates need n_samples ≥ {2 * v}, got {n}")
-        return v
+    _replicates = field_validator("replicates")(check_replicates)
 
     def plan(self):
         """The sample layout (``designopt.montecarlo.Plan``; one stream unless rqmc or

@@ -7,7 +7,7 @@ from typing import Literal
 
 from pydantic import Field, field_validator, model_validator
 
-from designopt.studies.base import Section, StudySettings, known_lengths, lo_hi
+from designopt.studies.base import Section, StudySettings, check_replicates, known_lengths, lo_hi
 
 DESIGN_KEYS = ("a", "c")
 """What the design can vary; b only moves R and changes neither η nor reach (eq. 17-18)."""
@@ -70,17 +70,7 @@ class Eta(Section):
     sampler: Literal["uniform", "halton", "rqmc"] = "uniform"
     replicates: int | None = Field(None, ge=1, le=1024)  # rqmc: 16 unless given (docs/indices.md)
 
-    @field_validator("replicates")
-    @classmethod
-    def _replicates(cls, v: int | None, info) -> int | None:
-        if v is not None and info.data.get("sampler") == "rqmc" and v < 2:
-            raise ValueError(f"must be at least 2 for sampler 'rqmc', got {v}")
-        if v is not None and info.data.get("sampler") == "halton" and v != 1:
-            raise ValueError("replicated Halton points are sampler 'rqmc'; 'halton' takes 1")
-        n = info.data.get("n_samples")
-        if v is not None and v > 1 and n is not None and n < 2 * v:
-            raise ValueError(f"{v} replicates need n_samples ≥ {2 * v}, got {n}")
-        return v
+    _replicates = field_validator("replicates")(check_replicates)
 
 
 class Constraints(Section):

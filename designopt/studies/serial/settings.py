@@ -23,7 +23,7 @@ from pydantic import (
 )
 
 from designopt.errors import ConfigError
-from designopt.studies.base import Section, StudySettings
+from designopt.studies.base import Section, StudySettings, check_replicates
 
 ROWS = ("vx", "vy", "vz", "wx", "wy", "wz")
 INDEX_NAMES = ("gci", "gcsei", "manipulability", "volume")
@@ -171,17 +171,7 @@ class SerialIndices(Section):
     length_scale: float = Field(1.0, gt=0)  # multiplies the angular rows (full Jacobian)
     replicates: int | None = Field(None, ge=1, le=1024)  # rqmc: 16 unless given (docs/indices.md)
 
-    @field_validator("replicates")
-    @classmethod
-    def _replicates(cls, v: int | None, info: ValidationInfo) -> int | None:
-        if v is not None and info.data.get("sampler") == "rqmc" and v < 2:
-            raise ValueError(f"must be at least 2 for sampler 'rqmc', got {v}")
-        if v is not None and info.data.get("sampler") == "halton" and v != 1:
-            raise ValueError("replicated Halton points are sampler 'rqmc'; 'halton' takes 1")
-        n = info.data.get("n_samples")
-        if v is not None and v > 1 and n is not None and n < 2 * v:
-            raise ValueError(f"{v} replicates need n_samples ≥ {2 * v}, got {n}")
-        return v
+    _replicates = field_validator("replicates")(check_replicates)
 
     @field_validator("jacobian")
     @classmethod
