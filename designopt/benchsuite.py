@@ -24,6 +24,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from designopt import optim, stats
+from designopt.finite import SEED_MAX
 from designopt.problems.benchmarks import benchmark
 from designopt.timing import Stopwatch
 
@@ -50,7 +51,7 @@ class Bench(_Strict):
     functions: list[Literal[BENCH_FUNCTIONS]] = ["griewank", "rastrigin", "ackley", "sphere"]  # type: ignore[valid-type]
     dim: int = Field(30, ge=1)
     shifted: bool = True  # also run every function with a seeded shift of its optimum
-    shift_seed: int = 1
+    shift_seed: int = Field(1, ge=0, le=SEED_MAX)
     variants: list[str | Entry] = ["p1", "p2", "p3", "p4", "p5", "p6", "p7", "cmaes"]
     reference: str = "p3"  # Mann-Whitney of every other entry against this label
     n_particles: int = Field(50, ge=2)  # population size of every entry (CMA-ES: λ)
@@ -66,7 +67,7 @@ class Bench(_Strict):
 class BenchConfig(_Strict):
     bench: Bench = Bench()
     precision: Literal["float32", "float64"] = "float32"
-    seed: int = 0
+    seed: int = Field(0, ge=0, le=SEED_MAX)
     output: str = "results/bench/pso_benchmark.h5"
 
 
@@ -193,10 +194,11 @@ def command(config_path: str, seed: int | None, out: str | None, quiet: bool,
     before anything runs or is written; an existing archive needs ``overwrite``."""
     from designopt import output
     from designopt.config import load
+    from designopt.finite import check_seed
 
     cfg, text = load(config_path, BenchConfig)
     if seed is not None:
-        cfg.seed = seed
+        cfg.seed = check_seed(seed, f"--seed {seed}")
     check(cfg, config_path)
     path = Path(out or cfg.output)
     with output.session():

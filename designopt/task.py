@@ -21,6 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 from pydantic import Discriminator, Field, Tag, ValidationInfo, field_validator, model_validator
 
+from designopt import finite
 from designopt.studies.base import Section
 
 Vec3 = tuple[float, float, float]
@@ -151,8 +152,9 @@ def read_points(path: Path) -> np.ndarray:
             v = [float(r[j]) for j in idx]
         except (ValueError, IndexError):
             raise ValueError(f"points file {path}: row {i}: needs three numbers x, y, z") from None
-        if not all(math.isfinite(x) and abs(x) <= 1e9 for x in v):
-            raise ValueError(f"points file {path}: row {i}: {v} is not finite")
+        bad = finite.first_bad(v)
+        if bad is not None:
+            raise ValueError(f"points file {path}: row {i}: {bad[1]}")
         out.append(v)
     if not out:
         raise ValueError(f"points file {path}: no points after the header")

@@ -293,3 +293,28 @@ def test_other_numeric_flags(tmp_path, capsys, flag, value, needle):
 def test_an_unused_fixed_value_is_an_error(tmp_path, capsys):
     p = cfg_file(tmp_path, PLANAR, lambda r: r["study"].update(fixed={"l3": 0.3}))
     one_line_exit_2(capsys, ["eval", str(p)], "fixed value(s) ['l3'] appear in no DH entry")
+
+
+def test_bench_seed_out_of_range(tmp_path, capsys):
+    """The benchmark suite's seeds take the same check as a study's (flag and config)."""
+    cfg = ROOT / "configs" / "pso_benchmark.yaml"
+    out = tmp_path / "b.h5"
+    one_line_exit_2(capsys, ["bench", str(cfg), "--seed", str(2**70), "--out", str(out)],
+                    f"--seed {2**70}", "4294967295")  # fmt: skip
+    p = tmp_path / "c.yaml"
+    p.write_text(cfg.read_text() + "\nseed: -1\n" if "seed:" not in cfg.read_text()
+                 else cfg.read_text().replace("seed: 0", "seed: -1"))  # fmt: skip
+    one_line_exit_2(capsys, ["bench", str(p), "--out", str(out)], "key 'seed': must be ≥ 0")
+    assert not out.exists()
+
+
+def test_task_points_refuse_non_finite_rows(tmp_path):
+    from designopt.task import read_points
+
+    p = tmp_path / "pts.csv"
+    p.write_text("x,y,z\n0,0,0\n1,nan,0\n")
+    with pytest.raises(ValueError, match="row 2: nan is not a finite number"):
+        read_points(p)
+    p.write_text("x,y,z\n0,0,1e300\n")
+    with pytest.raises(ValueError, match="row 1: 1e\\+300 is too large"):
+        read_points(p)

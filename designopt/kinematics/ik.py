@@ -72,10 +72,6 @@ class IKResult(NamedTuple):
     seed: jax.Array
 
 
-def _skew_cross(a: jax.Array, b: jax.Array) -> jax.Array:
-    return jnp.cross(a, b)
-
-
 def _rows(mode: Mode) -> tuple[int, ...]:
     return (0, 1, 2) if mode == "position" else (0, 1, 2, 3, 4, 5)
 
@@ -90,9 +86,9 @@ def residual(model: SerialModel, X: jax.Array, q: jax.Array, p_t: jax.Array,
     if mode == "position":
         return e_p, J_p, p, R
     if mode == "axis":
-        e_o = _skew_cross(R[..., :, 2], R_t[..., :, 2])
+        e_o = jnp.cross(R[..., :, 2], R_t[..., :, 2])
     else:
-        e_o = 0.5 * sum(_skew_cross(R[..., :, i], R_t[..., :, i]) for i in range(3))
+        e_o = 0.5 * sum(jnp.cross(R[..., :, i], R_t[..., :, i]) for i in range(3))
     return jnp.concatenate([e_p, e_o], -1), jnp.concatenate([J_p, J[..., 3:, :]], -2), p, R
 
 
