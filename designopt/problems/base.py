@@ -49,6 +49,11 @@ class Problem:
     info: dict[str, Any] = field(default_factory=dict)
     constraints: ConstraintFn | None = None  # G = constraints(params, X) (M, n_c), g ≤ 0
     shard_samples: Callable[[Any], Problem] | None = None  # mesh → the sample-sharded problem
+    n_samples_used: int = 0
+    """Monte-Carlo samples behind each index value (0: a closed-form problem)."""
+    norm_bounds: np.ndarray | None = None
+    """(k, 2) min/max of the normalised indices (the Halton probe), archived with the
+    run; the same numbers travel in ``params`` for the trace."""
 
     def __post_init__(self) -> None:
         lo, hi = np.asarray(self.lower, np.float64), np.asarray(self.upper, np.float64)

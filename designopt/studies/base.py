@@ -47,6 +47,43 @@ class StudySettings(BaseModel):
                 raise ValueError(f"{k}: lower bound {lo} is not below upper bound {hi}")
         return v
 
+    def box(self) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
+        """The design box: (names, lower (D,), upper (D,)) in the order of ``variables``."""
+        names = tuple(self.variables)
+        lo = np.array([self.variables[n][0] for n in names], np.float64)
+        hi = np.array([self.variables[n][1] for n in names], np.float64)
+        return names, lo, hi
+
+
+@dataclass(frozen=True)
+class Cost:
+    """What a study's settings cost per design evaluation, for the pre-flight estimate
+    (``Study.cost``): Monte-Carlo ``samples`` per design, ``chunk`` of them in flight at
+    once, ``n_norm`` designs scored once at set-up; the ``*_key`` fields name the config
+    keys a user lowers (printed in the estimate's messages)."""
+
+    samples: int = 1
+    chunk: int = 1
+    n_norm: int = 1
+    samples_key: str = "study.n_samples"
+    chunk_key: str = "study.n_samples"
+    norm_key: str | None = None
+
+
+@dataclass(frozen=True)
+class Command:
+    """An extra subcommand a study declares (``Study.commands``): the CLI builds its
+    subparser from the registry. ``arguments(parser)`` adds the arguments, ``run(args)``
+    returns the exit status; ``writes``: it writes files, so it runs under the output
+    session with signal handling like ``run``."""
+
+    name: str
+    help: str
+    arguments: Callable[[Any], None]
+    run: Callable[[Any], int]
+    description: str = ""
+    writes: bool = False
+
 
 class Section(BaseModel):
     """A nested section of a study's settings: unknown keys are errors."""
@@ -145,6 +182,11 @@ class Study:
     tiny: dict[str, Any] = field(default_factory=dict)
     """A small ``study:`` section (seconds to run), used by the contract tests."""
     meta: dict[str, Any] = field(default_factory=dict)
+    cost: Callable[[Any], Cost] = lambda s: Cost()
+    """``cost(settings)``: Monte-Carlo samples, chunk and normalisation probes per design,
+    for the pre-flight memory and time estimate (``designopt.preflight``)."""
+    commands: tuple[Command, ...] = ()
+    """Extra subcommands of this study (e.g. the da Vinci ``ik``)."""
     replay: (
         Callable[[Any, Mapping[str, jax.Array], Any, str], tuple[dict[str, Any], list[str]]] | None
     ) = None
