@@ -49,6 +49,8 @@ class Problem:
     info: dict[str, Any] = field(default_factory=dict)
     constraints: ConstraintFn | None = None  # G = constraints(params, X) (M, n_c), g ≤ 0
     shard_samples: Callable[[Any], Problem] | None = None  # mesh → the sample-sharded problem
+    n_objectives: int = 1
+    """m: f is (M,) when 1, (M, m) for a multi-objective problem (all minimised)."""
     n_samples_used: int = 0
     """Monte-Carlo samples behind each index value (0: a closed-form problem)."""
     norm_bounds: np.ndarray | None = None
