@@ -20,7 +20,7 @@ jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
-from designopt import archive, pipeline  # noqa: E402
+from designopt import archive, config, pipeline  # noqa: E402
 from designopt.studies.plas import figures as F  # noqa: E402
 from designopt.studies.plas import mechanism as m  # noqa: E402
 from designopt.studies.plas import paper as P  # noqa: E402
@@ -62,7 +62,7 @@ def readings() -> None:
 
 
 def compare(run: Path | None) -> None:
-    cfg, _ = pipeline.load("configs/plas.yaml")
+    cfg, _ = config.load("configs/plas.yaml")
     designs = [{"a2p": 138.0, "d6": 60.0}]
     if run is not None and run.exists():
         a = archive.read(run)
@@ -80,7 +80,7 @@ def compare(run: Path | None) -> None:
     raw = cfg.model_dump(by_alias=True)
     raw["study"]["variables"] = {"a2p": [80, 240], "a3p": [0, 60], "d6": [30, 120]}
     raw["study"]["fixed"] = {}
-    cfg3 = pipeline.validate(raw, "a3p")
+    cfg3 = config.validate(raw, "a3p")
     for d in ({"a2p": 100.0, "a3p": 30.0, "d6": 60.0}, {"a2p": 138.0, "a3p": 0.0, "d6": 60.0}):
         r = pipeline.evaluate(cfg3, d)
         print(f"  a3' free {d}: vel_rel = {r['vel_rel']:.3g} ± {r['vel_rel_se']:.1g}, "

@@ -1,7 +1,8 @@
 """HDF5 archives (schema: docs/archive.md), built in memory and written atomically by the one
 writer (``designopt.output``: a temporary file, fsync, rename).
 
-``write(path, tree, attrs)`` stores a nested dict: dict values become groups, everything
+``save(path, record)`` and ``load(path) -> Record`` store and read the typed records of
+``designopt.results``; underneath, ``write(path, tree, attrs)`` stores a nested dict: dict values become groups, everything
 else a dataset; a group's ``"attrs"`` entry becomes its HDF5 attributes (non-scalars as
 JSON). A run in progress writes checkpoints to ``partial_path(out)`` — a valid archive
 with ``complete = False`` — and removes it once the final archive is in place.
@@ -21,6 +22,7 @@ import jax
 import numpy as np
 
 from designopt import output
+from designopt.errors import ConfigError
 
 SCHEMA_VERSION = 1
 
@@ -106,3 +108,36 @@ def read(path: str | Path, group: str = "/") -> dict[str, Any]:
 
     with h5py.File(path, "r") as h:
         return get(h[group])
+
+
+def save(path: str | Path, record: Any, overwrite: bool = False, complete: bool = True) -> Path:
+    """Write a record (``designopt.results``) atomically through the one writer; the
+    output is claimed first if this command has not (``output.claim``: lock, free space,
+    an existing archive refused unless ``overwrite``). A disk fault is one WriteError
+    line (exit 1) and keeps what was there."""
+    path = Path(path)
+    ses = output.current()
+    if ses is None or not ses.covers(path):
+        output.claim(path, overwrite)
+    tree = record.to_tree()
+    attrs = tree.pop("attrs")
+    return write(path, tree, attrs, complete)
+
+
+def load(path: str | Path) -> Any:
+    """The record an archive holds (``designopt.results``: a run, scan, sweep, bench or
+    IK record; an interrupted run's checkpoint; a replay). ConfigError naming the file
+    when it is missing, not HDF5, or of an unknown kind."""
+    from designopt import results
+
+    p = Path(path)
+    if not p.is_file():
+        raise ConfigError(f"{p}: archive not found")
+    try:
+        tree = read(p)
+    except OSError as e:
+        raise ConfigError(f"{p}: not a readable HDF5 archive ({e})") from None
+    try:
+        return results.from_tree(tree)
+    except (ValueError, KeyError) as e:
+        raise ConfigError(f"{p}: not a designopt archive ({e})") from None

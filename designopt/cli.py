@@ -17,8 +17,9 @@ from pathlib import Path
 
 from designopt.errors import ConfigError, Interrupted, WriteError
 
-WRITERS = ("run", "sweep", "scan", "bench", "report", "ik", "export")
-"""Commands that write files: they run in the writer's session with signal handling."""
+WRITERS = ("run", "sweep", "scan", "bench", "report")
+"""Commands that write files: they run in the writer's session with signal handling (a
+study's own commands say so in ``Command.writes``)."""
 
 
 def _load(args: argparse.Namespace):
@@ -168,7 +169,7 @@ def _finish(rep, args: argparse.Namespace) -> int:
         if ses is not None:
             ses.kept = lambda: kept
         try:
-            figs = pipeline.draw_figures(rep.out)
+            figs = pipeline.draw_figures(rep.out, rep.record)
         except WriteError as e:
             raise WriteError(f"{e}; {kept}") from None
         print(f"figures: {len(figs) // 2} (PNG + PDF) in {figs[0].parent}")
@@ -248,7 +249,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
     cfg, _ = _load(args)
     design = _parse_design(args.design)
-    res = pipeline.evaluate(cfg, design, where=args.config)
+    res = {k: float(v[0]) for k, v in pipeline.evaluate(cfg, design, where=args.config).items()}
     feasible = None if "violation" not in res else bool(res["violation"] <= 0)
     if args.json:
         print(json.dumps(res | ({} if feasible is None else {"feasible": feasible})))
@@ -286,120 +287,47 @@ def cmd_bench(args: argparse.Namespace) -> int:
                               _parallel(args))  # fmt: skip
 
 
-def _readable(p: Path) -> None:
-    import h5py
-
-    if not p.is_file():
-        raise ConfigError(f"{p}: archive not found")
-    try:
-        with h5py.File(p, "r") as h:
-            if not h.attrs.get("complete", False):
-                raise ConfigError(f"{p}: archive is marked incomplete (an interrupted run); "
-                                  "resume it with `designopt run CONFIG --resume`")  # fmt: skip
-    except OSError as e:
-        raise ConfigError(f"{p}: not a readable HDF5 archive ({e})") from None
-
-
-def cmd_ik(args: argparse.Namespace) -> int:
-    from designopt.studies.davinci import ikcli
-
-    return ikcli.cmd_ik(args, _load(args))
-
-
-def cmd_chain(args: argparse.Namespace) -> int:
-    from designopt.studies.serial import commands
-
-    return commands.cmd_chain(args, _load(args))
-
-
-def cmd_export(args: argparse.Namespace) -> int:
-    from designopt.studies.serial import commands
-
-    return commands.cmd_export(args)
-
-
 def cmd_report(args: argparse.Namespace) -> int:
-    from designopt import pipeline
+    from designopt import archive, pipeline
+    from designopt.results import CheckpointRecord
 
     p = Path(args.archive)
-    _readable(p)
+    rec = archive.load(p)
+    if isinstance(rec, CheckpointRecord):
+        raise ConfigError(f"{p}: archive is marked incomplete (an interrupted run); "
+                          "resume it with `designopt run CONFIG --resume`")  # fmt: skip
     if not getattr(args, "no_cache", False):
         use_cache()  # the figure kernels compile once, then load
-    for f in pipeline.draw_figures(p):
+    for f in pipeline.draw_figures(p, rec):
         print(f)
     return 0
 
 
 def cmd_show(args: argparse.Namespace) -> int:
-    import h5py
-    import numpy as np
+    from designopt import archive
 
     p = Path(args.archive)
-    if not p.is_file():
-        raise ConfigError(f"{p}: archive not found")
-    try:
-        with h5py.File(p, "r") as h:
-            at = h.attrs
-            kind = at.get("kind", "run")
-            print(f"{p}: {kind}, study {at.get('study', '-')}, seed {at.get('seed')}, "
-                  f"complete {bool(at.get('complete'))}")  # fmt: skip
-            if not at.get("complete"):
-                c = h["checkpoint"]
-                print(f"interrupted after {c.attrs['done']} iterations; best so far "
-                      f"{np.min(c['history'][()][..., -1]):.5f}")  # fmt: skip
-                return 0
-            print(
-                f"wall time {at['wall_time_s']:.1f} s (compile {at.get('compile_time_s', 0):.1f} s)"
-            )
-            if kind == "run" and "problem" not in h:  # a replay (Study.replay)
-                for g in h.values():
-                    if "summary" in g.attrs:
-                        print(g.attrs["summary"])
-            elif kind == "run":
-                names = [n.decode() for n in h["problem/names"][()]]
-                fin = h["final"]
-                print("final design: " + ", ".join(
-                    f"{n} = {v:.4f}" for n, v in zip(names, fin["x"][()], strict=True)))  # fmt: skip
-                from designopt.studies import STUDIES
-
-                cfg = json.loads(at["config_resolved"])
-                st = STUDIES.get(at.get("study", ""))
-                subs = [k for k in fin if k + "_se" in fin and k != "f"][:6]
-                if st is not None:
-                    subs = [k for k in st.summary(st.settings.model_validate(cfg["study"]))
-                            if k + "_se" in fin]  # fmt: skip
-                print(f"f = {fin['f'][()]:.5f} (stage {fin.attrs['stage']}); "
-                      + "; ".join(f"{k} = {fin[k][()]:.5f} ± {fin[k + '_se'][()]:.1e}"
-                                  for k in subs))  # fmt: skip
-            elif kind == "sweep":
-                for k, g in h["members"].items():
-                    ov = json.loads(g.attrs["overrides"])
-                    print(f"  [{k}] {ov}: f = {g['final/f'][()]:.5f}")
-            elif kind == "scan":
-                from designopt.pipeline import best_lines
-
-                sc = h["scan"]
-                f = sc["f"][()]
-                names = [n.decode() for n in sc["names"][()]]
-                viol = sc["violation"][()] if "violation" in sc else None
-                print(f"{len(f)} designs")
-                for line in best_lines(names, sc["x"][()], f, viol):
-                    print(line)
-            elif kind == "ik":
-                from designopt.ikreport import summary_lines
-
-                g = h["ik"]
-                ik = {k: v[()] for k, v in g.items()} | {"attrs": dict(g.attrs)}
-                for line in summary_lines(ik):
-                    print(line)
-            elif kind == "bench":
-                for case, g in h["bench"].items():
-                    rows = json.loads(g.attrs["stats"])["rows"]
-                    best = min(rows, key=lambda v: rows[v]["mean"])
-                    print(f"  {case}: best mean {best} ({rows[best]['mean']:.3e})")
-    except OSError as e:
-        raise ConfigError(f"{p}: not a readable HDF5 archive ({e})") from None
+    rec = archive.load(p)
+    at = rec.attrs
+    print(f"{p}: {at.get('kind', 'run')}, study {at.get('study', '-')}, seed {at.get('seed')}, "
+          f"complete {bool(at.get('complete'))}")  # fmt: skip
+    for line in rec.summary():
+        print(line)
     return 0
+
+
+class Context:
+    """What a study's own command (``Study.commands``) gets from the CLI."""
+
+    @staticmethod
+    def load(args: argparse.Namespace):
+        """``args.config`` loaded as every command loads it: --seed, --devices, precision
+        (x64), the compilation cache."""
+        return _load(args)
+
+    @staticmethod
+    def progress(quiet: bool):
+        return _progress(quiet)
 
 
 def _positive(text: str) -> int:
@@ -474,55 +402,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     common(b, figures=False, dry=False)
     b.set_defaults(func=cmd_bench)
-    k = sub.add_parser(
-        "ik",
-        help="inverse kinematics of the da Vinci arm for poses from a CSV or HDF5 file",
-        description="Solve the da Vinci patient-side arm's inverse kinematics (Applied "
-        "Sciences 2019) for every pose of a file: CSV with a header row and columns "
-        "T00..T33 (row-major 4x4, mm) or x,y,z,qw,qx,qy,qz; or HDF5 with a dataset "
-        "'poses' (N, 4, 4). Writes ik/q (q3 in mm, the others in rad), ik/success, "
-        "ik/iterations, ik/pos_err (mm) and ik/rot_err (rad).",
-    )
-    k.add_argument(
-        "config", help="config (YAML) with a davinci study, e.g. configs/davinci_ik.yaml"
-    )
-    k.add_argument("--poses", required=True, metavar="PATH", help="poses file (.csv or .h5)")
-    k.add_argument("--out", default=None, metavar="PATH",
-                   help="archive path (default results/davinci/<poses name>_ik.h5)")  # fmt: skip
-    k.add_argument("--trajectory", action="store_true",
-                   help="solve in row order, each pose warm-started from the previous solution")  # fmt: skip
-    k.add_argument("--csv", action="store_true",
-                   help="also write the joints, one row per pose, to <archive stem>_joints.csv")  # fmt: skip
-    k.add_argument("--overwrite", action="store_true", help="replace an existing archive")
-    k.add_argument("--no-cache", action="store_true", help="do not keep compiled programs")
-    k.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
-    k.set_defaults(func=cmd_ik)
-    c = sub.add_parser(
-        "chain",
-        help="print a serial study's chain as imported (URDF or DH) and check it",
-        description="Print the chain of a serial study as imported: joints, types, axes, "
-        "limits, which numbers are design variables, the forward kinematics of the zero "
-        "pose and of --q; for a URDF chain, cross-check the import against the URDF "
-        "parser's own forward kinematics at random joint values (docs/urdf.md).",
-    )
-    c.add_argument("config", help="config (YAML) with a serial study, e.g. configs/urdf_arm.yaml")
-    c.add_argument("--q", default=None, metavar="Q1,Q2,...",
-                   help="joint values (degrees for revolute, length units for prismatic)")  # fmt: skip
-    c.add_argument("--design", action="append", default=[], metavar="NAME=VALUE",
-                   help="a design variable's value (repeat; others: middle of their box)")  # fmt: skip
-    c.add_argument("--seed", type=int, default=None, help="seed of the random check poses")
-    c.add_argument("--no-cache", action="store_true", help="do not keep compiled programs")
-    c.set_defaults(func=cmd_chain)
-    x = sub.add_parser(
-        "export",
-        help="write the best design of a run archive back as URDF",
-        description="Write the URDF of a serial study's run (or scan) archive with the best "
-        "design's values in the chain's `set` fields and nothing else changed (docs/urdf.md).",
-    )
-    x.add_argument("archive")
-    x.add_argument("--urdf", required=True, metavar="OUT.urdf", help="the URDF file to write")
-    x.add_argument("--overwrite", action="store_true", help="replace an existing file")
-    x.set_defaults(func=cmd_export)
+    from designopt.studies import STUDIES
+
+    for study in STUDIES.values():
+        for c in study.commands:
+            q = sub.add_parser(c.name, help=c.help, description=c.description or None)
+            c.arguments(q)
+            q.set_defaults(func=lambda a, c=c: c.run(a, Context()), writes=c.writes)
     p = sub.add_parser("report", help="draw the figures of an archive (PNG + PDF beside it)")
     p.add_argument("archive")
     p.add_argument("--no-cache", action="store_true", help="do not keep compiled programs")
@@ -537,7 +423,8 @@ def main(argv: list[str] | None = None) -> int:
     """Run one command; its exit status (module docstring, docs/faults.md)."""
     args = build_parser().parse_args(argv)
     try:
-        if args.command in WRITERS and not getattr(args, "dry_run", False):
+        writer = args.command in WRITERS or getattr(args, "writes", False)
+        if writer and not getattr(args, "dry_run", False):
             from designopt import output
 
             with output.session(signals=True) as ses:

@@ -94,3 +94,47 @@ def split(overrides: dict[str, Any]) -> tuple[dict[str, Any], dict[str, float]]:
     opt = {k.removeprefix(PREFIX): float(v) for k, v in overrides.items() if k.startswith(PREFIX)}
     rest = {k: v for k, v in overrides.items() if not k.startswith(PREFIX)}
     return rest, opt
+
+
+def groups(cfg: Any, where: str) -> tuple[dict[str, list[tuple[int, dict]]], dict[str, Any], list]:
+    """The sweep's members grouped by what changes the problem or the run shape:
+    ({group: [(member index, overrides)]}, {group: its config}, members). ConfigError
+    naming ``sweep.vary`` for a bad key or value."""
+    from pydantic import ValidationError
+
+    from designopt.config import error_text
+    from designopt.errors import ConfigError
+
+    if cfg.sweep is None:
+        raise ConfigError(f"{where}: key 'sweep': missing; `designopt sweep` needs one "
+                          "(docs/configs.md)")  # fmt: skip
+    try:
+        mem = members(cfg)
+        out: dict[str, list[tuple[int, dict]]] = {}
+        cfgs = {}
+        for i, m in enumerate(mem):
+            rest, _ = split(m)
+            k = repr(sorted(rest.items()))
+            cfgs.setdefault(k, apply(cfg, rest))
+            out.setdefault(k, []).append((i, m))
+    except ValidationError as e:
+        raise ConfigError(f"{where}: key 'sweep.vary' → {error_text(e)}") from None
+    except ValueError as e:
+        raise ConfigError(f"{where}: key 'sweep.vary': {e}") from None
+    return out, cfgs, mem
+
+
+def member(res: Any, j: int) -> Any:
+    """Member ``j`` of a batched optimizer result (``optim.run_batch``): every array
+    field sliced on its leading member axis, the settings picked per member."""
+    sets = {a: (b[j] if isinstance(b, list) else b) for a, b in res.settings.items()}
+    return res._replace(**{k: (None if v is None else v[j])
+                           for k, v in res._asdict().items() if k != "settings"},
+                        settings=sets)  # fmt: skip
+
+
+def resolved(cfg: Any, overrides: dict[str, Any]) -> str:
+    """The resolved YAML of one member's config."""
+    from designopt.prepare import resolved_yaml
+
+    return resolved_yaml(apply(cfg, overrides))

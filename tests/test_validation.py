@@ -214,14 +214,14 @@ def test_eval_reports_feasibility(tmp_path, capsys):
 def test_a_non_finite_result_writes_nothing(tmp_path, capsys, monkeypatch):
     """The safety net behind the input checks: a run whose final design scores NaN
     (here injected) exits 2 naming the index, and leaves no archive or checkpoint."""
-    real = pipeline.result_tree
+    real = pipeline.run_groups
 
     def poisoned(cfg, problem, res):
         tree = real(cfg, problem, res)
         tree["final"]["gci"] = np.float64(np.nan)
         return tree
 
-    monkeypatch.setattr(pipeline, "result_tree", poisoned)
+    monkeypatch.setattr(pipeline, "run_groups", poisoned)
     p = cfg_file(tmp_path, PLANAR)
     one_line_exit_2(capsys, ["run", str(p), "--out", str(tmp_path / "o" / "a.h5"), "--quiet"],
                     "gci is not finite", "nothing written")  # fmt: skip

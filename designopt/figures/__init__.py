@@ -66,3 +66,32 @@ def convergence(best_run: dict, indices: list[str], folder: Path, title: str,
     fig.suptitle(f"{title} (band: ± 2 SE; rates: Wilson interval)" if rates
                  else f"{title} (band: ± 2 SE)", fontsize=10)  # fmt: skip
     return save(fig, folder, "convergence")
+
+
+def drawer(record, path: Path):
+    """What draws a record's figures: (draw(record, folder) -> paths, the folder,
+    whether the folder is replaced whole). Runs: the study's figures (``Study.figures``)
+    in ``<stem>_figures``; sweeps and scans: the generic ones there too; benchmarks: the
+    PTPSO paper's figures beside the archive."""
+    from designopt.errors import ConfigError
+    from designopt.results import BenchRecord, ReplayRecord, RunRecord, ScanRecord, SweepRecord
+
+    path = Path(path)
+    figs = path.parent / f"{path.stem}_figures"
+    if isinstance(record, BenchRecord):
+        from designopt.figures import bench
+
+        return bench.draw_record, path.parent, False
+    if isinstance(record, RunRecord | ReplayRecord):
+        from designopt.studies import get
+
+        return get(record.study).figures, figs, True
+    if isinstance(record, SweepRecord):
+        from designopt.figures import sweep
+
+        return sweep.draw, figs, True
+    if isinstance(record, ScanRecord):
+        from designopt.figures import scan
+
+        return scan.draw, figs, True
+    raise ConfigError(f"{path}: archive kind {record.kind!r} has no figures")

@@ -73,14 +73,16 @@ class Cost:
 @dataclass(frozen=True)
 class Command:
     """An extra subcommand a study declares (``Study.commands``): the CLI builds its
-    subparser from the registry. ``arguments(parser)`` adds the arguments, ``run(args)``
-    returns the exit status; ``writes``: it writes files, so it runs under the output
+    subparser from the registry. ``arguments(parser)`` adds the arguments, ``run(args,
+    ctx)`` returns the exit status; ``ctx.load(args)`` loads ``args.config`` as every
+    command does (seed, devices, precision, compilation cache) and ``ctx.progress(quiet)``
+    gives the progress bar. ``writes``: it writes files, so it runs under the output
     session with signal handling like ``run``."""
 
     name: str
     help: str
     arguments: Callable[[Any], None]
-    run: Callable[[Any], int]
+    run: Callable[[Any, Any], int]
     description: str = ""
     writes: bool = False
 

@@ -13,7 +13,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from designopt.studies.base import Study
+from designopt.studies.base import Cost, Study
+from designopt.studies.davinci.ikcli import IK
 from designopt.studies.davinci.settings import UNITS, DavinciSettings
 
 INDICES = ("f", "gci", "coverage", "ik_success", "reach")
@@ -42,6 +43,12 @@ def _aliases(s: DavinciSettings) -> dict[str, str]:
     return out
 
 
+def _cost(s) -> Cost:
+    """Monte-Carlo cost per design (pre-flight): the GCI's joint samples, all in flight."""
+    n = s.indices.n_samples
+    return Cost(n, n, 1, "study.indices.n_samples", "study.indices.n_samples")
+
+
 STUDY = Study(
     name="davinci",
     title="da Vinci patient-side arm (Applied Sciences 2019): wrist offset and tilt for "
@@ -54,6 +61,8 @@ STUDY = Study(
     sweep_aliases=_aliases,
     units=lambda s: {k: UNITS[k] for k in s.variables} | INDEX_UNITS,
     example_config="configs/davinci.yaml",
+    cost=_cost,
+    commands=(IK,),
     tiny={
         "name": "davinci",
         "indices": {"n_samples": 256, "n_ik": 32, "solver": "closed_form"},

@@ -203,16 +203,35 @@ def _collect(out: dict[str, list[np.ndarray]], r: Any) -> None:
 # ---------------------------------------------------------------------------- command
 
 
-def cmd_ik(args: argparse.Namespace, loaded: tuple[Any, str] | None = None) -> int:
+def arguments(k: argparse.ArgumentParser) -> None:
+    """The arguments of ``designopt ik``."""
+    k.add_argument(
+        "config", help="config (YAML) with a davinci study, e.g. configs/davinci_ik.yaml"
+    )
+    k.add_argument("--poses", required=True, metavar="PATH", help="poses file (.csv or .h5)")
+    k.add_argument("--out", default=None, metavar="PATH",
+                   help="archive path (default results/davinci/<poses name>_ik.h5)")  # fmt: skip
+    k.add_argument("--trajectory", action="store_true",
+                   help="solve in row order, each pose warm-started from the previous solution")  # fmt: skip
+    k.add_argument("--csv", action="store_true",
+                   help="also write the joints, one row per pose, to <archive stem>_joints.csv")  # fmt: skip
+    k.add_argument("--overwrite", action="store_true", help="replace an existing archive")
+    k.add_argument("--no-cache", action="store_true", help="do not keep compiled programs")
+    k.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
+
+
+def cmd_ik(args: argparse.Namespace, ctx: Any = None) -> int:
     """``designopt ik CONFIG --poses PATH [--out PATH] [--trajectory] [--quiet]``;
-    ``loaded``: the (config, text) the CLI already loaded (with its compilation cache)."""
+    ``ctx.load`` loads the config as every command does (with its compilation cache)."""
     import jax
 
-    from designopt import config, ikreport, output, pipeline
+    from designopt import archive, config, ikreport, output
+    from designopt.prepare import base_attrs
+    from designopt.results import IKRecord
     from designopt.studies import streams
     from designopt.timing import Stopwatch
 
-    cfg, text = loaded if loaded is not None else config.load(args.config)
+    cfg, text = ctx.load(args) if ctx is not None else config.load(args.config)
     if cfg.study.name != "davinci":
         raise ConfigError(f"{args.config}: key 'study.name': `designopt ik` solves the da Vinci "
                           f"arm; this config's study is '{cfg.study.name}'")  # fmt: skip
@@ -223,10 +242,10 @@ def cmd_ik(args: argparse.Namespace, loaded: tuple[Any, str] | None = None) -> i
     poses = Path(args.poses)
     T = read_poses(poses, cfg.study.ik.orthonormal_tol)
     out = Path(args.out or f"results/davinci/{poses.stem}_ik.h5")
-    pipeline.check_output(out, getattr(args, "overwrite", False))
+    output.claim(out, getattr(args, "overwrite", False))
     csv_out = ikreport.csv_path(out) if getattr(args, "csv", False) else None
     if csv_out is not None:
-        pipeline.check_output(csv_out, getattr(args, "overwrite", False))
+        output.claim(csv_out, getattr(args, "overwrite", False))
     show = not args.quiet and len(T) >= PROGRESS_MIN
     from tqdm import tqdm
 
@@ -240,15 +259,37 @@ def cmd_ik(args: argparse.Namespace, loaded: tuple[Any, str] | None = None) -> i
                    "attrs": {"mode": mode, "poses_file": str(poses), "n": len(T),
                              "arm": cfg.study.ik_arm(), "joint_names": JOINT_NAMES,
                              "units": "q1, q2, q4, q5, q6 rad; q3 mm; pos_err mm; rot_err rad"}}}  # fmt: skip
-    attrs = pipeline.base_attrs("ik", cfg, text, streams(cfg.seed)) | {
+    attrs = base_attrs("ik", cfg, text, streams(cfg.seed), args.config) | {
         "wall_time_s": sw.wall, "compile_time_s": sw.compile, "run_time_s": sw.run}  # fmt: skip
-    pipeline.write_archive(out, tree, attrs, overwrite=getattr(args, "overwrite", False))
+    rec = IKRecord(attrs, tree, cfg)
+    archive.save(out, rec, overwrite=getattr(args, "overwrite", False))
     if csv_out is not None:
-        output.write_file(csv_out, ikreport.csv_text(tree["ik"]).encode(), "joints CSV")
+        output.write_file(csv_out, rec.csv_text().encode(), "joints CSV")
     if not args.quiet:
         print(f"mode: {mode}")
-        for line in ikreport.summary_lines(tree["ik"]):
+        for line in rec.summary()[1:]:
             print(line)
         print(f"wall {sw.wall:.1f} s = compile {sw.compile:.1f} s + run {sw.run:.1f} s")
         print(f"wrote {out}" + (f" and {csv_out}" if csv_out is not None else ""))
     return 0
+
+
+def _command() -> Any:
+    from designopt.studies.base import Command
+
+    return Command(
+        name="ik",
+        help="inverse kinematics of the da Vinci arm for poses from a CSV or HDF5 file",
+        description="Solve the da Vinci patient-side arm's inverse kinematics (Applied "
+        "Sciences 2019) for every pose of a file: CSV with a header row and columns "
+        "T00..T33 (row-major 4x4, mm) or x,y,z,qw,qx,qy,qz; or HDF5 with a dataset "
+        "'poses' (N, 4, 4). Writes ik/q (q3 in mm, the others in rad), ik/success, "
+        "ik/iterations, ik/pos_err (mm) and ik/rot_err (rad).",
+        arguments=arguments,
+        run=cmd_ik,
+        writes=True,
+    )
+
+
+IK = _command()
+"""``designopt ik``, declared in ``Study.commands``."""

@@ -11,7 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from designopt.studies.base import Study
+from designopt.studies.base import Cost, Study
 from designopt.studies.plas.settings import MASTER_KEYS, PlasSettings
 
 SUMMARY = ("vel_rel", "vel_reduction", "vel_abs", "pos_mean")
@@ -56,6 +56,18 @@ def _extra(s: PlasSettings, fin) -> list[str]:
     ]
 
 
+def _cost(s) -> Cost:
+    """Monte-Carlo cost per design (pre-flight): the mismatch samples, ``chunk`` in flight."""
+    m = s.mismatch
+    return Cost(
+        m.n_samples,
+        min(m.chunk, m.n_samples),
+        1,
+        "study.mismatch.n_samples",
+        "study.mismatch.chunk",
+    )
+
+
 STUDY = Study(
     name="plas",
     title="PLAS all-joints master (DGIST MS thesis 2015): master lengths for the least tip-velocity mismatch",
@@ -68,6 +80,7 @@ STUDY = Study(
     units=lambda s: dict.fromkeys(s.variables, "mm") | INDEX_UNITS,
     extra_lines=_extra,
     example_config="configs/plas.yaml",
+    cost=_cost,
     tiny={
         "name": "plas",
         "mismatch": {"n_samples": 256, "chunk": 128, "n_path": 2},

@@ -11,7 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from designopt.studies.base import Study
+from designopt.studies.base import Cost, Study
 from designopt.studies.rcm.settings import RcmSettings, TeleopSettings
 
 SUMMARY = ("eta", "eta_box", "eta_cone", "eta_reach", "reach")
@@ -44,6 +44,12 @@ def _extra(s: RcmSettings, fin) -> list[str]:
     ]
 
 
+def _cost(s) -> Cost:
+    """Monte-Carlo cost per design (pre-flight): the η samples, all in flight."""
+    n = s.eta.n_samples
+    return Cost(n, n, 1, "study.eta.n_samples", "study.eta.n_samples")
+
+
 STUDY_RCM = Study(
     name="rcm",
     title="planar RCM mechanism (Sensors 2023): link lengths (a, c) for the best conditioning over the task cone",
@@ -59,6 +65,7 @@ STUDY_RCM = Study(
     units=lambda s: dict.fromkeys(s.variables, "mm") | INDEX_UNITS,
     extra_lines=_extra,
     example_config="configs/rcm.yaml",
+    cost=_cost,
     tiny={"name": "rcm", "eta": {"n_samples": 1024}},
     meta={"variables": "a, c (mm)", "indices": ", ".join(INDICES)},
 )

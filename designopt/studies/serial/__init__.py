@@ -7,7 +7,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from designopt.studies.base import Study
+from designopt.studies.base import Cost, Study
+from designopt.studies.serial.commands import COMMANDS
 from designopt.studies.serial.settings import INDEX_NAMES, SerialSettings
 
 
@@ -49,6 +50,20 @@ def _aliases(s: SerialSettings) -> dict[str, str]:
     return out
 
 
+def _cost(s) -> Cost:
+    """Monte-Carlo cost per design (pre-flight): the index samples, ``chunk`` in flight,
+    and the normalisation probes when the objective normalises."""
+    ind, n_norm = s.indices, s.objective.get("n_norm")
+    return Cost(
+        ind.n_samples,
+        min(ind.chunk, ind.n_samples),
+        int(n_norm or 1),
+        "study.indices.n_samples",
+        "study.indices.chunk",
+        "study.objective.n_norm" if n_norm is not None else None,
+    )
+
+
 STUDY = Study(
     name="serial",
     title="any serial chain from YAML (DH table or URDF, with named design variables)",
@@ -60,6 +75,8 @@ STUDY = Study(
     sweep_aliases=_aliases,
     units=_units,
     example_config="configs/planar2r.yaml",
+    cost=_cost,
+    commands=COMMANDS,
     tiny={
         "name": "serial",
         "chain": {

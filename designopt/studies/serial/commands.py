@@ -55,9 +55,28 @@ def _pose_lines(label: str, R: np.ndarray, p: np.ndarray) -> list[str]:
             f"{' ' * len(label)}  R = {_fmt(R[0])} {_fmt(R[1])} {_fmt(R[2])}"]  # fmt: skip
 
 
-def cmd_chain(args: argparse.Namespace, loaded: tuple[Any, str]) -> int:
+def chain_arguments(c: argparse.ArgumentParser) -> None:
+    """The arguments of ``designopt chain``."""
+    c.add_argument("config", help="config (YAML) with a serial study, e.g. configs/urdf_arm.yaml")
+    c.add_argument("--q", default=None, metavar="Q1,Q2,...",
+                   help="joint values (degrees for revolute, length units for prismatic)")  # fmt: skip
+    c.add_argument("--design", action="append", default=[], metavar="NAME=VALUE",
+                   help="a design variable's value (repeat; others: middle of their box)")  # fmt: skip
+    c.add_argument("--seed", type=int, default=None, help="seed of the random check poses")
+    c.add_argument("--no-cache", action="store_true", help="do not keep compiled programs")
+
+
+def export_arguments(x: argparse.ArgumentParser) -> None:
+    """The arguments of ``designopt export``."""
+    x.add_argument("archive")
+    x.add_argument("--urdf", required=True, metavar="OUT.urdf", help="the URDF file to write")
+    x.add_argument("--overwrite", action="store_true", help="replace an existing file")
+
+
+def cmd_chain(args: argparse.Namespace, ctx: Any) -> int:
     """Print the chain as imported, its FK at zero and at ``--q``, and (URDF) the largest
     difference to yourdfpy's FK at random joint values."""
+    loaded = ctx.load(args)
     import jax
 
     jax.config.update("jax_enable_x64", True)
@@ -158,50 +177,38 @@ def check_import(s: Any, design: dict[str, float], mech: Any, full: np.ndarray,
     return err
 
 
-def _best(a: dict[str, Any], where: str) -> tuple[list[str], np.ndarray]:
-    kind = a["attrs"].get("kind")
-    if kind == "run":
-        names = [n.decode() if isinstance(n, bytes) else str(n) for n in a["problem"]["names"]]
-        return names, np.asarray(a["final"]["x"], np.float64)
-    if kind == "scan":
-        sc = a["scan"]
-        names = [n.decode() if isinstance(n, bytes) else str(n) for n in sc["names"]]
-        f = np.asarray(sc["f"], np.float64)
-        if "violation" in sc:
-            ok = np.asarray(sc["violation"]) <= 0
+def _best(rec: Any, where: str) -> tuple[list[str], np.ndarray]:
+    """The design to export: a run's final design, a scan's lowest f (feasible)."""
+    from designopt.results import RunRecord, ScanRecord
+
+    if isinstance(rec, RunRecord):
+        return rec.names, np.asarray(list(rec.x.values()), np.float64)
+    if isinstance(rec, ScanRecord):
+        v = rec.values
+        f = np.asarray(v["f"], np.float64)
+        if "violation" in v:
+            ok = np.asarray(v["violation"]) <= 0
             if not ok.any():
                 raise ConfigError(f"{where}: no feasible design in the scan to export")
             f = np.where(ok, f, np.inf)
-        return names, np.asarray(sc["x"], np.float64)[int(np.nanargmin(f))]
-    raise ConfigError(f"{where}: a '{kind}' archive; export takes a run or scan archive")
+        return rec.names, rec.X[int(np.nanargmin(f))]
+    raise ConfigError(f"{where}: a '{rec.kind}' archive; export takes a run or scan archive")
 
 
-def cmd_export(args: argparse.Namespace) -> int:
+def cmd_export(args: argparse.Namespace, ctx: Any = None) -> int:
     """Write the URDF of a run (final design) or scan (lowest f) archive."""
-    import h5py
-
     from designopt import archive, output
     from designopt.kinematics import urdf
-    from designopt.studies.serial.settings import SerialSettings, UrdfChain
+    from designopt.studies.serial.settings import UrdfChain
 
     where = args.archive
-    p = Path(where)
-    if not p.is_file():
-        raise ConfigError(f"{where}: archive not found")
-    try:
-        a = archive.read(p)
-    except (OSError, KeyError, ValueError) as e:
-        raise ConfigError(f"{where}: not a designopt archive ({e})") from None
-    except h5py.h5e.HDF5ExtError as e:  # pragma: no cover - h5py's own errors
-        raise ConfigError(f"{where}: not a designopt archive ({e})") from None
-    cfg = a["attrs"].get("config_resolved")
-    if not isinstance(cfg, dict) or cfg.get("study", {}).get("name") != "serial":
+    rec = archive.load(where)
+    if rec.study != "serial":
         raise ConfigError(f"{where}: not an archive of a serial study")
-    if not isinstance(cfg["study"].get("chain"), dict) or "urdf" not in cfg["study"]["chain"]:
+    s = rec.config.study
+    if not isinstance(s.chain, UrdfChain):
         raise ConfigError(f"{where}: the run's chain is a DH table, not a URDF (chain.urdf)")
-    s = SerialSettings.model_validate(cfg["study"])
-    assert isinstance(s.chain, UrdfChain)
-    names, x = _best(a, where)
+    names, x = _best(rec, where)
     design = dict(zip(names, (float(v) for v in x), strict=True))
     text = urdf.export_text(
         s.chain.urdf_text or "", set_values(s, design), s.chain.urdf_path or where
@@ -215,3 +222,32 @@ def cmd_export(args: argparse.Namespace) -> int:
     print(f"{out}: {s.chain.urdf} with " + ", ".join(
         f"{k} = {v:.6g}" for k, v in design.items()))  # fmt: skip
     return 0
+
+
+def _commands() -> tuple[Any, ...]:
+    from designopt.studies.base import Command
+
+    chain = Command(
+        name="chain",
+        help="print a serial study's chain as imported (URDF or DH) and check it",
+        description="Print the chain of a serial study as imported: joints, types, axes, "
+        "limits, which numbers are design variables, the forward kinematics of the zero "
+        "pose and of --q; for a URDF chain, cross-check the import against the URDF "
+        "parser's own forward kinematics at random joint values (docs/urdf.md).",
+        arguments=chain_arguments,
+        run=cmd_chain,
+    )
+    export = Command(
+        name="export",
+        help="write the best design of a run archive back as URDF",
+        description="Write the URDF of a serial study's run (or scan) archive with the best "
+        "design's values in the chain's `set` fields and nothing else changed (docs/urdf.md).",
+        arguments=export_arguments,
+        run=cmd_export,
+        writes=True,
+    )
+    return chain, export
+
+
+COMMANDS = _commands()
+"""``designopt chain`` and ``designopt export``, declared in ``Study.commands``."""

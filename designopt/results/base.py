@@ -1,0 +1,180 @@
+"""The record base: a typed result that converts to and from the archive tree.
+
+A record holds root ``attrs`` (kind, study, config text and resolved config, seed, the
+named keys, timings) and the kind's groups as nested dicts of numpy arrays, exactly the
+HDF5 layout of docs/archive.md. ``to_tree()`` gives the nested dict ``archive.write``
+stores (root attrs under ``"attrs"``); ``from_tree`` reads what ``archive.read`` returns.
+Two records are equal when their data and identity (kind, study, config, seed, keys)
+are; timings, versions and devices are measurements and not compared.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+
+MEASURED = ("schema_version", "versions", "jax_backend", "jax_devices", "complete",
+            "compilations", "compilations_by_stage", "config_dir")  # fmt: skip
+"""Root attrs that describe how a record was made, not what it holds (not compared)."""
+
+
+def measured(key: str) -> bool:
+    return key in MEASURED or key.endswith("_time_s") or key.endswith("_s")
+
+
+def text(v: Any) -> str:
+    """A name as ``str`` (HDF5 gives bytes)."""
+    return v.decode() if isinstance(v, bytes | np.bytes_) else str(v)
+
+
+def names(a: Any) -> list[str]:
+    """An array of names (bytes or str) as a list of ``str``."""
+    return [text(v) for v in np.asarray(a).ravel()]
+
+
+def _json(v: Any) -> Any:
+    if isinstance(v, str) and v[:1] in "[{":
+        try:
+            return json.loads(v)
+        except json.JSONDecodeError:
+            return v
+    return v
+
+
+def _canon(v: Any) -> Any:
+    """A comparable form: arrays as numpy, names as str, JSON attrs decoded."""
+    if isinstance(v, Mapping):
+        return {k: _canon(x) for k, x in v.items()}
+    if isinstance(v, list | tuple):
+        return [_canon(x) for x in v]
+    if isinstance(v, bytes | np.bytes_):
+        return v.decode()
+    if isinstance(v, np.ndarray) and v.dtype.kind in "SU":
+        return v.astype("U")
+    return _json(v)
+
+
+def same(a: Any, b: Any, path: str = "") -> str | None:
+    """None when ``a`` and ``b`` hold the same values (NaN equals NaN, arrays compared by
+    value and shape), else the first path where they differ."""
+    a, b = _canon(a), _canon(b)
+    if isinstance(a, dict) or isinstance(b, dict):
+        if not (isinstance(a, dict) and isinstance(b, dict)) or a.keys() != b.keys():
+            return path or "/"
+        for k in a:
+            d = same(a[k], b[k], f"{path}/{k}")
+            if d is not None:
+                return d
+        return None
+    if isinstance(a, list) and isinstance(b, list) and len(a) != len(b):
+        return path
+    x, y = np.asarray(a), np.asarray(b)
+    if x.shape != y.shape:
+        return path
+    if x.dtype.kind in "fc" or y.dtype.kind in "fc":
+        ok = np.array_equal(x.astype(np.complex128), y.astype(np.complex128), equal_nan=True)
+    else:
+        ok = bool(np.all(x == y)) if x.size else True
+    return None if ok else path
+
+
+@dataclass(eq=False)
+class Record:
+    """One result: root ``attrs`` and the kind's groups (``GROUPS``, in archive order)."""
+
+    KIND: ClassVar[str] = ""
+    GROUPS: ClassVar[tuple[str, ...]] = ()
+    OPTIONAL: ClassVar[tuple[str, ...]] = ()
+
+    attrs: dict[str, Any]
+    groups: dict[str, Any] = field(default_factory=dict)
+    _config: Any = field(default=None, repr=False)
+
+    @classmethod
+    def from_tree(cls, tree: Mapping[str, Any], config: Any = None) -> Record:
+        """The record of an archive tree (``archive.read``'s nested dict, root attrs under
+        ``"attrs"``); ``config``: the validated config when already at hand."""
+        attrs = {k: _json(v) for k, v in dict(tree.get("attrs", {})).items()}
+        missing = [g for g in cls.GROUPS if g not in tree]
+        if missing:
+            raise ValueError(f"a {cls.KIND or 'record'} archive needs the group(s) {missing}")
+        groups = {k: v for k, v in tree.items() if k != "attrs"}
+        return cls(attrs, groups, config)
+
+    def to_tree(self) -> dict[str, Any]:
+        """The nested dict ``archive.write`` stores (root attrs under ``"attrs"``)."""
+        return {"attrs": dict(self.attrs), **self.groups}
+
+    def data(self) -> dict[str, Any]:
+        """The groups (the archive tree without its root attrs)."""
+        return dict(self.groups)
+
+    def __getitem__(self, group: str) -> Any:
+        return self.groups[group]
+
+    def __contains__(self, group: str) -> bool:
+        return group in self.groups
+
+    def identity(self) -> dict[str, Any]:
+        return {k: v for k, v in self.attrs.items() if not measured(k)}
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Record) or type(other) is not type(self):
+            return NotImplemented
+        return (
+            same(self.identity(), other.identity()) is None
+            and same(self.groups, other.groups) is None
+        )
+
+    def differs(self, other: Record) -> str | None:
+        """Where two records differ (None: equal), for test messages."""
+        return same(self.identity(), other.identity(), "attrs") or same(self.groups, other.groups)
+
+    __hash__ = None  # type: ignore[assignment]
+
+    @property
+    def kind(self) -> str:
+        return str(self.attrs.get("kind", self.KIND))
+
+    @property
+    def study(self) -> str:
+        return str(self.attrs.get("study", ""))
+
+    @property
+    def seed(self) -> int:
+        return int(self.attrs.get("seed", 0))
+
+    @property
+    def config(self) -> Any:
+        """The validated config the record was made with (rebuilt from the archived
+        resolved config when the record was loaded from a file)."""
+        if self._config is None:
+            from designopt.config import validate
+
+            raw = self.attrs["config_resolved"]
+            raw = json.loads(raw) if isinstance(raw, str) else raw
+            folder = self.attrs.get("config_dir") or None
+            self._config = validate(raw, f"archive ({self.kind})", self.config_model(), folder)
+        return self._config
+
+    def config_model(self) -> Any:
+        return None  # the run-config model
+
+    def keys(self) -> dict[str, Any]:
+        """The named PRNG streams the record was made with (``studies.STREAMS``)."""
+        from designopt.studies import archived_keys
+
+        return archived_keys({"attrs": self.attrs})
+
+    def timing_line(self) -> str:
+        a = self.attrs
+        return (f"wall time {float(a.get('wall_time_s', 0)):.1f} s "
+                f"(compile {float(a.get('compile_time_s', 0)):.1f} s)")  # fmt: skip
+
+    def summary(self) -> list[str]:
+        """The lines ``designopt show`` prints after the header."""
+        return [self.timing_line()]

@@ -1,0 +1,41 @@
+"""The record of an optimizer benchmark (``designopt bench``): per case and optimizer
+entry the runs' histories and final values, per case the statistics."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+from designopt.results.base import Record
+
+
+@dataclass(eq=False)
+class BenchRecord(Record):
+    """Group ``bench/<case>/<entry>``: history, best_f, best_x, converged_at and attrs
+    wall_s, compile_s, settings; ``bench/<case>`` attr ``stats`` (docs/archive.md)."""
+
+    KIND: ClassVar[str] = "bench"
+    GROUPS: ClassVar[tuple[str, ...]] = ("bench",)
+
+    def config_model(self) -> Any:
+        from designopt.benchsuite import BenchConfig
+
+        return BenchConfig
+
+    @property
+    def cases(self) -> dict[str, dict[str, Any]]:
+        return {c: g for c, g in self.groups["bench"].items() if c != "attrs"}
+
+    def stats(self, case: str) -> dict[str, Any]:
+        return self.cases[case]["attrs"]["stats"]
+
+    def entries(self, case: str) -> dict[str, dict[str, Any]]:
+        return {v: g for v, g in self.cases[case].items() if v != "attrs"}
+
+    def summary(self) -> list[str]:
+        lines = [self.timing_line()]
+        for case in self.cases:
+            rows = self.stats(case)["rows"]
+            best = min(rows, key=lambda v: rows[v]["mean"])
+            lines.append(f"  {case}: best mean {best} ({rows[best]['mean']:.3e})")
+        return lines

@@ -1,0 +1,217 @@
+"""Records of runs: one optimisation (``RunRecord``), a sweep of them (``SweepRecord``),
+an interrupted run's checkpoint (``CheckpointRecord``) and a study whose run is a replay
+(``ReplayRecord``). Groups and attrs: docs/archive.md."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+
+from designopt.results.base import Record, names
+
+
+def _pm(name: str, v: float, se: float | None) -> str:
+    if se is None:
+        return f"  {name:<5} = {v:.5g}"
+    rel = f"({100 * se / abs(v):.2f} %)" if v else ""
+    return f"  {name:<5} = {v:.5f} ± {se:.1e} {rel}"
+
+
+def _study(cfg: Any) -> Any:
+    from designopt.studies import get
+
+    return get(cfg.study.name)
+
+
+@dataclass(eq=False)
+class RunRecord(Record):
+    """One optimisation: groups ``optimizer`` (history (runs, T+1), best_f, best_x,
+    converged_at, history_x), ``best_run`` (every index along the best run),
+    ``problem`` (names, box, info), ``final`` (the final design with every index ± SE)
+    and, after a polish, ``refine``."""
+
+    KIND: ClassVar[str] = "run"
+    GROUPS: ClassVar[tuple[str, ...]] = ("optimizer", "best_run", "problem", "final")
+
+    @property
+    def names(self) -> list[str]:
+        return names(self.groups["problem"]["names"])
+
+    @property
+    def x(self) -> dict[str, float]:
+        """The final design: variable → value."""
+        xf = np.asarray(self.groups["final"]["x"], np.float64)
+        return dict(zip(self.names, xf.tolist(), strict=True))
+
+    @property
+    def f(self) -> float:
+        return float(self.groups["final"]["f"])
+
+    @property
+    def indices(self) -> dict[str, tuple[float, float | None]]:
+        """Every index of the final design: name → (value, standard error or None)."""
+        fin = self.groups["final"]
+        out = {}
+        for k, v in fin.items():
+            if k in ("x", "attrs") or k.endswith("_se"):
+                continue
+            se = fin.get(k + "_se")
+            out[k] = (float(np.asarray(v)), None if se is None else float(np.asarray(se)))
+        return out
+
+    @property
+    def history(self) -> np.ndarray:
+        """Best f so far per run and iteration (runs, T+1)."""
+        return np.asarray(self.groups["optimizer"]["history"])
+
+    @property
+    def history_x(self) -> np.ndarray:
+        """Each run's best design per iteration (runs, T+1, D)."""
+        return np.asarray(self.groups["optimizer"]["history_x"])
+
+    @property
+    def best_run(self) -> dict[str, np.ndarray]:
+        """Every index (and ``_se``) along the best run, with ``iteration`` (T+1,)."""
+        return {k: np.asarray(v) for k, v in self.groups["best_run"].items() if k != "attrs"}
+
+    @property
+    def final(self) -> dict[str, Any]:
+        """The final design's values: ``x`` (D,), f and every index with ``_se``."""
+        return {k: v for k, v in self.groups["final"].items() if k != "attrs"}
+
+    @property
+    def info(self) -> dict[str, Any]:
+        """What the study's problem says about itself (the ``problem`` group's info)."""
+        return dict(self.groups["problem"].get("attrs", {}).get("info", {}))
+
+    @property
+    def lower(self) -> np.ndarray:
+        return np.asarray(self.groups["problem"]["lower"], np.float64)
+
+    @property
+    def upper(self) -> np.ndarray:
+        return np.asarray(self.groups["problem"]["upper"], np.float64)
+
+    @property
+    def best_run_index(self) -> int:
+        return int(self.groups["best_run"]["attrs"]["run_index"])
+
+    @property
+    def stage(self) -> str:
+        return str(self.groups["final"]["attrs"]["stage"])
+
+    @property
+    def n_samples_used(self) -> int:
+        return int(self.groups["final"]["attrs"].get("n_samples_used", 0))
+
+    def design_lines(self) -> list[str]:
+        """The run summary: the best design, f, what the polish gained, the study's
+        sub-objectives with ± SE, feasibility, the study's own lines."""
+        cfg = self.config
+        st = _study(cfg)
+        units = st.units(cfg.study)
+        fin, opt, best = self.groups["final"], self.groups["optimizer"], self.best_run_index
+        lines = [f"best design (run {best} of {cfg.optimizer.n_runs}; final stage: {self.stage}):"]
+        lines += [f"  {n} = {v:9.4f} {units.get(n, '')}".rstrip() for n, v in self.x.items()]
+        lines.append(f"  f     = {self.f:.5f}   ({cfg.optimizer.name} {opt['best_f'][best]:.5f}, "
+                     f"converged at iteration {opt['converged_at'][best]})")  # fmt: skip
+        if "refine" in self.groups:
+            r = self.groups["refine"]
+            lines.append(f"  polish ({r['attrs']['method']}, {r['attrs']['steps']} steps) "
+                         f"gained Δf = {np.max(r['gain']):.2e}")  # fmt: skip
+        for k in st.summary(cfg.study):
+            se = fin.get(k + "_se")
+            lines.append(_pm(k, float(fin[k]), None if se is None else float(se)))
+        if "violation" in fin:
+            v = float(fin["violation"])
+            ok = "feasible" if v <= 0 else f"violated by {v:.3g} (no feasible design found)"
+            lines.append(f"  constraints: {ok}")
+        lines += st.extra_lines(cfg.study, fin)
+        return lines
+
+    def run_line(self) -> str:
+        """Samples and the wall time split by stage (printed after a run)."""
+        a = self.attrs
+        by = a.get("compilations_by_stage", {})
+        return (f"samples per design: {self.n_samples_used or '-'}; wall "
+                f"{a['wall_time_s']:.1f} s = compile {a['compile_time_s']:.1f} s + run "
+                f"{a['run_time_s']:.1f} s (setup {a['setup_time_s']:.1f} s, optimizer "
+                f"{a['optimizer_time_s']:.1f} s, scoring/polish {a['post_time_s']:.1f} s); "
+                f"{a['compilations']} XLA compilations ({by.get('setup', 0)} + "
+                f"{by.get('optimizer', 0)} + {by.get('scoring_polish', 0)})")  # fmt: skip
+
+    def summary(self) -> list[str]:
+        """What ``designopt show`` prints: the final design, f and the study's indices."""
+        fin = self.groups["final"]
+        lines = [self.timing_line(),
+                 "final design: " + ", ".join(f"{n} = {v:.4f}" for n, v in self.x.items())]  # fmt: skip
+        subs = [k for k in fin if k + "_se" in fin and k != "f"][:6]
+        try:
+            cfg = self.config
+            subs = [k for k in _study(cfg).summary(cfg.study) if k + "_se" in fin]
+        except Exception:  # a study not registered in this process: its first indices
+            pass
+        lines.append(f"f = {self.f:.5f} (stage {self.stage}); "
+                     + "; ".join(f"{k} = {float(fin[k]):.5f} ± {float(fin[k + '_se']):.1e}"
+                                 for k in subs))  # fmt: skip
+        return lines
+
+
+@dataclass(eq=False)
+class ReplayRecord(Record):
+    """A study whose run is not an optimisation (``Study.replay``, e.g. a teleoperation
+    trajectory): the study's groups, each with an optional ``summary`` attr."""
+
+    KIND: ClassVar[str] = "run"
+
+    def summary(self) -> list[str]:
+        return [self.timing_line()] + [
+            str(g["attrs"]["summary"]) for g in self.groups.values()
+            if isinstance(g, dict) and "summary" in g.get("attrs", {})
+        ]  # fmt: skip
+
+
+@dataclass(eq=False)
+class SweepRecord(Record):
+    """Every member of a sweep: group ``members/<i>`` holds one run's groups and attrs
+    ``overrides`` and ``config_resolved_yaml``."""
+
+    KIND: ClassVar[str] = "sweep"
+    GROUPS: ClassVar[tuple[str, ...]] = ("members",)
+
+    @property
+    def members(self) -> dict[str, dict[str, Any]]:
+        return {k: v for k, v in self.groups["members"].items() if k != "attrs"}
+
+    def summary(self) -> list[str]:
+        return [self.timing_line()] + [
+            f"  [{k}] {m['attrs']['overrides']}: f = {float(m['final']['f']):.5f}"
+            for k, m in self.members.items()
+        ]
+
+
+@dataclass(eq=False)
+class CheckpointRecord(Record):
+    """An interrupted run (``<out>.partial.h5``, root attr ``complete`` false): the
+    optimizer state after ``done`` iterations, its history so far, and ``resume_key``."""
+
+    KIND: ClassVar[str] = "run"
+    GROUPS: ClassVar[tuple[str, ...]] = ("checkpoint",)
+
+    @property
+    def done(self) -> int:
+        return int(self.groups["checkpoint"]["attrs"]["done"])
+
+    def checkpoint(self) -> Any:
+        """The optimizer's ``Checkpoint`` (what ``--resume`` continues from)."""
+        from designopt.optim import Checkpoint
+
+        c = self.groups["checkpoint"]
+        state = {k: np.asarray(v) for k, v in c["state"].items() if k != "attrs"}
+        return Checkpoint(state, np.asarray(c["history"]), np.asarray(c["history_x"]), self.done)
+
+    def summary(self) -> list[str]:
+        best = float(np.min(np.asarray(self.groups["checkpoint"]["history"])[..., -1]))
+        return [f"interrupted after {self.done} iterations; best so far {best:.5f}"]

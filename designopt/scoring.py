@@ -1,0 +1,145 @@
+"""Scoring designs: f and every index with its standard error for any number of designs
+in vmapped batches of one size (one compiled program for any count), the finite-result
+safety net, and the record of a finished optimisation (the best run's history scored,
+the optional optax polish, the final design)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from designopt import parallel
+from designopt.errors import ConfigError
+from designopt.prepare import dtype_of
+from designopt.problems.base import Problem
+
+
+def score(problem: Problem, X: np.ndarray, batch: int | None = None,
+          plan: Any = None) -> dict[str, np.ndarray]:  # fmt: skip
+    """f and every index (with standard errors) of designs X (n, D), in vmapped batches of
+    a fixed size (the last one padded), so one compiled program serves any n. ``plan``
+    (``designopt.parallel.scoring_plan``) splits each batch's designs over its devices."""
+    X = np.asarray(X, np.float64)
+    n = X.shape[0]
+    b = n if batch is None else max(1, min(batch, n))
+    fn = _scorer(problem.fn, problem.constraints)
+    params, key, host, rows = problem.params, jax.random.key(0), np.asarray, jnp.asarray
+    if plan is not None:
+        b = -(-b // plan.n_devices) * plan.n_devices
+        params, key, host = plan.put(params), plan.put(key), plan.host
+        rows = lambda x: parallel.shard_rows(plan, x)  # noqa: E731
+    outs = []
+    for i in range(0, n, b):
+        Xi = X[i : i + b]
+        pad = b - Xi.shape[0]
+        if pad:
+            Xi = np.concatenate([Xi, np.repeat(Xi[-1:], pad, 0)])
+        f, sub = fn(params, rows(Xi), key)
+        outs.append({"f": host(f)[: b - pad]} | {k: host(v)[: b - pad] for k, v in sub.items()})
+    return {k: np.concatenate([o[k] for o in outs]) for k in outs[0]}
+
+
+_SCORERS: dict[Any, Any] = {}
+
+
+def _scorer(fn: Callable, constraints: Callable | None = None) -> Callable:
+    """fn jitted (cached per function); with constraints, ``violation`` (Σ max(g, 0), 0
+    when feasible) joins the indices."""
+    key = (fn, constraints)
+    if key not in _SCORERS:
+        if constraints is None:
+            _SCORERS[key] = jax.jit(fn)
+        else:
+            from designopt.problems.base import violation_of
+
+            def with_violation(params, X, k):
+                f, sub = fn(params, X, k)
+                return f, sub | {"violation": violation_of(constraints, params, X)}
+
+            _SCORERS[key] = jax.jit(with_violation)
+    return _SCORERS[key]
+
+
+def check_finite(values: Mapping[str, Any], where: str, what: str,
+                 names: Sequence[str] = (), X: np.ndarray | None = None) -> None:  # fmt: skip
+    """ConfigError (exit 2, nothing written) when a result holds NaN or inf: numbers a
+    config let through that the arithmetic cannot take (lengths so large their powers
+    overflow in the run's precision). ``X`` (n, D): name the first design affected."""
+    for k, v in values.items():
+        a = np.asarray(v) if k != "attrs" else np.zeros(0)
+        if a.dtype.kind != "f" or np.all(np.isfinite(a)):
+            continue
+        at = ""
+        if X is not None and a.ndim >= 1:
+            i = int(np.flatnonzero(~np.isfinite(a.reshape(len(a), -1)).all(-1))[0])
+            at = " at " + ", ".join(f"{n} = {x:g}" for n, x in zip(names, X[i], strict=True))
+        raise ConfigError(f"{where}: {what}: {k} is not finite{at}; the config's numbers are "
+                          "outside what the arithmetic can take (e.g. lengths so large that "
+                          "their powers overflow); nothing written")  # fmt: skip
+
+
+def problem_group(problem: Problem) -> dict[str, Any]:
+    """The archive's ``problem`` group: names, box, info, normalisation bounds."""
+    g: dict[str, Any] = {"names": np.array(problem.names, dtype="S"), "lower": problem.lower,
+                         "upper": problem.upper, "attrs": {"info": problem.info}}  # fmt: skip
+    if problem.norm_bounds is not None:
+        g["norm_bounds"] = np.asarray(problem.norm_bounds)
+    elif isinstance(problem.params, Mapping) and "bounds" in problem.params:
+        g["norm_bounds"] = np.asarray(problem.params["bounds"])
+    return g
+
+
+def samples_used(problem: Problem) -> int:
+    return int(problem.n_samples_used or problem.info.get("n_samples_used", 0))
+
+
+def run_groups(cfg: Any, problem: Problem, res: Any) -> dict[str, Any]:
+    """The groups of one (unbatched) run's record: optimizer, best_run, problem, final
+    and, with a ``refine`` section, refine (docs/archive.md)."""
+    from designopt.refine import refine
+
+    bv = getattr(res, "best_v", None)
+    # the best run by Deb's rules: least violation first, then the smallest f
+    if cfg.optimizer.constraints.method != "deb":
+        bv = None
+    best = int(np.lexsort((res.best_f, bv))[0]) if bv is not None else int(np.argmin(res.best_f))
+    sub_hist = score(problem, res.history_x[best])
+    tree: dict[str, Any] = {
+        "optimizer": {
+            "history": res.history, "best_f": res.best_f, "best_x": res.best_x,
+            "converged_at": res.converged_at, "history_x": res.history_x,
+            "attrs": {"settings": res.settings},
+        },
+        "best_run": sub_hist | {"iteration": np.arange(res.history.shape[-1]),
+                                "attrs": {"run_index": best}},
+        "problem": problem_group(problem),
+    }  # fmt: skip
+    deb = cfg.optimizer.constraints.method == "deb"  # a penalty run tracks no violation
+    if deb and getattr(res, "history_v", None) is not None and problem.constraints is not None:
+        tree["optimizer"] |= {"history_v": res.history_v, "best_v": res.best_v}
+    x_final = res.best_x[best][None]
+    stage = "optimizer"
+    if cfg.refine is not None:
+        r = cfg.refine
+        order = np.argsort(res.best_f)[: r.n_best]
+        rr = refine(problem, res.best_x[order], r.steps, r.learning_rate, r.method,
+                    dtype=dtype_of(cfg))  # fmt: skip
+        tree["refine"] = {
+            "run_index": order, "x0": rr.x0, "f0": rr.f0, "x": rr.x, "f": rr.f,
+            "history": rr.history, "gain": rr.gain,
+            "attrs": {"method": r.method, "steps": r.steps, "learning_rate": r.learning_rate},
+        }  # fmt: skip
+        i = int(np.argmin(rr.f))
+        keeps_feasible = problem.constraints is None or float(
+            np.asarray(problem.violation(rr.x[i : i + 1]))[0]
+        ) <= float(0.0 if bv is None else bv[best])
+        if rr.f[i] < res.best_f[best] and keeps_feasible:
+            x_final, stage = rr.x[i][None], "refine"
+    fin = {k: v[0] for k, v in score(problem, x_final).items()}
+    tree["final"] = fin | {"x": x_final[0], "attrs": {"stage": stage,
+                           "n_samples_used": samples_used(problem)}}  # fmt: skip
+    return tree
