@@ -144,13 +144,13 @@ def test_singular_configuration_contributes_zero_not_nan():
 
 
 def test_kernel_matches_generic_closed_form_condition_number():
-    from designopt.kinematics import inv_cond_fro3
+    from designopt.kinematics import inv_cond
 
     q = m.sample_joints(jax.random.key(6), 1000)[:, :3]
     d = m.default_design()
     x = {k: jnp.asarray([[d[k]]]) for k in d}
     _, r = inv_cond_fro_jv(jv_entries(x, _features(q)))
-    np.testing.assert_allclose(r[0], inv_cond_fro3(m.jacobian_v_closed(q, d)), rtol=1e-12)
+    np.testing.assert_allclose(r[0], inv_cond(m.jacobian_v_closed(q, d)), rtol=1e-12)
 
 
 def test_settings_reject_bad_values():
@@ -162,13 +162,13 @@ def test_settings_reject_bad_values():
 
 def test_generic_workspace_average_matches_study_kernel():
     """montecarlo.workspace_average (generic g_and_w) vs the specialised master9 kernel."""
-    from designopt.kinematics import inv_cond_fro3
+    from designopt.kinematics import inv_cond
 
     d = m.default_design()
 
     def g_and_w(q):
         J = m.jacobian_v_closed(q, d)
-        return inv_cond_fro3(J), m.det_jv(q, d)
+        return inv_cond(J), m.det_jv(q, d)
 
     lo, hi = m.POSITION_LIMITS[:, 0], m.POSITION_LIMITS[:, 1]
     est, n = mc.workspace_average(g_and_w, jax.random.key(8), lo, hi, 100_000, chunk=25_000)

@@ -1,5 +1,6 @@
 """The frame kernel (designopt.kinematics.kernel) against autodiff, closed forms, numpy and
-the Robotics Toolbox; inv_cond_any against numpy; the DHParams batching fix (#16 item 5)."""
+the Robotics Toolbox; inv_cond against numpy; the reference's DHParams batching (#16 item 5).
+The autodiff references (4×4 products, jax.jacfwd) are in tests/kinref.py."""
 
 import subprocess
 import sys
@@ -10,10 +11,9 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from kinref import DHChain, DHParams, ETChain, geometric_jacobian, position_jacobian
 
-from designopt.kinematics import ET, DHChain, ETChain, geometric_jacobian, position_jacobian
-from designopt.kinematics.chain import DHParams
-from designopt.kinematics.conditioning import inv_cond_any, inv_cond_fro3
+from designopt.kinematics import ET, inv_cond
 from designopt.kinematics.kernel import dh_model, et_model
 from designopt.studies.master9 import mechanism as m9
 
@@ -161,7 +161,7 @@ def test_random_et_chains_match_autodiff(spec):
     if chain.n == 0:
         return
     rng = np.random.default_rng(seed)
-    model = et_model(chain, variables=names)
+    model = et_model(chain.elements, variables=names)
     X = rng.uniform(-1, 1, (2, len(names)))
     q = rng.uniform(-2, 2, (3, chain.n))
     params = {nm: jnp.asarray(X[:, i])[:, None] for i, nm in enumerate(names)}
@@ -188,7 +188,7 @@ def test_master9_matches_closed_forms():
     np.testing.assert_allclose(J, m9.jacobian_closed(q, D), rtol=1e-12, atol=1e-10)
     Jv = m9.jacobian_v_closed(q[:, :3], D)
     r, det = model.inv_cond(X, q, rows=(0, 1, 2), cols=(0, 1, 2), with_det=True)
-    np.testing.assert_allclose(r, inv_cond_fro3(Jv), rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(r, inv_cond(Jv), rtol=1e-12, atol=1e-15)
     np.testing.assert_allclose(det, m9.det_jv(q[:, :3], D), rtol=1e-11, atol=1e-6)
     # all 8 lengths as variables (d2 enters as -d2): same numbers
     names = ("a1", "a3", "d3", "a4", "a5", "d2", "d5", "d6")
@@ -205,7 +205,7 @@ def test_master9_float32_agrees_with_closed_form():
     D = {**m9.FIXED_DEFAULTS, "a1": X[:, 0:1], "a3": X[:, 1:2], "d3": X[:, 2:3]}
     r = model.inv_cond(X.astype(np.float32), q.astype(np.float32), rows=(0, 1, 2), cols=(0, 1, 2))
     assert r.dtype == jnp.float32
-    np.testing.assert_allclose(r, inv_cond_fro3(m9.jacobian_v_closed(q[:, :3], D)), atol=1e-5)
+    np.testing.assert_allclose(r, inv_cond(m9.jacobian_v_closed(q[:, :3], D)), atol=1e-5)
 
 
 def test_master9_singular_boundary_gives_zero_and_finite_gradients():
@@ -445,7 +445,7 @@ def test_da_vinci_like_et_chain():
             ET("Rz", joint=5),
         )
     )
-    model = et_model(chain, variables=("l_QH", "l_IJ", "beta"))
+    model = et_model(chain.elements, variables=("l_QH", "l_IJ", "beta"))
     X = np.array([[784.29, 10.0, np.deg2rad(30.45)], [700.0, 12.0, 0.5]])
     rng = np.random.default_rng(4)
     q = rng.uniform(-1, 1, (6, 6))
@@ -464,12 +464,12 @@ def test_float32_without_x64():
     code = (
         "import numpy as np, jax.numpy as jnp\n"
         "from designopt.kinematics.kernel import dh_model\n"
-        "from designopt.kinematics.conditioning import inv_cond_any\n"
+        "from designopt.kinematics.conditioning import inv_cond\n"
         "m = dh_model('modified', 'RRP', alpha=[0, 1.2, 'tw'], a=[0, 'l1', 0.5], d=[0.1, 0, 'l2'],"
         " theta=[0, 0.3, 0], variables=('l1', 'l2', 'tw'))\n"
         "J = m.jacobian(np.ones((2, 3)), np.ones((4, 3)))\n"
         "r = m.inv_cond(np.ones((2, 3)), np.ones((4, 3)), rows=(0, 1, 2), norm='2')\n"
-        "s = inv_cond_any(jnp.ones((5, 4, 6)))\n"
+        "s = inv_cond(jnp.ones((5, 4, 6)))\n"
         "assert J.dtype == r.dtype == s.dtype == jnp.float32, (J.dtype, r.dtype, s.dtype)\n"
         "print('ok')\n"
     )
@@ -477,7 +477,7 @@ def test_float32_without_x64():
     assert out.returncode == 0 and "ok" in out.stdout, out.stderr
 
 
-# ----------------------------------------------------------------- inv_cond_any
+# ----------------------------------------------------------------- inv_cond
 
 
 def _np_ref(J, norm, normalized):
@@ -491,18 +491,18 @@ def _np_ref(J, norm, normalized):
 
 @jax.jit
 def _all_norms(J):
-    return inv_cond_any(J, "2"), inv_cond_any(J, "fro"), inv_cond_any(J, "fro", True)
+    return inv_cond(J, "2"), inv_cond(J, "fro"), inv_cond(J, "fro", True)
 
 
 @jax.jit
 def _both_grads(J):
-    return jax.grad(lambda A: jnp.sum(inv_cond_any(A, "2") + inv_cond_any(A, "fro")))(J)
+    return jax.grad(lambda A: jnp.sum(inv_cond(A, "2") + inv_cond(A, "fro")))(J)
 
 
 SHAPES = [(1, 4), (2, 5), (3, 3), (3, 7), (6, 3), (4, 4), (6, 6), (5, 8), (7, 4)]
 
 
-def test_inv_cond_any_matches_numpy():
+def test_inv_cond_matches_numpy():
     """Random shapes against numpy's SVD and pinv; row 0 of each batch is rank-deficient
     and must give exactly 0 (with a finite gradient)."""
     rng = np.random.default_rng(0)
@@ -522,7 +522,7 @@ def test_inv_cond_any_matches_numpy():
             assert np.all(np.isfinite(_both_grads(jnp.asarray(J))))
 
 
-def test_inv_cond_any_special_cases():
+def test_inv_cond_special_cases():
     """Identity (isotropic: 1), zero (0), diag(1, 1, 2) (repeated Gram eigenvalues):
     values and finite gradients."""
     B = jnp.stack([jnp.eye(3), jnp.zeros((3, 3)), jnp.diag(jnp.array([1.0, 1.0, 2.0]))])
@@ -535,9 +535,9 @@ def test_inv_cond_any_special_cases():
     np.testing.assert_allclose(r2, [1.0, 0.0], rtol=1e-12)
     np.testing.assert_allclose(rfn, [1.0, 0.0], rtol=1e-12)
     assert np.all(np.isfinite(_both_grads(B5)))
-    # 3×3 square Frobenius equals the existing closed form
+    # 3×3 square Frobenius (the adjugate) against numpy's cond
     A = np.random.default_rng(0).normal(size=(50, 3, 3))
-    np.testing.assert_allclose(_all_norms(A)[1], inv_cond_fro3(A), rtol=1e-13)
+    np.testing.assert_allclose(_all_norms(A)[1], 1 / np.linalg.cond(A, "fro"), rtol=1e-12)
 
 
 # ------------------------------------------------ #16 item 5: DHParams as params

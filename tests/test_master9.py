@@ -5,7 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from designopt.kinematics import cond_fro, det3
+from designopt.kinematics import cond
 from designopt.studies.master9 import mechanism as m
 
 KEY = jax.random.key(0)
@@ -105,7 +105,7 @@ def test_eq53_frobenius_condition_number_with_a4_for_d4():
     k1, k2 = jax.random.split(jax.random.key(7))
     q = m.sample_joints(k1, 500)
     d = random_designs(k2, 500)
-    k = cond_fro(m.jacobian(q, d)[:, :3, :3])
+    k = cond(m.jacobian(q, d)[:, :3, :3])
     np.testing.assert_allclose(m.cond_fro_eq53(q[:, :3], d), k, rtol=1e-9)
 
 
@@ -113,7 +113,7 @@ def test_det_jv_closed_form():
     q = m.sample_joints(KEY, 300)
     d = m.default_design()
     np.testing.assert_allclose(
-        m.det_jv(q[:, :3], d), det3(m.jacobian_v_closed(q[:, :3], d)), rtol=1e-9
+        m.det_jv(q[:, :3], d), np.linalg.det(m.jacobian_v_closed(q[:, :3], d)), rtol=1e-9
     )
 
 
@@ -283,3 +283,81 @@ def test_q_ref_broadcasts_keeps_dtype_and_checks_its_shape(initial_1000):
     assert out.dtype == jnp.float32 and out.shape == (1000, 7)
     with pytest.raises(ValueError, match=r"q_ref must have shape \(\.\.\., 7\)"):
         m.ik(T, d, q_ref=jnp.zeros(6))
+
+
+# ----------------------------------------------- the chain on the frame kernel vs numpy
+
+
+def _np_dh_modified(alpha, a, theta, d):
+    """Rx(α) Tx(a) Rz(θ) Tz(d) in numpy, one link (Craig's convention, eq. 1)."""
+    ca, sa, ct, st = np.cos(alpha), np.sin(alpha), np.cos(theta), np.sin(theta)
+    return np.array(
+        [
+            [ct, -st, 0.0, a],
+            [st * ca, ct * ca, -sa, -sa * d],
+            [st * sa, ct * sa, ca, ca * d],
+            [0.0, 0.0, 0.0, 1.0],
+        ]
+    )
+
+
+def _np_master9(q, x):
+    """Independent numpy FK (4×4) and geometric Jacobian (6×7) of the reconstructed
+    Table 1: the product of the 9 link transforms, then the chain Jacobian from the frames
+    (z_i × (p_9 − p_i); z_i) mapped to the active joints through q4 = −q3, q5 = −q1 − q2."""
+    q1, q2, q3, q6, q7, q8, q9 = q
+    hp = np.pi / 2
+    rows = [  # α_{i-1}, a_{i-1}, θ_i, d_i
+        (0.0, 0.0, q1, 0.0),
+        (0.0, x["a1"], q2 - hp, -x["d2"]),
+        (-hp, 0.0, q3, x["d3"]),
+        (0.0, x["a3"], -q3, 0.0),
+        (hp, x["a4"], -q1 - q2, x["d5"]),
+        (0.0, x["a5"], q6 - hp, x["d6"]),
+        (-hp, 0.0, q7, 0.0),
+        (hp, 0.0, q8 + hp, 0.0),
+        (hp, 0.0, q9 - hp, 0.0),
+    ]
+    T = np.eye(4)
+    frames = []
+    for r in rows:
+        T = T @ _np_dh_modified(*r)
+        frames.append(T)
+    p_n = T[:3, 3]
+    Jc = np.zeros((6, 9))
+    for i, Ti in enumerate(frames):
+        z, p = Ti[:3, 2], Ti[:3, 3]
+        Jc[:3, i] = np.cross(z, p_n - p)
+        Jc[3:, i] = z
+    C = np.zeros((9, 7))
+    for i, j in [(0, 0), (1, 1), (2, 2), (5, 3), (6, 4), (7, 5), (8, 6)]:
+        C[i, j] = 1.0
+    C[3, 2] = -1.0
+    C[4, 0] = C[4, 1] = -1.0
+    return T, Jc @ C
+
+
+def test_kernel_fk_and_jacobian_equal_a_numpy_dh_product():
+    """mechanism.fk/jacobian (the frame kernel with the joint couplings) against the numpy
+    product of the DH link matrices, random designs (all 8 lengths) and joints, float64."""
+    rng = np.random.default_rng(11)
+    lo = np.array([250, 250, 50, 0, 20, 10, 20, 40.0])
+    hi = np.array([350, 350, 150, 40, 100, 60, 80, 120.0])
+    n = 64
+    X = rng.uniform(lo, hi, (n, 8))
+    q = rng.uniform(m.JOINT_LIMITS[:, 0], m.JOINT_LIMITS[:, 1], (n, 7))
+    d = {k: jnp.asarray(X[:, i]) for i, k in enumerate(m.DESIGN_KEYS)}
+    T, J = np.asarray(m.fk(q, d)), np.asarray(m.jacobian(q, d))
+    assert T.dtype == J.dtype == np.float64
+    for i in range(n):
+        Tr, Jr = _np_master9(q[i], dict(zip(m.DESIGN_KEYS, X[i], strict=True)))
+        # rotations and J_w to 1e-12; positions and J_v (mm, |p| < 1000) to 1e-12 relative
+        np.testing.assert_allclose(T[i, :3, :3], Tr[:3, :3], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(T[i, :3, 3], Tr[:3, 3], rtol=0, atol=1e-12 * 1e3)
+        np.testing.assert_allclose(J[i, :3], Jr[:3], rtol=0, atol=1e-12 * 1e3)
+        np.testing.assert_allclose(J[i, 3:], Jr[3:], rtol=0, atol=1e-12)
+    # design values broadcast against q's leading dims: (4, 1) designs × (5, 7) joints
+    TM = np.asarray(m.fk(q[:5], {k: v[:4, None] for k, v in d.items()}))
+    assert TM.shape == (4, 5, 4, 4)
+    Tr, _ = _np_master9(q[3], dict(zip(m.DESIGN_KEYS, X[2], strict=True)))
+    np.testing.assert_allclose(TM[2, 3], Tr, rtol=0, atol=1e-9)

@@ -1,18 +1,7 @@
-"""Kernel layer shared by every study (SPEC §2): transforms, chains, Jacobians, conditioning."""
+"""Kernel layer shared by every study (SPEC §2): transforms, the frame kernel, conditioning."""
 
-from designopt.kinematics.chain import ET, DHChain, ETChain
-from designopt.kinematics.conditioning import (
-    cond_2,
-    cond_fro,
-    det3,
-    inv_cond,
-    inv_cond_2,
-    inv_cond_any,
-    inv_cond_fro,
-    inv_cond_fro3,
-)
-from designopt.kinematics.jacobian import geometric_jacobian, position_jacobian
-from designopt.kinematics.kernel import SerialModel, dh_model, et_model
+from designopt.kinematics.conditioning import cond, inv_cond, singular_values_sq
+from designopt.kinematics.kernel import ET, SerialModel, dh_model, et_model
 from designopt.kinematics.transforms import (
     dh_modified,
     dh_standard,
@@ -26,27 +15,18 @@ from designopt.kinematics.transforms import (
 )
 
 __all__ = [
-    "DHChain",
     "ET",
-    "ETChain",
     "SerialModel",
-    "cond_2",
-    "cond_fro",
-    "det3",
+    "cond",
     "dh_model",
     "dh_modified",
     "dh_standard",
     "et_model",
-    "geometric_jacobian",
     "inv_cond",
-    "inv_cond_2",
-    "inv_cond_any",
-    "inv_cond_fro",
-    "inv_cond_fro3",
-    "position_jacobian",
     "rotx",
     "roty",
     "rotz",
+    "singular_values_sq",
     "trans",
     "transx",
     "transy",

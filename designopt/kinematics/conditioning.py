@@ -1,11 +1,27 @@
-"""Condition numbers of Jacobians (seed 000 eq. 35 and appendix eq. 51-52).
+"""Inverse condition numbers 1/k of Jacobians of any shape (seed 000 eq. 35, 51-53).
 
-Conventions, stated once for the whole API:
-- ``cond_2``  = σ_max/σ_min (≥ 1).  ``cond_fro`` = ‖J‖_F·‖J⁻¹‖_F (≥ n for n×n, *raw*;
-  pass ``normalized=True`` for k/n ≥ 1, the Gosselin-Angeles convention).
-- ``inv_*`` return 1/k in [0, 1] (2-norm, or normalised Frobenius) or [0, 1/n] (raw
-  Frobenius). A singular matrix gives exactly 0, never NaN or inf, and the gradient of
-  ``inv_cond_fro3`` stays finite there.
+One public entry point, :func:`inv_cond` (and :func:`cond` = 1/inv_cond), dispatching on
+the shape (..., r, n), r ≤ n or r ≥ n, m = min(r, n); G is the m×m Gram matrix of the
+smaller side (J Jᵀ for r ≤ n, Jᵀ J otherwise), σ_i the singular values of J.
+
+- norm "2":   σ_min/σ_max in [0, 1].
+- norm "fro": 1/(‖J‖_F ‖J⁺‖_F) (J⁺ = J⁻¹ for square J), *raw* in [0, 1/m];
+  ``normalized`` multiplies by m so the range is [0, 1] (the Gosselin-Angeles convention).
+
+How (all differentiable, no LAPACK call for m ≤ 8):
+- m ≤ 3: closed forms on the entries (square Frobenius: the adjugate, |det J| /
+  (‖J‖_F ‖adj J‖_F); otherwise the eigenvalues of G, its determinant by Cauchy-Binet);
+- m = 4..8, Frobenius: an unrolled LDLᵀ of G, tr G⁻¹ = ‖J⁺‖_F²; larger: Cholesky;
+- m ≥ 4, 2-norm: one-sided Jacobi (``singular_values_sq``).
+
+Numerically singular gives exactly 0, never NaN or inf: σ_min/σ_max ≤ max(r, n)·eps
+(numpy's matrix_rank tolerance) for the 2-norm; normalised Frobenius 1/k ≤ max(r, n)·eps
+(which implies the same bound on σ_min/σ_max); for m ≥ 4 and the Frobenius norm an LDLᵀ
+pivot of G ≤ 4·max(r, n)·eps·tr G (the Gram route's resolution). The gradient there is
+finite (the unsafe branches are evaluated on substituted values: the double-where rule).
+
+The frame kernel (``designopt.kinematics.kernel``) calls the same closed forms on a
+Jacobian given entry-wise (``_inv_cond_entries``), so its structural zeros are folded.
 """
 
 from __future__ import annotations
@@ -22,120 +38,7 @@ from jax.typing import ArrayLike
 from designopt.kinematics import _fold as F
 
 Array = jnp.ndarray
-
-
-def _safe_div(num: Array, den: Array) -> Array:
-    ok = den > 0
-    return jnp.where(ok, num / jnp.where(ok, den, 1.0), 0.0)
-
-
-def cofactors3(J: ArrayLike) -> Array:
-    """Cofactor matrix C of a (..., 3, 3) matrix; adj(J) = Cᵀ and det J = Σ_j J_0j C_0j."""
-    J = jnp.asarray(J)
-    a, b, c = J[..., 0, 0], J[..., 0, 1], J[..., 0, 2]
-    d, e, f = J[..., 1, 0], J[..., 1, 1], J[..., 1, 2]
-    g, h, i = J[..., 2, 0], J[..., 2, 1], J[..., 2, 2]
-    rows = [
-        [e * i - f * h, f * g - d * i, d * h - e * g],
-        [c * h - b * i, a * i - c * g, b * g - a * h],
-        [b * f - c * e, c * d - a * f, a * e - b * d],
-    ]
-    return jnp.stack([jnp.stack(r, axis=-1) for r in rows], axis=-2)
-
-
-def det3(J: ArrayLike) -> Array:
-    """Determinant of (..., 3, 3) by cofactor expansion (no LU, differentiable)."""
-    J = jnp.asarray(J)
-    return jnp.sum(J[..., 0, :] * cofactors3(J)[..., 0, :], axis=-1)
-
-
-def inv_cond_fro3(J: ArrayLike, normalized: bool = False) -> Array:
-    """1/k_F for 3×3 matrices in closed form: |det J| / (‖J‖_F ‖adj J‖_F), no SVD.
-
-    ‖J⁻¹‖_F = ‖adj J‖_F/|det J| (seed 000 eq. 51-52). Raw values lie in [0, 1/3];
-    ``normalized`` multiplies by 3 so that the range is [0, 1].
-    """
-    J = jnp.asarray(J)
-    if J.shape[-2:] != (3, 3):
-        raise ValueError(f"inv_cond_fro3 needs (..., 3, 3) input, got shape {J.shape}")
-    C = cofactors3(J)
-    det = jnp.sum(J[..., 0, :] * C[..., 0, :], axis=-1)
-    nJ2 = jnp.sum(J * J, axis=(-2, -1))
-    nC2 = jnp.sum(C * C, axis=(-2, -1))
-    den2 = nJ2 * nC2
-    ok = den2 > 0
-    den = jnp.sqrt(jnp.where(ok, den2, 1.0))
-    r = jnp.where(ok, jnp.abs(det) / den, 0.0)
-    return 3.0 * r if normalized else r
-
-
-def _svals(J: ArrayLike) -> Array:
-    J = jnp.asarray(J)
-    if J.shape[-1] != J.shape[-2]:
-        raise ValueError(f"condition numbers here need square matrices, got shape {J.shape}")
-    return jnp.linalg.svd(J, compute_uv=False)  # descending
-
-
-def _rank_deficient(s: Array) -> Array:
-    """σ_min ≤ n·eps·σ_max: numerically singular (numpy.linalg.matrix_rank's tolerance)."""
-    eps = jnp.finfo(s.dtype).eps
-    return s[..., -1] <= s.shape[-1] * eps * s[..., 0]
-
-
-def inv_cond_2(J: ArrayLike) -> Array:
-    """σ_min/σ_max in [0, 1]; exactly 0 for numerically singular matrices (and J = 0)."""
-    s = _svals(J)
-    return jnp.where(_rank_deficient(s), 0.0, _safe_div(s[..., -1], s[..., 0]))
-
-
-def cond_2(J: ArrayLike) -> Array:
-    """σ_max/σ_min (seed 000 eq. 35); +inf for a singular matrix."""
-    r = inv_cond_2(J)
-    return jnp.where(r > 0, 1.0 / jnp.where(r > 0, r, 1.0), jnp.inf)
-
-
-def inv_cond_fro(J: ArrayLike, normalized: bool = False) -> Array:
-    """1/(‖J‖_F ‖J⁻¹‖_F) for any square size (3×3 uses the closed form)."""
-    J = jnp.asarray(J)
-    if J.shape[-2:] == (3, 3):
-        return inv_cond_fro3(J, normalized)
-    s = _svals(J)
-    n = J.shape[-1]
-    ok = ~_rank_deficient(s)
-    s_safe = jnp.where(ok[..., None], s, 1.0)
-    kf = jnp.sqrt(jnp.sum(s_safe**2, -1)) * jnp.sqrt(jnp.sum(1.0 / s_safe**2, -1))
-    r = jnp.where(ok, 1.0 / kf, 0.0)
-    return n * r if normalized else r
-
-
-def cond_fro(J: ArrayLike, normalized: bool = False) -> Array:
-    """‖J‖_F·‖J⁻¹‖_F (raw, ≥ n) or k/n when normalized; +inf for singular matrices."""
-    r = inv_cond_fro(J, normalized)
-    return jnp.where(r > 0, 1.0 / jnp.where(r > 0, r, 1.0), jnp.inf)
-
-
-def inv_cond(J: ArrayLike, norm: Literal["fro", "2"] = "fro", normalized: bool = False) -> Array:
-    """Dispatch: 1/k in the chosen norm. ``normalized`` only affects the Frobenius norm."""
-    if norm == "fro":
-        return inv_cond_fro(J, normalized)
-    if norm == "2":
-        return inv_cond_2(J)
-    raise ValueError(f"norm must be 'fro' or '2', got {norm!r}")
-
-
-# --------------------------------------------------------------------------------------
-# Any shape: (..., r, n) with r ≤ n or r ≥ n.
-#
-# Convention (inv_cond_any / inv_cond_entries): m = min(r, n), G the m×m Gram matrix of
-# the smaller side (J Jᵀ for r ≤ n, Jᵀ J otherwise), σ_i the singular values of J.
-# - "2":   σ_min/σ_max in [0, 1].
-# - "fro": 1/(‖J‖_F ‖J⁺‖_F) (J⁺ = J⁻¹ for square J), raw in [0, 1/m]; ``normalized``
-#          multiplies by m so the range is [0, 1].
-# Numerically singular gives exactly 0: σ_min/σ_max ≤ max(r, n)·eps (numpy's
-# matrix_rank tolerance) for the 2-norm; normalised Frobenius 1/k ≤ max(r, n)·eps
-# (which implies the same bound on σ_min/σ_max); for m ≥ 4 and the Frobenius norm an
-# LDLᵀ pivot of G ≤ 4·max(r, n)·eps·tr G (the Gram route's resolution). The gradient there is finite (the unsafe branches
-# are evaluated on substituted values: the double-where rule).
+Norm = Literal["fro", "2"]
 
 
 def _fsqrt(x):
@@ -276,13 +179,13 @@ def _inv_cond_fro_ldl(E, normalized, eps):
     return jnp.where(ok, m * val if normalized else val, 0.0)
 
 
-def inv_cond_entries(E, norm="fro", normalized=False, dtype=None, return_det=False):
-    """1/k of a matrix given entry-wise: E[i][j] is a Python float (a structural value,
-    e.g. an exact 0 of a Jacobian pattern) or an array; arrays broadcast together.
-
-    Structural zeros are folded away at trace time, so e.g. the 9-DOF haptic master's J_v (J20 = J21 = 0)
-    costs what a hand-specialised adjugate costs. Conventions: see ``inv_cond_any``.
-    With ``return_det``, also returns det J for square blocks up to 3×3 (else None).
+def _inv_cond_entries(E, norm="fro", normalized=False, dtype=None):
+    """(1/k, det J, det G) of a matrix given entry-wise: E[i][j] is a Python float (a
+    structural value, e.g. an exact 0 of a Jacobian pattern) or an array; arrays broadcast
+    together. det J is None unless the matrix is square and m ≤ 3; det G (= σ_1²…σ_m²) is
+    None for m > 3. Structural zeros are folded away at trace time, so e.g. the 9-DOF
+    haptic master's J_v (J20 = J21 = 0) costs what a hand-specialised adjugate costs.
+    Conventions: the module docstring.
     """
     if norm not in ("fro", "2"):
         raise ValueError(f"norm must be 'fro' or '2', got {norm!r}")
@@ -294,15 +197,13 @@ def inv_cond_entries(E, norm="fro", normalized=False, dtype=None, return_det=Fal
     eps = float(jnp.finfo(dtype).eps)
     if m > 3 and norm == "fro" and m <= _LDL_MAX:
         res = _inv_cond_fro_ldl(E, normalized, eps)
-        res = jnp.asarray(res).astype(dtype)
-        return (res, None) if return_det else res
+        return jnp.asarray(res).astype(dtype), None, None
     if m > 3:
         flat = [jnp.asarray(x, dtype) for row in E for x in row]
         shape = jnp.broadcast_shapes(*[x.shape for x in flat])
         flat = [jnp.broadcast_to(x, shape) for x in flat]
         J = jnp.stack(flat, -1).reshape(shape + (r, n))
-        out = inv_cond_any(J, norm, normalized)
-        return (out, None) if return_det else out
+        return inv_cond(J, norm, normalized), None, None
     det = None
     if r == n:
         if m == 1:
@@ -312,11 +213,10 @@ def inv_cond_entries(E, norm="fro", normalized=False, dtype=None, return_det=Fal
         else:
             C = _cof3(E)
             det = F.total(F.mul(E[0][j], C[0][j]) for j in range(3))
-    if m == 1:
-        n2 = _sumsq([x for row in E for x in row])
-        res = jnp.where(jnp.asarray(n2) > 0, 1.0, 0.0).astype(dtype)
-        return (res, det) if return_det else res
     nJ2 = _sumsq([x for row in E for x in row])  # = tr G
+    if m == 1:
+        res = jnp.where(jnp.asarray(nJ2) > 0, 1.0, 0.0).astype(dtype)
+        return res, det, nJ2
     if det is not None:
         detG = F.mul(det, det)
     else:
@@ -351,8 +251,7 @@ def inv_cond_entries(E, norm="fro", normalized=False, dtype=None, return_det=Fal
         Gs = [[F.where(ok, G[a][b], eye[a][b]) for b in range(m)] for a in range(m)]
         val = _sym_eig_ratio(Gs, F.where(ok, detG, 1.0))
         res = jnp.where(ok & (val > max(r, n) * eps), val, 0.0)
-    res = jnp.asarray(res).astype(dtype)
-    return (res, det) if return_det else res
+    return jnp.asarray(res).astype(dtype), det, detG
 
 
 def singular_values_sq(J: ArrayLike, sweeps: int | None = None) -> Array:
@@ -406,39 +305,20 @@ def singular_values_sq(J: ArrayLike, sweeps: int | None = None) -> Array:
     return jnp.stack([dot(col, col) for col in cols], -1)
 
 
-def inv_cond_any(
-    J: ArrayLike, norm: Literal["fro", "2"] = "fro", normalized: bool = False
-) -> Array:
-    """1/k of (..., r, n) matrices of any shape (r ≤ n: e.g. a 3×7 position Jacobian of a
-    redundant arm; r ≥ n: a 6×3 Jacobian of a 3-joint arm).
+def _ratio_from_sv2(s2: Array, r: int, n: int) -> Array:
+    """σ_min/σ_max from squared singular values; 0 when numerically singular."""
+    eps = jnp.finfo(s2.dtype).eps
+    smax2 = jnp.max(s2, -1)
+    smin2 = jnp.min(s2, -1)
+    ok = smin2 > (max(r, n) * eps) ** 2 * smax2
+    return jnp.where(ok, jnp.sqrt(jnp.where(ok, smin2 / jnp.where(ok, smax2, 1.0), 1.0)), 0.0)
 
-    norm "2": σ_min/σ_max ∈ [0, 1] (closed form via the eigenvalues of the 2×2/3×3 Gram
-    matrix of the smaller side, one-sided Jacobi from 4 on: ``singular_values_sq``). norm "fro": 1/(‖J‖_F‖J⁺‖_F),
-    raw ∈ [0, 1/m] with m = min(r, n), or ×m in [0, 1] with ``normalized`` (for square J
-    this is ``inv_cond_fro``: adjugate for 3×3, for m ≥ 4 the Cholesky factor of the Gram
-    matrix gives ‖J⁺‖_F² = tr(G⁻¹)). Singular → exactly 0, finite gradient.
-    """
-    J = jnp.asarray(J)
-    if not jnp.issubdtype(J.dtype, jnp.floating):
-        J = J.astype(jnp.result_type(float))
-    if J.ndim < 2:
-        raise ValueError(f"inv_cond_any needs (..., r, n) input, got shape {J.shape}")
+
+def _fro_cholesky(J: Array, normalized: bool) -> Array:
+    """Frobenius 1/k for m > 8: ‖J⁺‖_F² = tr(G⁻¹) from the Cholesky factor of G."""
     r, n = J.shape[-2:]
     m = min(r, n)
-    if m == 0:
-        raise ValueError(f"empty matrix shape {J.shape}")
-    if m <= 3 or (norm == "fro" and m <= _LDL_MAX):
-        E = [[J[..., i, j] for j in range(n)] for i in range(r)]
-        return inv_cond_entries(E, norm, normalized, dtype=J.dtype)
     eps = jnp.finfo(J.dtype).eps
-    if norm == "2":
-        s2 = singular_values_sq(J)  # no LAPACK call: see singular_values_sq
-        smax2 = jnp.max(s2, -1)
-        smin2 = jnp.min(s2, -1)
-        ok = smin2 > (max(r, n) * eps) ** 2 * smax2
-        return jnp.where(ok, jnp.sqrt(jnp.where(ok, smin2 / jnp.where(ok, smax2, 1.0), 1.0)), 0.0)
-    if norm != "fro":
-        raise ValueError(f"norm must be 'fro' or '2', got {norm!r}")
     Jt = jnp.swapaxes(J, -1, -2)
     G = J @ Jt if r <= n else Jt @ J
     trG = jnp.trace(G, axis1=-2, axis2=-1)
@@ -454,3 +334,58 @@ def inv_cond_any(
     tr_inv = jnp.sum(Linv * Linv, axis=(-2, -1))
     val = jax.lax.rsqrt(jnp.where(ok, trG, 1.0) * tr_inv)
     return jnp.where(ok, m * val if normalized else val, 0.0)
+
+
+def inv_cond(
+    J: ArrayLike, norm: Norm = "fro", normalized: bool = False, with_volume: bool = False
+) -> Array | tuple[Array, Array]:
+    """1/k of (..., r, n) matrices of any shape (square; r < n, e.g. a 3×7 position
+    Jacobian of a redundant arm; r > n, e.g. a 6×3 Jacobian of a 3-joint arm).
+
+    ``norm`` "2": σ_min/σ_max ∈ [0, 1]; "fro": 1/(‖J‖_F‖J⁺‖_F), raw ∈ [0, 1/m], or ×m
+    ∈ [0, 1] with ``normalized`` (m = min(r, n)). Singular → exactly 0, finite gradient.
+    The method follows the shape (module docstring). ``with_volume`` also returns
+    σ_1⋯σ_m = sqrt(det G) (|det J| for square J; Yoshikawa's manipulability), from the
+    same closed form (m ≤ 3) or the same Jacobi singular values (m ≥ 4): (1/k, volume).
+    """
+    J = jnp.asarray(J)
+    if not jnp.issubdtype(J.dtype, jnp.floating):
+        J = J.astype(jnp.result_type(float))
+    if J.ndim < 2:
+        raise ValueError(f"inv_cond needs (..., r, n) input, got shape {J.shape}")
+    if norm not in ("fro", "2"):
+        raise ValueError(f"norm must be 'fro' or '2', got {norm!r}")
+    r, n = J.shape[-2:]
+    m = min(r, n)
+    if m == 0:
+        raise ValueError(f"empty matrix shape {J.shape}")
+    if m <= 3:
+        E = [[J[..., i, j] for j in range(n)] for i in range(r)]
+        res, det, detG = _inv_cond_entries(E, norm, normalized, dtype=J.dtype)
+        if not with_volume:
+            return res
+        vol = jnp.abs(det) if det is not None else _fsqrt(detG)
+        return res, jnp.broadcast_to(jnp.asarray(vol, J.dtype), res.shape)
+    s2 = singular_values_sq(J) if (with_volume or norm == "2") else None
+    if norm == "2":
+        res = _ratio_from_sv2(s2, r, n)  # no LAPACK call: see singular_values_sq
+    elif m <= _LDL_MAX:
+        E = [[J[..., i, j] for j in range(n)] for i in range(r)]
+        res = _inv_cond_entries(E, norm, normalized, dtype=J.dtype)[0]
+    else:
+        res = _fro_cholesky(J, normalized)
+    if not with_volume:
+        return res
+    return res, _fsqrt(jnp.prod(s2, -1))
+
+
+def cond(J: ArrayLike, norm: Norm = "fro", normalized: bool = False) -> Array:
+    """k = 1/:func:`inv_cond` (σ_max/σ_min, or ‖J‖_F‖J⁺‖_F raw ≥ m / normalised ≥ 1);
+    +inf for a numerically singular matrix."""
+    r = inv_cond(J, norm, normalized)
+    return jnp.where(r > 0, 1.0 / jnp.where(r > 0, r, 1.0), jnp.inf)
+
+
+inv_cond_any = inv_cond
+"""Transitional alias for the one importer outside this package that still uses the old
+name (the da Vinci study's objective); remove once it imports ``inv_cond``."""

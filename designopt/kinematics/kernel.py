@@ -40,8 +40,7 @@ import numpy as np
 from jax.typing import ArrayLike
 
 from designopt.kinematics import _fold as F
-from designopt.kinematics.chain import ET, ETChain
-from designopt.kinematics.conditioning import inv_cond_entries
+from designopt.kinematics.conditioning import _inv_cond_entries
 
 Array = jnp.ndarray
 Scalar = F.Scalar
@@ -50,6 +49,30 @@ Vec3 = tuple[Scalar, Scalar, Scalar]
 _AXES = {"x": 0, "y": 1, "z": 2}
 _HALF_PI = math.pi / 2
 _MAX_PENDING = 3
+
+
+ETKind = Literal["Rx", "Ry", "Rz", "Tx", "Ty", "Tz"]
+ET_KINDS: tuple[str, ...] = ("Rx", "Ry", "Rz", "Tx", "Ty", "Tz")
+
+
+@dataclass(frozen=True)
+class ET:
+    """One elementary transform of an ``et_model`` chain: ``kind`` (a rotation about or a
+    translation along a frame axis) with value ``const + scale·X[param] + q_chain[joint]``.
+
+    ``param`` names a design variable, ``joint`` a chain joint index; either may be None.
+    Rotations driven by a joint are revolute joints, translations prismatic.
+    """
+
+    kind: ETKind
+    joint: int | None = None
+    param: str | None = None
+    const: float = 0.0
+    scale: float = 1.0  # multiplies the param (e.g. -1 for Rx(-alpha))
+
+    def __post_init__(self) -> None:
+        if self.kind not in ET_KINDS:
+            raise ValueError(f"elementary transform kind must be one of {sorted(ET_KINDS)}")
 
 
 class _Lin(NamedTuple):
@@ -206,7 +229,7 @@ class SerialModel:
     ):
         """1/k of the selected Jacobian block, (M, C), computed entry-wise so that the
         structural zeros of the block are folded into the conditioning formulas
-        (``conditioning.inv_cond_entries``). ``with_position`` also returns p (M, C, 3);
+        (the closed forms of ``conditioning.inv_cond``, on the entries). ``with_position`` also returns p (M, C, 3);
         ``with_det`` also returns det J (square blocks up to 3×3, e.g. |det J_v| weights).
         Returns r, or a tuple (r, [p], [det]) in that order.
         """
@@ -214,7 +237,7 @@ class SerialModel:
         E = w.jacobian_entries(_rows(rows), _cols(cols, self.n_active), char_length)
         E, pos = w.seal((E, w.pos_lins() if with_position else None))
         E = [[w.contract(e) for e in row] for row in E]
-        r, det = inv_cond_entries(E, norm, normalized, dtype=w.dtype, return_det=True)
+        r, det, _ = _inv_cond_entries(E, norm, normalized, dtype=w.dtype)
         out = [w.full(r)]
         if with_position:
             out.append(w.pos_array(pos))
@@ -710,21 +733,20 @@ def dh_model(
 
 
 def et_model(
-    elements: ETChain | Sequence[ET | tuple],
+    elements: Sequence[ET | tuple],
     variables: Sequence[str] | None = None,
     coupling: Any = None,
     n_chain: int | None = None,
 ) -> SerialModel:
     """An elementary-transform chain as a ``SerialModel``.
 
-    ``elements``: an ``ETChain``, a sequence of ``ET``, or tuples
-    ``(kind, joint, param, const, scale)`` (trailing fields optional). Each value is
+    ``elements``: a sequence of ``ET`` or of tuples ``(kind, joint, param, const, scale)``
+    (trailing fields optional). Each value is
     const + scale·X[param] + q_chain[joint]; rotations driven by a joint are revolute,
     translations prismatic. ``coupling`` as in ``dh_model`` (chain joints are the ET
     joint indices 0..n_chain-1).
     """
-    els = elements.elements if isinstance(elements, ETChain) else tuple(elements)
-    els = tuple(e if isinstance(e, ET) else ET(*e) for e in els)
+    els = tuple(e if isinstance(e, ET) else ET(*e) for e in elements)
     js = [e.joint for e in els if e.joint is not None]
     nc = (max(js) + 1 if js else 0) if n_chain is None else n_chain
     if sorted(js) != list(range(nc)):

@@ -12,6 +12,7 @@ degenerate (the redundancy is resolved by an explicit rule, see ``ik``).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 
 import jax
@@ -19,8 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.typing import ArrayLike
 
-from designopt.kinematics.chain import DHChain, DHParams
-from designopt.kinematics.jacobian import geometric_jacobian
+from designopt.kinematics.kernel import SerialModel, dh_model
 
 Array = jnp.ndarray
 
@@ -48,8 +48,27 @@ JOINT_LIMITS = np.deg2rad(JOINT_LIMITS_DEG)
 
 POSITION_LIMITS = JOINT_LIMITS[:3]
 
-CHAIN = DHChain(joint_types=("R",) * 9, convention="modified")
-"""The 9-joint modified-DH chain of SPEC §3.1 (reconstructed Table 1)."""
+_HP = math.pi / 2
+COUPLING = np.zeros((9, 7))
+for _i, _j in [(0, 0), (1, 1), (2, 2), (5, 3), (6, 4), (7, 5), (8, 6)]:
+    COUPLING[_i, _j] = 1.0
+COUPLING[3, 2] = -1.0  # q4 = -q3 (parallelogram)
+COUPLING[4, 0] = COUPLING[4, 1] = -1.0  # q5 = -q1 - q2 (position compensation)
+"""(9, 7): chain joints q1..q9 = COUPLING @ active joints (q1, q2, q3, q6, q7, q8, q9)."""
+
+MODEL: SerialModel = dh_model(
+    "modified",
+    ("R",) * 9,
+    alpha=[0.0, 0.0, -_HP, 0.0, _HP, 0.0, -_HP, _HP, _HP],
+    a=[0.0, "a1", 0.0, "a3", "a4", "a5", 0.0, 0.0, 0.0],
+    d=[0.0, ("d2", -1.0), "d3", 0.0, "d5", "d6", 0.0, 0.0, 0.0],
+    theta=[0.0, -_HP, 0.0, 0.0, 0.0, -_HP, 0.0, _HP, -_HP],
+    variables=DESIGN_KEYS,
+    coupling=COUPLING,
+)
+"""The 9-joint modified-DH chain of SPEC §3.1 (reconstructed Table 1) on the frame kernel:
+every length of ``DESIGN_KEYS`` is a design variable (a column of X, in that order), the
+7 active joints drive the 9 chain joints through ``COUPLING``."""
 
 
 def default_design() -> dict[str, float]:
@@ -86,39 +105,26 @@ def _float(q: Array) -> Array:
     return q if jnp.issubdtype(q.dtype, jnp.floating) else q.astype(jnp.float64)
 
 
-def dh_params(design: Mapping[str, ArrayLike], dtype=jnp.float64) -> DHParams:
-    """The DH table of SPEC §3.1 as arrays (shape design_batch + (9,))."""
-    p = _d(design, dtype)
-    z = jnp.zeros_like(
-        p["a1"] + p["a3"] + p["d3"] + p["a4"] + p["a5"] + p["d2"] + p["d5"] + p["d6"]
-    )
-    hp = jnp.pi / 2
-
-    def row(*xs):
-        return jnp.stack([x + z for x in xs], axis=-1)
-
-    alpha = row(0.0, 0.0, -hp, 0.0, hp, 0.0, -hp, hp, hp)
-    a = row(0.0, p["a1"], 0.0, p["a3"], p["a4"], p["a5"], 0.0, 0.0, 0.0)
-    d = row(0.0, -p["d2"], p["d3"], 0.0, p["d5"], p["d6"], 0.0, 0.0, 0.0)
-    theta = row(0.0, -hp, 0.0, 0.0, 0.0, -hp, 0.0, hp, -hp)
-    return DHParams(
-        alpha=alpha.astype(dtype), a=a.astype(dtype), d=d.astype(dtype), theta=theta.astype(dtype)
-    )
-
-
-def full_joints(q: ArrayLike) -> Array:
-    """(..., 7) active joints → (..., 9) chain joints with the passive constraints applied."""
-    q = jnp.asarray(q)
-    q1, q2, q3 = q[..., 0], q[..., 1], q[..., 2]
-    return jnp.stack([q1, q2, q3, -q3, -q1 - q2, q[..., 3], q[..., 4], q[..., 5], q[..., 6]], -1)
+def _pairs(q: Array, design: Mapping[str, ArrayLike]) -> tuple[Array, Array, tuple]:
+    """Designs X (N, 8) and configurations (N, 7), one pair per element of the broadcast
+    leading shape of q and the design values."""
+    dd = _d(design, q.dtype)
+    lead = jnp.broadcast_shapes(q.shape[:-1], *[v.shape for v in dd.values()])
+    X = jnp.stack([jnp.broadcast_to(dd[k], lead) for k in DESIGN_KEYS], -1)
+    return X.reshape(-1, len(DESIGN_KEYS)), jnp.broadcast_to(q, lead + (7,)).reshape(-1, 7), lead
 
 
 def _fk(q: Array, design: Mapping[str, ArrayLike]) -> Array:
-    return CHAIN.fk(dh_params(design, q.dtype), full_joints(q))
+    X, qf, lead = _pairs(q, design)
+    R, p = jax.vmap(MODEL.fk)(X, qf)  # (N, 3, 3), (N, 3)
+    top = jnp.concatenate([R, p[:, :, None]], -1)
+    bottom = jnp.broadcast_to(jnp.asarray([0.0, 0.0, 0.0, 1.0], R.dtype), (R.shape[0], 1, 4))
+    return jnp.concatenate([top, bottom], -2).reshape(lead + (4, 4))
 
 
 def fk(q: ArrayLike, design: Mapping[str, ArrayLike]) -> Array:
-    """Base-to-holding-point transform (..., 4, 4) from the DH chain (seed 000 eq. 1-2)."""
+    """Base-to-holding-point transform (..., 4, 4) of the chain (seed 000 eq. 1-2), by the
+    frame kernel; design values broadcast against q's leading dimensions."""
     check_design(design)
     q = _float(_check_q(q))
     return _fk(q, design)
@@ -171,11 +177,13 @@ def fk_closed(q: ArrayLike, design: Mapping[str, ArrayLike]) -> Array:
 
 
 def jacobian(q: ArrayLike, design: Mapping[str, ArrayLike]) -> Array:
-    """Geometric Jacobian (..., 6, 7) in the base frame, rows v then ω, by autodiff of the
-    chain with the passive constraints inside (equivalent to seed 000 eq. 31)."""
+    """Geometric Jacobian (..., 6, 7) in the base frame, rows v then ω, columns the active
+    joints, from the frame kernel (the passive joints enter through ``COUPLING``;
+    equivalent to seed 000 eq. 31)."""
     check_design(design)
     q = _float(_check_q(q))
-    return geometric_jacobian(_fk, q, _d(design, q.dtype))
+    X, qf, lead = _pairs(q, design)
+    return jax.vmap(MODEL.jacobian)(X, qf).reshape(lead + (6, 7))
 
 
 def jacobian_v_closed(q3: ArrayLike, design: Mapping[str, ArrayLike]) -> Array:
