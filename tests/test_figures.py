@@ -1,6 +1,9 @@
 """Figure checks (docs/figures.md, the checker in tests/figcheck.py): the scan, sweep and
 bench figures with tiny inputs, and the checker itself. Every registered study's run
-figures are checked by the contract test that draws them (tests/test_studies.py)."""
+figures are checked by the contract test that draws them (tests/test_studies.py).
+
+Figures are drawn from records (``designopt.results``): the in-memory record of a command
+and the record loaded back from its archive draw the same pixels."""
 
 from __future__ import annotations
 
@@ -11,12 +14,13 @@ import numpy as np
 import pytest
 from figcheck import assert_clean, problems
 
-from designopt import archive, figures, pipeline, stats
+from designopt import archive, figures, output, pipeline, stats
 from designopt.config import validate
 from designopt.figures import bench as bench_figs
 from designopt.figures import scan as scan_figs
 from designopt.figures import style
 from designopt.figures import sweep as sweep_figs
+from designopt.results import BenchRecord, SweepRecord
 from designopt.studies import STUDIES, get
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -78,6 +82,10 @@ def test_labels_and_log_choice():
     plt.close("all")
 
 
+def _pngs(folder: Path) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in sorted(folder.glob("*.png"))}
+
+
 # ------------------------------------------------------------------ every study, tiny
 
 
@@ -97,14 +105,18 @@ def test_replay_figures(name, tmp_path, record):
     contract run test in tests/test_studies.py)."""
     cfg = _config(name)
     rep = pipeline.run(cfg, "tiny", str(ROOT / "configs" / "tiny.yaml"), tmp_path / "a.h5")
-    get(name).figures(archive.read(rep.out), tmp_path / "figs")
+    rec = archive.load(rep.out)
+    assert rec == rep.record
+    get(name).figures(rec, tmp_path / "figs")
     assert_clean(record)
+    get(name).figures(rep.record, tmp_path / "mem")  # the in-memory record: same pixels
+    assert _pngs(tmp_path / "mem") == _pngs(tmp_path / "figs") != {}
 
 
 def _scan(name: str, tmp_path: Path, scan: dict):
     cfg = _config(name, scan=scan)
     rep = pipeline.scan(cfg, "tiny", "tiny", tmp_path / f"{name}_{scan.get('mode', 'grid')}.h5")
-    return archive.read(rep.out)
+    return archive.load(rep.out)
 
 
 def test_scan_curves_merge_equal_indices(tmp_path, record):
@@ -125,7 +137,7 @@ def test_scan_grid_hatches_infeasible_cells_and_designs(tmp_path, record):
     grid = {"a": {"from": 60, "to": 200, "num": 4}, "c": {"from": 200, "to": 400, "num": 3}}
     a = _scan("rcm", tmp_path, {"mode": "grid", "vary": grid})
     scan_figs.draw(a, tmp_path / "f")
-    assert (a["scan"]["violation"] > 0).any()  # eq. (19) fails for small a, large c
+    assert (a.values["violation"] > 0).any()  # eq. (19) fails for small a, large c
     fig = record[0][1]
     texts = [
         t.get_text() for ax in fig.axes if ax.get_legend() for t in ax.get_legend().get_texts()
@@ -141,8 +153,25 @@ def test_scan_grid_hatches_infeasible_cells_and_designs(tmp_path, record):
 def test_sweep_figure(tmp_path, record):
     cfg = _config("rcm", sweep={"vary": {"optimizer.gamma": [1e-7, 1e-3]}})
     rep = pipeline.sweep(cfg, "tiny", "tiny", tmp_path / "s.h5")
-    sweep_figs.draw(archive.read(rep.out), tmp_path / "f")
+    rec = archive.load(rep.out)
+    assert isinstance(rec, SweepRecord)
+    sweep_figs.draw(rec, tmp_path / "f")
     assert_clean(record)
+    (_, fig), = record  # fmt: skip
+    ax = fig.axes[0]
+    # one row per member, at its archived final f, labelled by what it overrides
+    assert [t.get_text() for t in ax.get_yticklabels()] == ["gamma=1e-07", "gamma=0.001"]
+    f = [float(m["final"]["f"]) for m in rec.members.values()]
+    np.testing.assert_array_equal(ax.lines[0].get_xdata(), f)
+    members = rec.member_records()
+    assert list(members) == ["000", "001"]
+    for (k, m), gamma in zip(members.items(), (1e-7, 1e-3), strict=True):
+        assert list(rec.overrides()[k].values()) == [gamma]
+        assert m.config.optimizer.settings == {"gamma": gamma}
+        assert m.config.study == rec.config.study
+        assert m.study == "rcm" and m.seed == 3 and m.f == f[int(k)]
+    sweep_figs.draw(rep.record, tmp_path / "mem")
+    assert _pngs(tmp_path / "mem") == _pngs(tmp_path / "f") != {}
 
 
 def test_bench_figures(tmp_path, record):
@@ -160,3 +189,19 @@ def test_bench_figures(tmp_path, record):
     assert_clean(record)
     curves = dict(record)["convergence_curves"]
     assert all(ax.get_yscale() == "log" for ax in curves.axes if ax.get_visible() and ax.lines)
+    # the same data as a record, through its archive: the same figures (``designopt report``)
+    tree = {c: {"attrs": {"stats": st[c]}} | {v: {"history": h} for v, h in hist[c].items()}
+            for c in hist}  # fmt: skip
+    raw = {"bench": {"functions": ["sphere", "griewank"], "n_runs": 6}}
+    attrs = {"kind": "bench", "config_resolved": raw, "seed": 0}
+    with output.session():
+        archive.save(tmp_path / "b.h5", BenchRecord(attrs, {"bench": tree}))
+    rec = archive.load(tmp_path / "b.h5")
+    assert isinstance(rec, BenchRecord) and rec.n_runs == 6
+    assert list(rec.cases) == ["griewank_shifted", "sphere"]  # HDF5: sorted by name
+    assert rec.case_names() == ["sphere", "griewank_shifted"]  # the config's order
+    assert list(rec.histories("sphere")) == ["p1", "p3", "cmaes"]
+    np.testing.assert_array_equal(rec.histories("sphere")["p3"], hist["sphere"]["p3"])
+    paths = bench_figs.draw_record(rec, tmp_path / "again")
+    assert {p.name for p in paths} == {p.name for p in tmp_path.glob("*.p[nd][gf]")}
+    assert _pngs(tmp_path / "again") == _pngs(tmp_path)

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from designopt.figures import save, style
+from designopt.results import BenchRecord
 
 
 def _grid(n: int) -> tuple[int, int]:
@@ -124,3 +125,11 @@ def draw(folder: Path, stats: dict[str, Any], histories: dict[str, dict[str, np.
     fig.suptitle(f"Convergence over {n_runs} runs (median, band IQR){note}", fontsize=9)
     out += save(fig, folder, "convergence_curves")
     return out
+
+
+def draw_record(rec: BenchRecord, folder: Path) -> list[Path]:
+    """Draw a benchmark record's figures into ``folder`` (``designopt report``)."""
+    cases = rec.case_names()  # the order the suite ran them, as drawn after the run
+    stats = {c: rec.stats(c) for c in cases}
+    histories = {c: rec.histories(c) for c in cases}
+    return draw(Path(folder), stats, histories, rec.n_runs)

@@ -22,26 +22,28 @@ from matplotlib.collections import PatchCollection
 from matplotlib.colors import LogNorm
 from matplotlib.patches import Patch, Rectangle
 
+from designopt.errors import ConfigError
 from designopt.figures import save, style
+from designopt.results import ScanRecord
 
 INFEASIBLE = {"marker": "o", "mfc": "none", "mec": "0.45", "ls": "none", "ms": 5}
 
 
-def _indices(sc: dict[str, Any]) -> list[str]:
-    skip = {"names", "x", "varied", "attrs", "violation"}
-    return [k for k in sc if k not in skip and not k.endswith("_se")]
+def _indices(sc: Mapping[str, Any]) -> list[str]:
+    """The indices drawn: f and every index of ``ScanRecord.values`` but the violation."""
+    return [k for k in sc if k != "violation" and not k.endswith("_se")]
 
 
-def study_hints(a: dict[str, Any]) -> tuple[dict[str, str], Any]:
-    """(units, the study's figures module or None) of an archive's study; the units also
+def study_hints(rec: ScanRecord) -> tuple[dict[str, str], Any]:
+    """(units, the study's figures module or None) of a scan's study; the units also
     hold ``"__summary__"``: the study's summary indices (the maps drawn first)."""
     from designopt.studies import get
 
     try:
-        st = get(a["attrs"].get("study", ""))
-        s = st.settings.model_validate(a["attrs"]["config_resolved"]["study"])
+        st = get(rec.study)
+        s = rec.config.study
         units = dict(st.units(s)) | {"__summary__": tuple(st.summary(s))}
-    except (ValueError, KeyError, TypeError):
+    except (ValueError, KeyError, TypeError, ConfigError):
         return {}, None
     home = st.figures.__module__  # a study package ("designopt.studies.rcm") or a module in it
     for name in (home + ".figures", home.rsplit(".", 1)[0] + ".figures"):
@@ -85,12 +87,11 @@ def _masked(sc: Mapping[str, Any], k: str, undefined: Mapping[str, str]) -> np.n
     return y
 
 
-def _curves(a: dict[str, Any], folder: Path, units: dict[str, str], mod: Any) -> list[Path]:
-    sc = a["scan"]
-    names = [n.decode() for n in sc["names"]]
-    var = sc["varied"][0].decode()
-    study = a["attrs"].get("study", "")
-    x = sc["x"][:, names.index(var)]
+def _curves(rec: ScanRecord, folder: Path, units: dict[str, str], mod: Any) -> list[Path]:
+    sc = rec.values
+    var = rec.varied[0]
+    study = rec.study
+    x = rec.X[:, rec.names.index(var)]
     order = np.argsort(x)
     x = x[order]
     rates = set(getattr(mod, "RATES", ()))
@@ -144,13 +145,11 @@ def _curves(a: dict[str, Any], folder: Path, units: dict[str, str], mod: Any) ->
     return save(fig, folder, f"scan_{var}")
 
 
-def _grid(a: dict[str, Any], folder: Path, units: dict[str, str], mod: Any) -> list[Path]:
-    sc = a["scan"]
-    names = [n.decode() for n in sc["names"]]
-    varied = [n.decode() for n in sc["varied"]]
-    study = a["attrs"].get("study", "")
-    n0, n1 = sc["attrs"]["shape"]
-    X = sc["x"]
+def _grid(rec: ScanRecord, folder: Path, units: dict[str, str], mod: Any) -> list[Path]:
+    sc = rec.values
+    names, varied, study = rec.names, rec.varied, rec.study
+    n0, n1 = rec.shape
+    X = rec.X
     i0, i1 = names.index(varied[0]), names.index(varied[1])
     g0 = X[:, i0].reshape(n0, n1)[:, 0]
     g1 = X[:, i1].reshape(n0, n1)[0, :]
@@ -194,9 +193,9 @@ def _edges(g: np.ndarray) -> np.ndarray:
     return np.concatenate([[2 * g[0] - mid[0]], mid, [2 * g[-1] - mid[-1]]])
 
 
-def _designs(a: dict[str, Any], folder: Path) -> list[Path]:
-    sc = a["scan"]
-    study = a["attrs"].get("study", "")
+def _designs(rec: ScanRecord, folder: Path) -> list[Path]:
+    sc = rec.values
+    study = rec.study
     f = np.asarray(sc["f"], np.float64)
     i = np.arange(len(f))
     se = np.asarray(sc["f_se"]) if "f_se" in sc else None
@@ -214,12 +213,12 @@ def _designs(a: dict[str, Any], folder: Path) -> list[Path]:
     return save(fig, folder, "scan_designs")
 
 
-def draw(a: dict[str, Any], folder: Path) -> list[Path]:
-    """The figure of a scan archive (``archive.read``) into ``folder``."""
-    units, mod = study_hints(a)
-    varied = a["scan"]["varied"]
+def draw(rec: ScanRecord, folder: Path) -> list[Path]:
+    """The figure of a scan record into ``folder``."""
+    units, mod = study_hints(rec)
+    varied = rec.varied
     if len(varied) == 1:
-        return _curves(a, folder, units, mod)
-    if len(varied) == 2 and a["scan"]["attrs"].get("mode") == "grid":
-        return _grid(a, folder, units, mod)
-    return _designs(a, folder)
+        return _curves(rec, folder, units, mod)
+    if len(varied) == 2 and rec.mode == "grid":
+        return _grid(rec, folder, units, mod)
+    return _designs(rec, folder)

@@ -4,21 +4,22 @@ it) and the members' convergence curves (median over runs, band: interquartile r
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from designopt.figures import save, style
+from designopt.results import SweepRecord
 
 
-def draw(a: dict[str, Any], folder: Path) -> list[Path]:
-    """The figure of a sweep archive (``archive.read``) into ``folder``."""
-    mem = {k: v for k, v in a["members"].items() if k != "attrs"}
-    labels = [", ".join(f"{kk.split('.')[-1]}={vv:g}" for kk, vv in m["attrs"]["overrides"].items())
-              for m in mem.values()]  # fmt: skip
-    study = a["attrs"].get("study", "")
-    f = np.array([float(m["final"]["f"]) for m in mem.values()])
-    se = np.array([float(m["final"].get("f_se", np.nan)) for m in mem.values()])
+def draw(rec: SweepRecord, folder: Path) -> list[Path]:
+    """The figure of a sweep record into ``folder``."""
+    mem = rec.member_records()
+    labels = [", ".join(f"{kk.split('.')[-1]}={vv:g}" for kk, vv in ov.items())
+              for ov in rec.overrides().values()]  # fmt: skip
+    study = rec.study
+    f = np.array([m.f for m in mem.values()])
+    se = np.array([np.nan if m.indices["f"][1] is None else m.indices["f"][1]
+                   for m in mem.values()])  # fmt: skip
     n = len(mem)
     fig, axes = style.subplots(1, 2, figsize=(11, 0.9 + max(2.8, 0.32 * n)),
                                width_ratios=[1, 1.3])  # fmt: skip
@@ -36,7 +37,7 @@ def draw(a: dict[str, Any], folder: Path) -> list[Path]:
     ax = axes[1]
     hs = []
     for lab, m in zip(labels, mem.values(), strict=True):
-        h = np.asarray(m["optimizer"]["history"], np.float64)
+        h = np.asarray(m.history, np.float64)
         it = np.arange(h.shape[1])
         q25, q50, q75 = np.percentile(h, [25, 50, 75], axis=0)
         (line,) = ax.plot(it, q50, lw=1, label=lab)

@@ -6,6 +6,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
+import numpy as np
+
 from designopt.results.base import Record
 
 
@@ -39,3 +41,25 @@ class BenchRecord(Record):
             best = min(rows, key=lambda v: rows[v]["mean"])
             lines.append(f"  {case}: best mean {best} ({rows[best]['mean']:.3e})")
         return lines
+
+    def case_names(self) -> list[str]:
+        """The cases in the order the suite ran them (the config's functions, then their
+        shifted copies; an archive gives its groups sorted by name)."""
+        from designopt.benchsuite import cases
+
+        have = list(self.cases)
+        ran = [c for c, _, _ in cases(self.config) if c in have]
+        return ran + [c for c in have if c not in ran]
+
+    def histories(self, case: str) -> dict[str, np.ndarray]:
+        """Each entry's best f so far per run and iteration (runs, T+1) for one case, in
+        the config's order of the entries (that of the case's ``stats`` rows)."""
+        ent = self.entries(case)
+        order = [v for v in self.stats(case)["rows"] if v in ent]
+        order += [v for v in ent if v not in order]
+        return {v: np.asarray(ent[v]["history"]) for v in order}
+
+    @property
+    def n_runs(self) -> int:
+        """Independent runs per entry (``bench.n_runs`` of the config)."""
+        return int(self.config.bench.n_runs)

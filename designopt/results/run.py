@@ -172,6 +172,10 @@ class ReplayRecord(Record):
             if isinstance(g, dict) and "summary" in g.get("attrs", {})
         ]  # fmt: skip
 
+    def arrays(self, group: str) -> dict[str, np.ndarray]:
+        """The arrays of one of the study's groups (its attrs left out) as numpy."""
+        return {k: np.asarray(v) for k, v in self.groups[group].items() if k != "attrs"}
+
 
 @dataclass(eq=False)
 class SweepRecord(Record):
@@ -190,6 +194,31 @@ class SweepRecord(Record):
             f"  [{k}] {m['attrs']['overrides']}: f = {float(m['final']['f']):.5f}"
             for k, m in self.members.items()
         ]
+
+    def member_records(self) -> dict[str, RunRecord]:
+        """Each member as a ``RunRecord``, in archive order: its groups, its attrs
+        (``overrides``, ``config_resolved_yaml``) and the sweep's ``study``, ``seed``,
+        ``keys`` and ``config_dir``; ``.config`` is the member's own resolved config."""
+        import yaml
+
+        root = {k: self.attrs[k] for k in ("study", "seed", "keys", "config_dir")
+                if k in self.attrs}  # fmt: skip
+        out = {}
+        for k, m in self.members.items():
+            attrs = {"kind": "run", **root, **dict(m.get("attrs", {}))}
+            if "config_resolved_yaml" in attrs:
+                attrs["config_resolved"] = yaml.safe_load(str(attrs["config_resolved_yaml"]))
+                seed = attrs["config_resolved"].get("seed", attrs.get("seed"))
+                if seed is not None and int(seed) != self.seed:  # a sweep over the seed
+                    from designopt.studies import key_data, streams
+
+                    attrs |= {"seed": int(seed), "keys": key_data(streams(int(seed)))}
+            out[k] = RunRecord.from_tree({**m, "attrs": attrs})
+        return out
+
+    def overrides(self) -> dict[str, dict[str, Any]]:
+        """What each member changes: dotted config key → value."""
+        return {k: dict(m["attrs"]["overrides"]) for k, m in self.members.items()}
 
 
 @dataclass(eq=False)

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -15,7 +14,7 @@ from matplotlib.ticker import MaxNLocator
 
 from designopt import montecarlo as mc
 from designopt.figures import convergence, save, style
-from designopt.studies.base import archived_keys
+from designopt.results import RunRecord
 from designopt.studies.davinci import mechanism as mech
 from designopt.studies.davinci import objective
 from designopt.studies.davinci.settings import TABLE1, DavinciSettings
@@ -85,20 +84,20 @@ def gci_line(s: DavinciSettings, params, x: np.ndarray, names: tuple[str, ...], 
     return save(fig, folder, "gci_vs_lij")
 
 
-def draw_run(a: dict[str, Any], folder: Path) -> list[Path]:
-    cfg = a["attrs"]["config_resolved"]
-    s = DavinciSettings.model_validate(cfg["study"])
-    params = objective.make_params(s, archived_keys(a), mc.out_dtype())
-    names = tuple(s.variables)
-    x = np.asarray(a["final"]["x"], np.float64)
+def draw_run(rec: RunRecord, folder: Path) -> list[Path]:
+    """Convergence, workspace and GCI line of a run record."""
+    s: DavinciSettings = rec.config.study
+    params = objective.make_params(s, rec.keys(), mc.out_dtype())
+    names = tuple(rec.names)
+    x = np.asarray(list(rec.x.values()), np.float64)
     units = {k: "-" for k in ("f", "gci", *RATES)}
-    out = convergence(a["best_run"], ["f", "gci", "ik_success"], folder,
+    out = convergence(rec.best_run, ["f", "gci", "ik_success"], folder,
                       "da Vinci arm: objective, GCI and IK success along the best run",
                       units=units, rates={"ik_success": s.indices.n_ik})  # fmt: skip
     desc = ", ".join(f"{n} = {v:.3g}" for n, v in zip(names, x, strict=True))
     out += workspace(s, params, x, folder, f"final design ({desc}): jaw points around H")
     marks = {"Table 1": TABLE1["l_IJ"]}
     if "l_IJ" in names:
-        marks["final"] = float(x[names.index("l_IJ")])
+        marks["final"] = rec.x["l_IJ"]
     out += gci_line(s, params, x, names, folder, marks)
     return out

@@ -6,7 +6,6 @@ mismatch after moving from home); the counterbalance m(θ) and I(θ) of §2.1.2.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -14,6 +13,7 @@ import numpy as np
 
 from designopt import montecarlo as mc
 from designopt.figures import convergence, save, style
+from designopt.results import RunRecord
 from designopt.studies.plas import mechanism as m
 from designopt.studies.plas.objective import pointwise
 from designopt.studies.plas.settings import PlasSettings
@@ -50,15 +50,14 @@ def _master(s: PlasSettings, names: list[str], x: np.ndarray) -> np.ndarray:
     return np.array([d[k] for k in m.MASTER_KEYS])
 
 
-def draw_run(a: dict[str, Any], folder: Path, resolution: int = N_GRID) -> list[Path]:
+def draw_run(rec: RunRecord, folder: Path, resolution: int = N_GRID) -> list[Path]:
     """Convergence, mismatch maps (``resolution``² points) and counterbalance of a run."""
-    cfg = a["attrs"]["config_resolved"]
-    s = PlasSettings.model_validate(cfg["study"])
-    names = [n.decode() if isinstance(n, bytes) else str(n) for n in a["problem"]["names"]]
-    x = np.asarray(a["final"]["x"], np.float64)
+    s: PlasSettings = rec.config.study
+    names = rec.names
+    x = np.asarray(list(rec.x.values()), np.float64)
     out: list[Path] = []
 
-    br = a["best_run"]
+    br = rec.best_run
     inds = [k for k in ("f", "vel_rel", "pos_mean") if k in br]
     from designopt.studies.plas import INDEX_UNITS
 

@@ -9,7 +9,6 @@ and is not drawn there; reach is a rate (clipped to [0, 1], Wilson band)."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -18,10 +17,10 @@ from matplotlib.ticker import MaxNLocator
 
 from designopt import montecarlo as mc
 from designopt.figures import convergence, save, style
-from designopt.studies.base import archived_keys
+from designopt.results import ReplayRecord, RunRecord
 from designopt.studies.rcm import mechanism as m
 from designopt.studies.rcm import objective, workspace
-from designopt.studies.rcm.settings import RcmSettings
+from designopt.studies.rcm.settings import RcmSettings, TeleopSettings
 
 N_C = 81  # points of the η(c) curves
 N_MAP = 121  # grid of the 1/k maps
@@ -171,14 +170,13 @@ def draw_workspace(key: jax.Array, folder: Path) -> list[Path]:
     return save(fig, folder, "workspace")
 
 
-def draw_run(a: dict[str, Any], folder: Path) -> list[Path]:
-    s = RcmSettings.model_validate(a["attrs"]["config_resolved"]["study"])
-    keys = archived_keys(a)
-    names = [n.decode() if isinstance(n, bytes) else str(n) for n in a["problem"]["names"]]
-    x = dict(zip(names, np.asarray(a["final"]["x"], np.float64).tolist(), strict=True))
-    des = s.design() | x
+def draw_run(rec: RunRecord, folder: Path) -> list[Path]:
+    """Convergence, η(c), the 1/k maps and the built arm's workspace of a run record."""
+    s: RcmSettings = rec.config.study
+    keys = rec.keys()
+    des = s.design() | rec.x
     out: list[Path] = []
-    br = a["best_run"]
+    br = rec.best_run
     out += convergence(br, [k for k in ("f", "eta", "reach") if k in br], folder, "Best run",
                        units=_units(s), rates={"reach": None})  # fmt: skip
     out += draw_eta(s, keys, des["a"], {"final": des["c"], "built": 250.0}, folder)
@@ -188,11 +186,12 @@ def draw_run(a: dict[str, Any], folder: Path) -> list[Path]:
     return out
 
 
-def draw_teleop(a: dict[str, Any], folder: Path) -> list[Path]:
+def draw_teleop(rec: ReplayRecord, folder: Path) -> list[Path]:
     """Target and achieved tip paths, master and slave in (x, y), the tracking error and
     each coordinate against time; a planar path (z constant) is drawn in (x, y) and its
     constant z stated instead of a panel of z(t)."""
-    t = a["teleop"]
+    s: TeleopSettings = rec.config.study
+    t = rec.arrays("teleop")
     tt, cmd, tip, err = t["t"], t["command"], t["tip"], t["error"]
     clutch = np.asarray(t["clutch"], bool)
     cl = np.asarray(t["clamped"], bool)
@@ -227,12 +226,12 @@ def draw_teleop(a: dict[str, Any], folder: Path) -> list[Path]:
     ax2.set_xlabel(style.label("x", "mm"))
     ax2.set_ylabel(style.label("y", "mm"))
     ax2.legend(fontsize=7, loc="center right")
-    ax2.set_title(f"master and slave (x, y), {t['attrs']['scale']:g}:1", fontsize=9)
+    ax2.set_title(f"master and slave (x, y), {s.scale:g}:1", fontsize=9)
     ax3 = fig.add_subplot(2, 3, 3)
     ax3.plot(tt, err, lw=0.8)
     ax3.set_xlabel(style.label("t", "s"))
     ax3.set_ylabel(style.label("tracking error", "mm"))
-    ax3.set_title(f"max {err.max():.2f}, mean {err.mean():.2f} mm (delay {t['attrs']['delay_ms']:g} ms)",
+    ax3.set_title(f"max {err.max():.2f}, mean {err.mean():.2f} mm (delay {s.delay_ms:g} ms)",
                   fontsize=9)  # fmt: skip
     ax3.grid(alpha=0.3)
     for i, lab in enumerate("xy" if planar else "xyz"):

@@ -11,7 +11,6 @@ singularity such as the PUMA 560's wrist at q5 = 0. The figure states where they
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -20,6 +19,7 @@ from matplotlib.ticker import MaxNLocator
 
 from designopt import montecarlo as mc
 from designopt.figures import MAP_RESOLUTION, convergence, save, style
+from designopt.results import RunRecord
 from designopt.studies.serial.mechanism import Mechanism, build
 from designopt.studies.serial.objective import measures
 from designopt.studies.serial.settings import ROWS, SerialSettings
@@ -98,16 +98,14 @@ def held(mech: Mechanism, s: SerialSettings, X: np.ndarray, pair: tuple[int, int
     return q
 
 
-def draw_run(a: dict[str, Any], folder: Path, resolution: int = MAP_RESOLUTION) -> list[Path]:
-    """Convergence, 1/k map (``resolution``² points) and workspace of a run archive."""
-    cfg = a["attrs"]["config_resolved"]
-    s = SerialSettings.model_validate(cfg["study"])
+def draw_run(rec: RunRecord, folder: Path, resolution: int = MAP_RESOLUTION) -> list[Path]:
+    """Convergence, 1/k map (``resolution``² points) and workspace of a run record."""
+    s: SerialSettings = rec.config.study
     mech = build(s)
-    br = a["best_run"]
-    run = int(br["attrs"]["run_index"])
+    br = rec.best_run
     designs = {
-        "initial (iteration 0)": a["optimizer"]["history_x"][run, 0],
-        "final": a["final"]["x"],
+        "initial (iteration 0)": rec.history_x[rec.best_run_index, 0],
+        "final": np.asarray(list(rec.x.values()), np.float64),
     }
     out = []
     out += convergence(br, ["f", *s.index_names()], folder, "Best run: objective and indices",
@@ -121,7 +119,7 @@ def draw_run(a: dict[str, Any], folder: Path, resolution: int = MAP_RESOLUTION) 
     n = resolution if mech.n >= 2 else 0  # the map needs two joints
     hq = held(mech, s, X[-1:], pair) if n else 0.5 * (lo + hi)
     ga, gb, qg = _grid(lo, hi, pair, hq, n)
-    rng = np.random.default_rng(np.asarray(a["attrs"]["keys"]["figures"], np.uint32))
+    rng = np.random.default_rng(np.asarray(jax.random.key_data(rec.keys()["figures"]), np.uint32))
     qc = lo + (hi - lo) * rng.uniform(size=(4000, mech.n))  # NumPy: no threefry compile
     z, P = _kernel(mech, s)(X, np.concatenate([qg, qc]).astype(X.dtype))  # one XLA program
     z, P = np.asarray(z), np.asarray(P)
