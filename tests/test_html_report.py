@@ -573,6 +573,7 @@ RENDERED = """Array.from(document.querySelectorAll('div.plot')).map(d => ({
   traces: (d._fullData || []).length, gl: d.querySelectorAll('.gl-container canvas').length,
   points: d.querySelectorAll('.scatterlayer .point, .boxlayer .point').length,
   heatmaps: d.querySelectorAll('.heatmaplayer image').length,
+  caption: d.parentElement.querySelector('figcaption').textContent,
   failed: d.textContent.startsWith('plot failed')}))"""
 
 PAGES = {  # page: (tree, page kwargs)
@@ -601,6 +602,7 @@ def test_page_renders_in_chromium(name, trees, browser, tmp_path):
     assert set(got) == set(figs)
     for pid, r in got.items():
         assert not r["failed"] and r["svg"] >= 2 and r["container"] == 1, r
+        assert r["caption"], r  # every plot says what it shows
         assert r["traces"] == len(figs[pid]["data"]), r
         kinds = {tr["type"] for tr in figs[pid]["data"]}
         if kinds & {"scatter3d", "splom"}:
@@ -612,7 +614,9 @@ def test_page_renders_in_chromium(name, trees, browser, tmp_path):
             assert r["points"] > 0, r
     if name == "run_front_cloud":
         best = int(tree["best_run"]["attrs"]["run_index"])
-        pid = next(p for p in figs if figs[p]["layout"]["title"]["text"] == "best-so-far f per iteration")  # fmt: skip
+        secs = H.sections(tree, cloud=_cloud())
+        pid = next(p.id for s in secs for p in s.plots()
+                   if p.fig["layout"]["title"]["text"] == "best-so-far f per iteration")  # fmt: skip
         y = browser.js(f"""(() => {{ const g = document.getElementById('{pid}');
             const i = g._fullData.findIndex(t => t.name === 'best run ({best})');
             return Array.from(g._fullData[i].y); }})()""")  # fmt: skip

@@ -149,7 +149,8 @@ def _layout(title: str, xlabel: str = "", ylabel: str = "", **kw: Any) -> dict[s
         "hovermode": "closest",
         "legend": {"font": {"size": 10}},
     }
-    ax = {"gridcolor": "#e3e3e3", "zerolinecolor": "#c8c8c8", "automargin": True}
+    ax = {"gridcolor": "#e3e3e3", "zerolinecolor": "#c8c8c8", "automargin": True,
+          "exponentformat": "power"}  # fmt: skip
     if xlabel or ylabel:
         lay["xaxis"] = {**ax, "title": {"text": xlabel}}
         lay["yaxis"] = {**ax, "title": {"text": ylabel}}
@@ -427,6 +428,9 @@ def _run_sections(tree: Mapping[str, Any], ids: _Ids, units: dict[str, str],
         sec.items.append(_convergence(h, best, ids, "best-so-far f per iteration",
                                       style.label("best f", style.unit_of("f", units))))  # fmt: skip
         if "history_v" in opt:
+            sec.items.append("<p class='note'>Constrained: each run's best-so-far design and the "
+                             "best run are chosen by Deb's rules (a smaller violation first, then "
+                             "f), so a run's f can rise while its violation falls.</p>")  # fmt: skip
             sec.items.append(_convergence(_f(opt["history_v"]), best, ids,
                                           "constraint violation of the best-so-far design",
                                           style.label("violation", style.DIMENSIONLESS), "violation"))  # fmt: skip
@@ -752,6 +756,7 @@ def _sweep(tree: Mapping[str, Any], ids: _Ids, units: dict[str, str]) -> list[Se
     if data:
         lay = _layout("median best-so-far f over runs, per member", _lab("iteration", {}),
                       _lab("best f (median over runs)", {}))  # fmt: skip
+        _int_ticks(lay, max(h.shape[1] for h in hs))
         if _is_log(*hs):
             lay["yaxis"]["type"] = "log"
         sec.items.append(Plot(ids("sweep-conv"), {"data": data, "layout": lay}, wide=True))
@@ -873,19 +878,25 @@ def _ik(tree: Mapping[str, Any], ids: _Ids) -> list[Section]:
         if key not in ik:
             continue
         v = _f(ik[key])
+        fin = v[np.isfinite(v)]
+        pos = fin[fin > 0]
+        # one axis for solved and failed: log10 when the positive errors span > 2 decades
+        # (an error of exactly 0 counted at a floor a decade below the least positive)
+        log = key != "iterations" and pos.size > 0 and pos.max() / pos.min() > style.LOG_RATIO
+        floor = float(pos.min()) / 10 if log else 0.0
         data = []
         for nm, mask, col in (("solved", ok, PALETTE[2]), ("failed", ~ok, PALETTE[3])):
             vv = v[mask & np.isfinite(v)]
-            if not vv.size:
-                continue
-            log = key != "iterations" and np.all(vv > 0) and vv.max() / vv.min() > style.LOG_RATIO
-            data.append({"type": "histogram", "x": np.log10(vv) if log else vv,
-                         "name": f"{nm} ({vv.size})" + (" log10" if log else ""),
-                         "marker": {"color": col}, "opacity": 0.7})  # fmt: skip
-        anylog = any("log10" in d["name"] for d in data)
+            if vv.size:
+                data.append({"type": "histogram", "x": np.log10(np.maximum(vv, floor)) if log else vv,
+                             "name": f"{nm} ({vv.size})", "marker": {"color": col},
+                             "opacity": 0.7})  # fmt: skip
         unit = u.get(key, style.DIMENSIONLESS if key == "iterations" else "")
-        xl = style.label(("log10 " if anylog else "") + key, unit)
-        lay = _layout(esc(f"{key} histogram"), esc(xl), esc(style.label("poses", "count")),
+        xl = style.label(("log10 " if log else "") + key, unit)
+        t = f"{key} histogram" + (
+            f" (0 counted at {floor:.2g})" if log and (fin <= 0).any() else ""
+        )
+        lay = _layout(esc(t), esc(xl), esc(style.label("poses", "count")),
                       barmode="overlay")  # fmt: skip
         sec.items.append(Plot(ids("ik-" + key), {"data": data, "layout": lay}))
     return [sec]
@@ -906,7 +917,7 @@ def _cloud(cloud: Mapping[str, Any], ids: _Ids) -> Section:
     fin = np.isfinite(val[keep])
     tr = {"type": "scatter3d", "mode": "markers", "x": xyz[keep, 0], "y": xyz[keep, 1],
           "z": xyz[keep, 2], "name": esc(lab),
-          "marker": {"size": 2.5, "color": np.where(fin, val[keep], np.nan), "colorscale": "Viridis",
+          "marker": {"size": 2, "color": np.where(fin, val[keep], np.nan), "colorscale": "Viridis",
                      "opacity": 0.85, "colorbar": {"title": {"text": esc(style.label(lab, unit))}}},
           "hovertemplate": f"x %{{x:.4g}}, y %{{y:.4g}}, z %{{z:.4g}} {esc(xu)}<br>{esc(lab)} = %{{marker.color:.4g}} {esc(unit)}<extra></extra>"}  # fmt: skip
     scene = {a: {"title": {"text": esc(style.label(a[0], xu))}} for a in ("xaxis", "yaxis", "zaxis")}  # fmt: skip
@@ -1075,8 +1086,10 @@ main{padding:8px 24px 40px;max-width:1500px}
 section{background:#fff;border:1px solid #dde1e5;border-radius:6px;margin:16px 0;padding:8px 16px 16px}
 h2{font-size:17px;margin:8px 0}h3{font-size:14px;margin:12px 0 6px}
 .grid{display:grid;grid-template-columns:repeat(auto-fill,minmax(440px,1fr));gap:12px}
-.plot{height:380px;min-width:0;border:1px solid #eceff1}
-.plot.wide{grid-column:1/-1;height:460px}
+figure{margin:0;min-width:0;border:1px solid #eceff1;border-radius:4px}
+figure.wide{grid-column:1/-1}figure.wide .plot{height:460px}
+figcaption{font-size:12.5px;padding:6px 10px 0;color:#333}
+.plot{height:360px;min-width:0}
 table{border-collapse:collapse;font-size:13px;margin:6px 0}
 td,th{border:1px solid #dde1e5;padding:3px 8px;text-align:left}th{background:#f0f2f4}
 td{font-variant-numeric:tabular-nums}
@@ -1123,8 +1136,18 @@ def page(tree: Mapping[str, Any], *, title: str | None = None,
         chunks, grid = [], []
         for it in s.items:
             if isinstance(it, Plot):
-                figs[it.id] = _clean({"data": it.fig["data"], "layout": it.fig["layout"], "config": CONFIG})  # fmt: skip
-                grid.append(f'<div id="{esc(it.id)}" class="plot{" wide" if it.wide else ""}"></div>')  # fmt: skip
+                lay = dict(it.fig["layout"])
+                cap = lay.pop("title", {}).get("text", "")  # a caption wraps; a plot title
+                lay["margin"] = lay.get("margin", {}) | {"t": 34}  # would run under the modebar
+                if not it.wide and lay.get("showlegend") is not False and "scene" not in lay:
+                    # a small plot keeps its width: the legend goes in a row above it
+                    lay["legend"] = {"orientation": "h", "x": 0, "y": 1.0, "xanchor": "left",
+                                     "yanchor": "bottom", "font": {"size": 10}}  # fmt: skip
+                h = lay.pop("height", None)
+                style_h = f' style="height:{int(h)}px"' if h else ""
+                figs[it.id] = _clean({"data": it.fig["data"], "layout": lay, "config": CONFIG})
+                grid.append(f'<figure class="{"wide" if it.wide else ""}"><figcaption>{cap}</figcaption>'
+                            f'<div id="{esc(it.id)}" class="plot"{style_h}></div></figure>')  # fmt: skip
             else:
                 if grid:
                     chunks.append(f"<div class='grid'>{''.join(grid)}</div>")
