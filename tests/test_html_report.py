@@ -67,6 +67,7 @@ def trees(tmp_path_factory) -> dict[str, dict[str, Any]]:
     out["sweep"] = _sweep(out["run"], d / "sweep.h5")
     out["bench"] = _bench(rng, d / "bench.h5")
     out["ik"] = _ik(rng, d / "ik.h5")
+    out["replay"] = _replay(d / "replay.h5")
     return out
 
 
@@ -156,6 +157,20 @@ def _ik(rng, path: Path) -> dict[str, Any]:
                              "units": "q1, q2, q4, q5, q6 rad; q3 mm; pos_err mm; rot_err rad"}},
             "attrs": {"kind": "ik", "study": "davinci", "config_yaml": "study: {name: davinci}",
                       "seed": 0}}  # fmt: skip
+    return _roundtrip(tree, path)
+
+
+def _replay(path: Path) -> dict[str, Any]:
+    """A trajectory replay's ``teleop`` group (rcm_teleop's layout): a square, tracked
+    with a small lag."""
+    t = np.linspace(0, 4, 401)
+    s = np.clip(np.abs((t % 4) - 2) - 0.5, 0, 1)  # a square's corner coordinates
+    cmd = np.stack([30 * s, 30 * np.roll(s, 100), np.full_like(t, -150.0)], 1)
+    tip = np.roll(cmd, 2, axis=0)
+    tree = {"teleop": {"t": t, "command": cmd, "tip": tip,
+                       "error": np.linalg.norm(tip - cmd, axis=1),
+                       "attrs": {"scale": 0.5, "dt_s": 0.01}},
+            "attrs": {"kind": "run", "study": "rcm_teleop", "config_yaml": "replay"}}  # fmt: skip
     return _roundtrip(tree, path)
 
 
@@ -353,6 +368,30 @@ def test_sweep_bench_and_ik_pages(trees):
     solved = next(tr for tr in pe.fig["data"] if tr["name"].startswith("solved"))
     np.testing.assert_allclose(solved["x"], np.log10(ik["ik"]["pos_err"][ok]))  # 3 decades: log
     assert pe.fig["layout"]["xaxis"]["title"]["text"] == "log10 pos_err [mm]"
+
+
+def test_replay_and_checkpoint_pages(trees):
+    r = trees["replay"]["teleop"]
+    plots = _plots(H.sections(trees["replay"]))
+    path = next(p for p in plots.values() if p.id.endswith("teleop-path"))
+    np.testing.assert_array_equal(_trace(path, "commanded")["z"], r["command"][:, 2])
+    np.testing.assert_array_equal(_trace(path, "achieved")["x"], r["tip"][:, 0])
+    err = next(p for p in plots.values() if p.id.endswith("teleop-error"))
+    np.testing.assert_array_equal(err.fig["data"][0]["y"], r["error"])
+    # a checkpoint: stated on the page, its history drawn
+    h = trees["run"]["optimizer"]["history"]
+    ck = {"attrs": {"kind": "run", "complete": np.False_},
+          "checkpoint": {"history": h[:, :3], "attrs": {"done": 2}}}  # fmt: skip
+    text = H.page(ck)
+    assert "This archive is a checkpoint" in text and "2 iterations done" in text
+
+
+def test_records_give_the_same_page(trees):
+    """The lead's typed records hold the same tree (``record.to_tree()``)."""
+    results = pytest.importorskip("designopt.results")
+    for key in ("run", "scan_grid", "sweep", "bench", "ik", "front2"):
+        t = trees[key]
+        assert H.page(results.from_tree(t).to_tree()) == H.page(t), key
 
 
 def test_untrusted_text_is_escaped(trees):
@@ -584,7 +623,7 @@ PAGES = {  # page: (tree, page kwargs)
     "sweep": ("sweep", {}),
     "bench": ("bench", {}),
     "ik": ("ik", {}),
-}
+}  # the replay's 3-D path uses the same traces as the 3-D front (checked in Python only)
 
 
 @pytest.mark.parametrize("name", list(PAGES))
