@@ -278,7 +278,7 @@ def test_front_2d_3d_values_errors_hover_and_ambiguity(trees):
         np.testing.assert_array_equal(cd[:, 0], np.arange(n))
         np.testing.assert_array_equal(cd[:, 1:3], fr["x"])
         hov = tr["hovertemplate"]
-        assert "a = %{customdata[1]:.5g} mm" in hov and "reach = %{customdata[" in hov
+        assert "a = %{customdata[1]:.5~g} mm" in hov and "reach = %{customdata[" in hov
         j = hov.split("<br>").index(next(s for s in hov.split("<br>") if s.startswith("eta = ")))
         col = int(re.search(r"customdata\[(\d+)\]", hov.split("<br>")[j]).group(1))
         np.testing.assert_array_equal(cd[:, col], fr["eta"])
@@ -660,6 +660,17 @@ def test_page_renders_in_chromium(name, trees, browser, tmp_path):
             const i = g._fullData.findIndex(t => t.name === 'best run ({best})');
             return Array.from(g._fullData[i].y); }})()""")  # fmt: skip
         assert y == tree["optimizer"]["history"][best].tolist()  # exact through the page
+        # hovering design 3 of the front shows its variables and indices ± SE
+        fid = next(p.id for s in secs for p in s.plots() if p.id.endswith("-front"))
+        hover = browser.js(f"""(async () => {{ const g = document.getElementById('{fid}');
+            Plotly.Fx.hover(g, [{{curveNumber: g._fullData.length - 1, pointNumber: 3}}]);
+            await new Promise(r => setTimeout(r, 100));
+            return Array.from(g.querySelectorAll('.hoverlayer text'), e => e.textContent)
+                        .join(' '); }})()""")  # fmt: skip
+        fr = tree["front"]
+        for want in ("design 3", f"c = {fr['x'][3, 1]:.5g} mm", f"{EVIL} = {fr['x'][3, 0]:.5g}",
+                     f"eta = {fr['eta'][3]:.5g} ± {fr['eta_se'][3]:.2g}"):  # fmt: skip
+            assert want in hover, (want, hover)
         assert browser.js("document.querySelectorAll('img[src=\"x\"]').length") == 0
         assert EVIL in browser.js("document.getElementById('final').textContent")
     browser.screenshot(ARTIFACTS / f"html_report_{name}.png")

@@ -255,7 +255,7 @@ def _convergence(hist: np.ndarray, best: int | None, ids: _Ids, title: str, ylab
             continue
         data.append({"type": "scatter", "mode": "lines", "x": it[keep], "y": hist[r, keep],
                      "name": "each run" if first else f"run {r}", "legendgroup": "runs",
-                     "showlegend": first, "hovertemplate": f"run {r}: %{{y:.6g}}<extra></extra>",
+                     "showlegend": first, "hovertemplate": f"run {r}: %{{y:.6~g}}<extra></extra>",
                      "line": {"color": "rgba(110,110,110,0.45)", "width": 1}})  # fmt: skip
         first = False
     if best is not None:
@@ -352,7 +352,7 @@ def _best_run(br: Mapping[str, Any], ids: _Ids, units: dict[str, str], rates: se
                 "marker": {"size": 4}}  # fmt: skip
         if se is not None:
             line["customdata"] = _f(se)[keep]
-            line["hovertemplate"] = "iteration %{x}: %{y:.6g} ± %{customdata:.2g} (SE)<extra></extra>"  # fmt: skip
+            line["hovertemplate"] = "iteration %{x}: %{y:.6~g} ± %{customdata:.2~g} (SE)<extra></extra>"  # fmt: skip
         t = f"{name} along the best run" + (f" (band: {what})" if what else "")
         t += _thin_note(len(it), len(keep), "iterations")
         lay = _layout(esc(t), _lab("iteration", {}), _lab(k, units), showlegend=False)
@@ -534,14 +534,14 @@ def _front(tree: Mapping[str, Any], ids: _Ids, units: dict[str, str]) -> list[Se
     tpl = ["<b>design %{customdata[0]}</b>"]
     c = 1
     for j, v in enumerate(vnames[: X.shape[1]]):
-        tpl.append(f"{esc(v)} = %{{customdata[{c + j}]:.5g}} {esc(style.unit_of(v, units))}")
+        tpl.append(f"{esc(v)} = %{{customdata[{c + j}]:.5~g}} {esc(style.unit_of(v, units))}")
     c += X.shape[1]
     tpl.append(f"in %{{customdata[{c}]}} ambiguous pairs")
     c += 1
     for k in inds:
         se = _f(fr[k + "_se"]) if k + "_se" in fr else np.full(n, np.nan)
         cd += [_f(fr[k])[:, None], se[:, None]]
-        tpl.append(f"{esc(k)} = %{{customdata[{c}]:.5g}} ± %{{customdata[{c + 1}]:.2g}} "
+        tpl.append(f"{esc(k)} = %{{customdata[{c}]:.5~g}} ± %{{customdata[{c + 1}]:.2~g}} "
                    f"{esc(style.unit_of(k, units))}")  # fmt: skip
         c += 2
     custom = np.concatenate(cd, axis=1)[keep]
@@ -651,7 +651,7 @@ def _scan(tree: Mapping[str, Any], ids: _Ids, units: dict[str, str], mod: Any) -
                     "marker": {"size": 5}}  # fmt: skip
             if se is not None:
                 line["customdata"] = se[keep]
-                line["hovertemplate"] = f"{esc(v)} = %{{x:.5g}}: %{{y:.6g}} ± %{{customdata:.2g}} (SE)<extra></extra>"  # fmt: skip
+                line["hovertemplate"] = f"{esc(v)} = %{{x:.5~g}}: %{{y:.6~g}} ± %{{customdata:.2~g}} (SE)<extra></extra>"  # fmt: skip
             data = [*band, line]
             if bad.any():
                 b = keep[bad[keep]]
@@ -680,8 +680,8 @@ def _scan(tree: Mapping[str, Any], ids: _Ids, units: dict[str, str], mod: Any) -
                 tr |= {"zmin": 0, "zmax": 1}
             if k + "_se" in sc:
                 tr["customdata"] = _f(sc[k + "_se"]).reshape(n0, n1)[np.ix_(r0, r1)]
-                tr["hovertemplate"] = (f"{esc(varied[1])} = %{{x:.5g}}, {esc(varied[0])} = %{{y:.5g}}"
-                                       f"<br>{esc(k)} = %{{z:.6g}} ± %{{customdata:.2g}} (SE)<extra></extra>")  # fmt: skip
+                tr["hovertemplate"] = (f"{esc(varied[1])} = %{{x:.5~g}}, {esc(varied[0])} = %{{y:.5~g}}"
+                                       f"<br>{esc(k)} = %{{z:.6~g}} ± %{{customdata:.2~g}} (SE)<extra></extra>")  # fmt: skip
             data = [tr]
             if badg.any():
                 ii, jj = np.nonzero(badg)
@@ -701,10 +701,10 @@ def _scan(tree: Mapping[str, Any], ids: _Ids, units: dict[str, str], mod: Any) -
         f = _f(sc["f"])
         se = _f(sc["f_se"]) if "f_se" in sc else None
         cd = X[keep]
-        tpl = "<br>".join(f"{esc(nm)} = %{{customdata[{i}]:.5g}} {esc(style.unit_of(nm, units))}"
+        tpl = "<br>".join(f"{esc(nm)} = %{{customdata[{i}]:.5~g}} {esc(style.unit_of(nm, units))}"
                           for i, nm in enumerate(names))  # fmt: skip
         tr = {"type": "scatter", "mode": "markers", "x": keep, "y": f[keep], "name": "f ± 2 SE",
-              "customdata": cd, "hovertemplate": f"design %{{x}}: f = %{{y:.6g}}<br>{tpl}<extra></extra>",
+              "customdata": cd, "hovertemplate": f"design %{{x}}: f = %{{y:.6~g}}<br>{tpl}<extra></extra>",
               "marker": {"color": PALETTE[0], "size": 7}}  # fmt: skip
         if se is not None:
             tr["error_y"] = {"type": "data", "array": Z * se[keep], "visible": True}
@@ -735,7 +735,7 @@ def _sweep(tree: Mapping[str, Any], ids: _Ids, units: dict[str, str]) -> list[Se
     sec = Section("sweep", f"Sweep: {len(mem)} members")
     tr = {"type": "scatter", "mode": "markers", "x": f, "y": [esc(lab) for lab in labels],
           "name": "final f", "marker": {"size": 9, "color": PALETTE[0]},
-          "hovertemplate": "%{y}: f = %{x:.6g}<extra></extra>"}  # fmt: skip
+          "hovertemplate": "%{y}: f = %{x:.6~g}<extra></extra>"}  # fmt: skip
     if np.isfinite(se).any():
         tr["error_x"] = {"type": "data", "array": Z * np.nan_to_num(se), "visible": True}
     lay = _layout("final f per member (bars ± 2 SE)", _lab("final f", units),
@@ -919,7 +919,7 @@ def _cloud(cloud: Mapping[str, Any], ids: _Ids) -> Section:
           "z": xyz[keep, 2], "name": esc(lab),
           "marker": {"size": 2, "color": np.where(fin, val[keep], np.nan), "colorscale": "Viridis",
                      "opacity": 0.85, "colorbar": {"title": {"text": esc(style.label(lab, unit))}}},
-          "hovertemplate": f"x %{{x:.4g}}, y %{{y:.4g}}, z %{{z:.4g}} {esc(xu)}<br>{esc(lab)} = %{{marker.color:.4g}} {esc(unit)}<extra></extra>"}  # fmt: skip
+          "hovertemplate": f"x %{{x:.4~g}}, y %{{y:.4~g}}, z %{{z:.4~g}} {esc(xu)}<br>{esc(lab)} = %{{marker.color:.4~g}} {esc(unit)}<extra></extra>"}  # fmt: skip
     scene = {a: {"title": {"text": esc(style.label(a[0], xu))}} for a in ("xaxis", "yaxis", "zaxis")}  # fmt: skip
     title = f"{lab} over the workspace: {n} points" + (
         f" ({len(keep)} shown)" if len(keep) < n else ""
