@@ -151,26 +151,33 @@ def test_scan_grid_hatches_infeasible_cells_and_designs(tmp_path, record):
 
 
 def test_sweep_figure(tmp_path, record):
-    cfg = _config("rcm", sweep={"vary": {"optimizer.gamma": [1e-7, 1e-3]}})
+    vary = {"optimizer.gamma": [1e-7, 1e-3], "optimizer.n_particles": [4, 6]}
+    cfg = _config("rcm", sweep={"vary": vary})
     rep = pipeline.sweep(cfg, "tiny", "tiny", tmp_path / "s.h5")
+    # in memory the members come in vmapped batches (one per swarm size), read back by name
+    assert list(rep.record.members) == ["000", "002", "001", "003"]
     rec = archive.load(rep.out)
     assert isinstance(rec, SweepRecord)
     sweep_figs.draw(rec, tmp_path / "f")
     assert_clean(record)
     (_, fig), = record  # fmt: skip
     ax = fig.axes[0]
-    # one row per member, at its archived final f, labelled by what it overrides
-    assert [t.get_text() for t in ax.get_yticklabels()] == ["gamma=1e-07", "gamma=0.001"]
-    f = [float(m["final"]["f"]) for m in rec.members.values()]
+    # one row per member in the sweep's order, at its final f, labelled by its overrides
+    grid = [(g, n) for g in (1e-7, 1e-3) for n in (4, 6)]
+    assert [t.get_text() for t in ax.get_yticklabels()] == [
+        f"gamma={g:g}, n_particles={n}" for g, n in grid
+    ]
+    f = [float(rec.members[k]["final"]["f"]) for k in ("000", "001", "002", "003")]
     np.testing.assert_array_equal(ax.lines[0].get_xdata(), f)
     members = rec.member_records()
-    assert list(members) == ["000", "001"]
-    for (k, m), gamma in zip(members.items(), (1e-7, 1e-3), strict=True):
-        assert list(rec.overrides()[k].values()) == [gamma]
+    assert list(members) == list(rep.record.member_records()) == ["000", "001", "002", "003"]
+    for (k, m), (gamma, n) in zip(members.items(), grid, strict=True):
+        assert list(rec.overrides()[k].values()) == [gamma, n]
         assert m.config.optimizer.settings == {"gamma": gamma}
+        assert m.config.optimizer.n_particles == n and m.history.shape == (1, 3)
         assert m.config.study == rec.config.study
         assert m.study == "rcm" and m.seed == 3 and m.f == f[int(k)]
-    sweep_figs.draw(rep.record, tmp_path / "mem")
+    sweep_figs.draw(rep.record, tmp_path / "mem")  # the in-memory record: same pixels
     assert _pngs(tmp_path / "mem") == _pngs(tmp_path / "f") != {}
 
 

@@ -195,8 +195,13 @@ class SweepRecord(Record):
             for k, m in self.members.items()
         ]
 
+    def _ordered(self) -> list[tuple[str, dict[str, Any]]]:
+        """The members in the order the sweep declares them (their number), whether the
+        record is in memory (grouped by vmapped batch) or read back (sorted by name)."""
+        return sorted(self.members.items(), key=lambda kv: (not kv[0].isdigit(), len(kv[0]), kv[0]))
+
     def member_records(self) -> dict[str, RunRecord]:
-        """Each member as a ``RunRecord``, in archive order: its groups, its attrs
+        """Each member as a ``RunRecord``, in the sweep's order: its groups, its attrs
         (``overrides``, ``config_resolved_yaml``) and the sweep's ``study``, ``seed``,
         ``keys`` and ``config_dir``; ``.config`` is the member's own resolved config."""
         import yaml
@@ -204,7 +209,7 @@ class SweepRecord(Record):
         root = {k: self.attrs[k] for k in ("study", "seed", "keys", "config_dir")
                 if k in self.attrs}  # fmt: skip
         out = {}
-        for k, m in self.members.items():
+        for k, m in self._ordered():
             attrs = {"kind": "run", **root, **dict(m.get("attrs", {}))}
             if "config_resolved_yaml" in attrs:
                 attrs["config_resolved"] = yaml.safe_load(str(attrs["config_resolved_yaml"]))
@@ -217,8 +222,8 @@ class SweepRecord(Record):
         return out
 
     def overrides(self) -> dict[str, dict[str, Any]]:
-        """What each member changes: dotted config key → value."""
-        return {k: dict(m["attrs"]["overrides"]) for k, m in self.members.items()}
+        """What each member changes (dotted config key → value), in the sweep's order."""
+        return {k: dict(m["attrs"]["overrides"]) for k, m in self._ordered()}
 
 
 @dataclass(eq=False)
