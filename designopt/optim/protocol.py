@@ -10,6 +10,12 @@ defaults on the class):
     state = opt.step(key, state, params, task)    # one iteration
     x, f, v = opt.best(state)                     # best design so far (Deb's rules)
 
+A multi-objective entry (``multi_objective = True``, e.g. NSGA-II) is given problems whose
+objective is a vector: ``evaluate`` returns f (M, m), all minimised, and instead of
+``best`` it implements ``front(state) -> Front(x, f, v, rank)``, its current population
+with each member's non-dominated front index (0 = non-dominated). The runner records the
+hypervolume of that population's feasible points after every iteration.
+
 ``params`` is the optimizer's ``Params`` NamedTuple of arrays (its numeric settings,
 defaults on the class), so one compiled kernel serves a vmapped batch of settings;
 ``state`` is any pytree of arrays. ``task`` is the problem as the optimizer sees it: the
@@ -38,7 +44,7 @@ BOUNDS = ("clip", "reflect", "reinit")
 class Task(NamedTuple):
     """The problem as an optimizer sees it (built by the runner inside the jitted code)."""
 
-    evaluate: Callable[[Array, jax.Array], tuple[Array, Array]]  # X (M, D) → f (M,), v (M,)
+    evaluate: Callable[[Array, jax.Array], tuple[Array, Array]]  # X (M, D) → f (M,)|(M, m), v (M,)
     lower: Array  # (D,)
     upper: Array  # (D,)
 
@@ -47,6 +53,15 @@ class Best(NamedTuple):
     x: Array  # (D,)
     f: Array  # ()
     v: Array  # () total constraint violation (0 = feasible)
+
+
+class Front(NamedTuple):
+    """A multi-objective entry's population (per run; the runner adds leading axes)."""
+
+    x: Array  # (P, D)
+    f: Array  # (P, m) objectives, all minimised
+    v: Array  # (P,) total constraint violation (0 = feasible)
+    rank: Array  # (P,) int32 non-dominated front index (Deb's constrained domination)
 
 
 def clean(f: Array) -> Array:
@@ -95,7 +110,8 @@ class Optimizer:
     Subclasses set ``Params`` (a NamedTuple with defaults), ``options`` (static string
     options: name → allowed values, the first is the default), ``min_population`` and
     ``fixed`` (Params fields a preset sets but a user may not, e.g. PSO's inertia rule),
-    and implement ``init``, ``step`` and ``best``.
+    and implement ``init``, ``step`` and ``best``. A multi-objective entry sets
+    ``multi_objective = True`` and implements ``front`` instead of ``best``.
     """
 
     n: int  # population size
@@ -106,6 +122,7 @@ class Optimizer:
     options: ClassVar[dict[str, tuple[str, ...]]] = {}
     fixed: ClassVar[tuple[str, ...]] = ()
     min_population: ClassVar[int] = 2
+    multi_objective: ClassVar[bool] = False  # True: f is (M, m) and ``front`` replaces best
 
     def init(self, key: jax.Array, params: Any, task: Task) -> Any:
         raise NotImplementedError
@@ -114,6 +131,9 @@ class Optimizer:
         raise NotImplementedError
 
     def best(self, state: Any) -> Best:
+        raise NotImplementedError
+
+    def front(self, state: Any) -> Front:
         raise NotImplementedError
 
     @classmethod

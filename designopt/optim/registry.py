@@ -13,6 +13,7 @@ import jax.numpy as jnp
 
 from designopt.optim import draws as rng
 from designopt.optim.cmaes import CMAES
+from designopt.optim.nsga2 import NSGA2
 from designopt.optim.protocol import BOUNDS, Optimizer
 from designopt.optim.pso import ALIASES, PSO, VARIANTS
 
@@ -24,11 +25,18 @@ class Entry(NamedTuple):
     source: str
 
 
+_NSGA2_SOURCE = (
+    "NSGA-II, Deb, Pratap, Agarwal & Meyarivan 2002, with pymoo 0.6's default SBX and "
+    "polynomial mutation"
+)
+
 OPTIMIZERS: dict[str, Entry] = {
     **{k: Entry(k, PSO, pre, src) for k, (pre, src) in VARIANTS.items()},
     **{a: Entry(k, PSO, VARIANTS[k][0], VARIANTS[k][1]) for a, k in ALIASES.items()},
     "cmaes": Entry("cmaes", CMAES, {}, "CMA-ES, Hansen 2016 tutorial (arXiv:1604.00772)"),
     "cma_es": Entry("cmaes", CMAES, {}, "CMA-ES, Hansen 2016 tutorial (arXiv:1604.00772)"),
+    "nsga2": Entry("nsga2", NSGA2, {}, _NSGA2_SOURCE),
+    "nsga_ii": Entry("nsga2", NSGA2, {}, _NSGA2_SOURCE),
 }
 
 
@@ -49,15 +57,44 @@ def setting_names(name: str) -> tuple[str, ...]:
     return resolve(name).cls.setting_names()
 
 
+def multi_objective_names() -> list[str]:
+    """The accepted names of the multi-objective optimizers (canonical names and aliases)."""
+    return sorted(k for k, e in OPTIMIZERS.items() if e.cls.multi_objective)
+
+
+def is_multi_objective(name: str) -> bool:
+    """Whether optimizer ``name`` optimises a vector objective (a front)."""
+    return resolve(name).cls.multi_objective
+
+
 def option_names(name: str) -> dict[str, tuple[str, ...]]:
     """The static string options of ``name`` and their allowed values (first = default)."""
     return dict(resolve(name).cls.options)
 
 
-def validate(name: str, settings: dict[str, Any], n_particles: int | None = None) -> None:
+def validate(
+    name: str,
+    settings: dict[str, Any],
+    n_particles: int | None = None,
+    n_objectives: int | None = None,
+) -> None:
     """ValueError (one line, naming the bad thing) for an unknown optimizer, a setting it
-    does not have, a value of the wrong kind, or a population below what it needs."""
+    does not have, a value of the wrong kind, a population below what it needs, or (with
+    ``n_objectives``) a single-objective optimizer asked for a front or a multi-objective
+    one given a single objective."""
     e = resolve(name)
+    if n_objectives is not None:
+        multi = [k for k, x in OPTIMIZERS.items() if x.cls.multi_objective and k == x.name]
+        if n_objectives > 1 and not e.cls.multi_objective:
+            raise ValueError(
+                f"optimizer {name!r} is single-objective; the problem has {n_objectives} "
+                f"objectives (a Pareto front): use {' or '.join(sorted(multi))}"
+            )
+        if n_objectives < 2 and e.cls.multi_objective:
+            raise ValueError(
+                f"optimizer {name!r} is multi-objective; the problem has a single objective: "
+                "use a single-objective optimizer (e.g. ptpso or cmaes)"
+            )
     nums, opts = e.cls.setting_names(), e.cls.options
     for k, val in settings.items():
         if k in opts:

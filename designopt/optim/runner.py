@@ -8,6 +8,13 @@ iteration, and hands the host a :class:`Checkpoint` between chunks, and after th
 one with ``checkpoint_at_end`` (progress bar, stops at an iteration boundary, resuming
 after the loop). A checkpoint's ``state`` is a flat dict of numpy arrays named by the
 state pytree's paths; resuming from it gives bit-for-bit the uninterrupted run.
+
+A multi-objective entry (``multi_objective``, e.g. NSGA-II) runs on a problem with
+``n_objectives`` > 1 through the same functions. Its per-iteration record is the
+hypervolume of each run's feasible population against one reference point (given as
+``ref_point``, else the componentwise maximum of the first generation's feasible
+objective values over all runs), and its result adds the final populations
+(``RunResult.front``) and the reference point (``RunResult.ref_point``).
 """
 
 from __future__ import annotations
@@ -21,14 +28,22 @@ import jax.numpy as jnp
 import numpy as np
 
 from designopt.optim import registry
-from designopt.optim.protocol import Best, Optimizer, Task, clean
+from designopt.optim.protocol import Front, Optimizer, Task, clean
+from designopt.pareto import hypervolume_jax
 from designopt.problems.base import Problem, violation_of
 
 CONVERGENCE_TOL = 1e-6
 
 
 class RunResult(NamedTuple):
-    history: np.ndarray  # ([B,] n_runs, n_iters + 1) best-so-far value
+    """Per run (and member). For a multi-objective entry ``history`` is the hypervolume of
+    the feasible population after each iteration against ``ref_point`` (larger is better;
+    NaN for more than 3 objectives: use ``designopt.pareto.hypervolume`` on ``front``),
+    ``best_f`` the final hypervolume, ``converged_at`` the iteration after which it never
+    grows by > tol, ``history_v``/``best_v`` the least violation in the population,
+    ``history_x``/``best_x`` empty (last axis 0) and ``front`` the final populations."""
+
+    history: np.ndarray  # ([B,] n_runs, n_iters + 1) best-so-far value (MO: hypervolume)
     best_f: np.ndarray  # ([B,] n_runs)
     best_x: np.ndarray  # ([B,] n_runs, D)
     converged_at: np.ndarray  # ([B,] n_runs) iteration after which no improvement > tol
@@ -36,6 +51,8 @@ class RunResult(NamedTuple):
     settings: dict[str, Any]
     history_v: np.ndarray | None = None  # ([B,] n_runs, n_iters + 1) its constraint violation
     best_v: np.ndarray | None = None  # ([B,] n_runs) 0 = feasible
+    front: Front | None = None  # MO: x ([B,] n_runs, P, D), f (…, P, m), v (…, P), rank (…, P)
+    ref_point: np.ndarray | None = None  # MO: (m,) the hypervolume's reference point
 
 
 class Checkpoint(NamedTuple):
@@ -86,8 +103,19 @@ def _init(keys, params, pparams, lower, upper, opt, fn, cons, batched=False):
     return _over_runs(one, batched)(keys, params)
 
 
+def _track(opt: Optimizer, state, ref) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """What the runner keeps per iteration: the best so far (x, f, v), or for a
+    multi-objective entry (an empty x, the feasible population's hypervolume, the least
+    violation)."""
+    if not opt.multi_objective:
+        return tuple(opt.best(state))
+    fr = opt.front(state)
+    hv = hypervolume_jax(fr.f, ref, fr.v == 0).astype(fr.x.dtype)
+    return jnp.zeros((0,), fr.x.dtype), hv, jnp.min(fr.v)
+
+
 @partial(jax.jit, static_argnames=("opt", "fn", "cons", "length", "batched"))
-def _advance(carry, params, pparams, lower, upper, opt, fn, cons, length, batched=False):
+def _advance(carry, params, pparams, lower, upper, ref, opt, fn, cons, length, batched=False):
     task = _task(fn, cons, pparams, lower, upper)
 
     def one(c, p):
@@ -95,16 +123,36 @@ def _advance(carry, params, pparams, lower, upper, opt, fn, cons, length, batche
             key, state = c
             key, k = jax.random.split(key)
             state = opt.step(k, state, p, task)
-            return (key, state), tuple(opt.best(state))
+            return (key, state), _track(opt, state, ref)
 
         return jax.lax.scan(body, c, None, length=length)
 
     return _over_runs(one, batched)(carry, params)
 
 
-def _best(opt: Optimizer, carry, batched: bool) -> Best:
-    f = lambda c, _: tuple(opt.best(c[1]))  # noqa: E731
-    return Best(*_over_runs(f, batched)(carry, None))
+@partial(jax.jit, static_argnames=("opt", "batched"))
+def _records(carry, ref, opt, batched):
+    f = lambda c, _: _track(opt, c[1], ref)  # noqa: E731
+    return _over_runs(f, batched)(carry, None)
+
+
+@partial(jax.jit, static_argnames=("opt", "batched"))
+def _fronts(carry, opt, batched) -> Front:
+    f = lambda c, _: tuple(opt.front(c[1]))  # noqa: E731
+    return Front(*_over_runs(f, batched)(carry, None))
+
+
+def first_nadir(f: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """The default reference point: per objective the largest finite value among the
+    feasible points of f (…, P, m) (among all points when none is feasible)."""
+    f = np.asarray(f, np.float64)
+    m = f.shape[-1]
+    f2, v2 = f.reshape(-1, m), np.asarray(v).reshape(-1)
+    ok = np.all(np.isfinite(f2), axis=1)
+    pick = ok & (v2 == 0) if np.any(ok & (v2 == 0)) else ok
+    if not np.any(pick):
+        raise ValueError("no finite objective values in the first generation: no reference point")
+    return f2[pick].max(axis=0)
 
 
 def _path_name(path) -> str:
@@ -140,7 +188,7 @@ def _from_numpy(d: dict[str, np.ndarray], template) -> Any:
 
 
 def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress, checkpoint,
-           resume, batched, B, record, at_end=False, plan=None):  # fmt: skip
+           resume, batched, B, record, at_end=False, plan=None, ref_point=None):  # fmt: skip
     n_iters = opt.n_iters
     lower = jnp.asarray(problem.lower, dtype)
     upper = jnp.asarray(problem.upper, dtype)
@@ -154,19 +202,33 @@ def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress
     if plan is not None:
         keys, params, pparams, lower, upper = plan.put((keys, params, pparams, lower, upper))
     statics = dict(opt=opt, fn=problem.fn, cons=problem.constraints, batched=batched)
+    mo = opt.multi_objective
+    ref = None if ref_point is None else jnp.asarray(ref_point, dtype)
     if resume is None:
         carry = place(_init(keys, params, pparams, lower, upper, **statics))
-        b = _best(opt, carry, batched)
+        if mo and ref is None:
+            fr = _fronts(carry, opt, batched)
+            ref = jnp.asarray(first_nadir(host(fr.f), host(fr.v)), dtype)
+        if plan is not None and ref is not None:
+            ref = plan.put(ref)
+        bx, bf, bv = _records(carry, ref, opt, batched)
         hf, hx, hv = (
-            [host(b.f)[..., None]],
-            [host(b.x)[..., None, :]],
-            [host(b.v)[..., None]],
+            [host(bf)[..., None]],
+            [host(bx)[..., None, :]],
+            [host(bv)[..., None]],
         )
         done = 0
     else:
         template = jax.eval_shape(lambda: _init(keys, params, pparams, lower, upper, **statics))
         st = dict(resume.state)
         hv0 = st.pop("runner.history_v", None)
+        ref0 = st.pop("runner.ref_point", None)
+        if mo:
+            if ref0 is None:
+                raise ValueError("checkpoint lacks the reference point (runner.ref_point)")
+            if ref is not None and not np.array_equal(np.asarray(ref), np.asarray(ref0, dtype)):
+                raise ValueError("ref_point differs from the checkpoint's reference point")
+            ref = jnp.asarray(ref0, dtype) if plan is None else plan.put(jnp.asarray(ref0, dtype))
         carry = place(_from_numpy(st, template))
         done = resume.done
         hf, hx = [np.asarray(resume.history)], [np.asarray(resume.history_x)]
@@ -178,7 +240,9 @@ def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress
     chunk = n_iters if chunk_iters is None else max(1, min(chunk_iters, n_iters))
     while done < n_iters:
         length = min(chunk, n_iters - done)
-        carry, (x, f, v) = _advance(carry, params, pparams, lower, upper, length=length, **statics)
+        carry, (x, f, v) = _advance(
+            carry, params, pparams, lower, upper, ref, length=length, **statics
+        )
         if plan is not None:
             carry = place(carry)  # the same placement every chunk: one compiled program
         hf.append(host(f))
@@ -192,25 +256,40 @@ def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress
             hx = [np.concatenate(hx, axis=-2)]
             hv = [np.concatenate(hv, axis=-1)]
             state = _to_numpy(carry, host) | {"runner.history_v": hv[0]}
+            if mo:
+                state["runner.ref_point"] = host(ref)
             checkpoint(Checkpoint(state, hf[0], hx[0], done))
     history = np.concatenate(hf, axis=-1)
     history_x = np.concatenate(hx, axis=-2)
     history_v = np.concatenate(hv, axis=-1)
+    front = Front(*(host(a) for a in _fronts(carry, opt, batched))) if mo else None
     return RunResult(
         history=history,
         best_f=history[..., -1],
         best_x=history_x[..., -1, :],
-        converged_at=convergence_iteration(history),
+        converged_at=convergence_iteration(-history if mo else history),
         history_x=history_x,
-        settings=record,
+        settings=record | ({"ref_point": host(ref).tolist()} if mo else {}),
         history_v=history_v,
         best_v=history_v[..., -1],
+        front=front,
+        ref_point=host(ref) if mo else None,
     )
 
 
-def _prepare(name, n_particles, n_iters, n_runs, bounds, settings_list):
+def _prepare(name, n_particles, n_iters, n_runs, bounds, settings_list, problem=None,
+             ref_point=None):  # fmt: skip
+    m = None if problem is None else int(problem.n_objectives)
     for s in settings_list:
-        registry.validate(name, s, n_particles)
+        registry.validate(name, s, n_particles, n_objectives=m)
+    if ref_point is not None:
+        if not registry.resolve(name).cls.multi_objective:
+            raise ValueError(f"ref_point is for multi-objective optimizers, not {name!r}")
+        r = np.asarray(ref_point, np.float64)
+        if r.ndim != 1 or (m is not None and r.shape[0] != m):
+            raise ValueError(f"ref_point has {r.size} values, the problem has {m} objectives")
+        if not np.all(np.isfinite(r)):
+            raise ValueError("ref_point must be finite")
     if n_iters < 1 or n_runs < 1:
         raise ValueError("n_iters must be ≥ 1 and n_runs ≥ 1")
     opts = [registry.split_settings(name, s)[1] for s in settings_list]
@@ -240,6 +319,7 @@ def run(
     resume: Checkpoint | None = None,
     checkpoint_at_end: bool = False,
     plan: Any = None,
+    ref_point: Sequence[float] | None = None,
     **settings: Any,
 ) -> RunResult:
     """Run ``n_runs`` independent runs of optimizer ``name`` (``registry.names()``) on
@@ -251,13 +331,18 @@ def run(
     :class:`Checkpoint`; passing one back as ``resume`` continues the run and gives exactly
     the uninterrupted result. ``plan`` (``designopt.parallel.plan``) shards the runs or
     particles over a device mesh: one compiled program, the same numbers.
+
+    A multi-objective optimizer (``nsga2``) needs a problem with ``n_objectives`` > 1 and
+    a single-objective one a problem with one objective (ValueError otherwise);
+    ``ref_point`` (m,) is the hypervolume's reference point (default: the componentwise
+    maximum of the first generation's feasible values, over all runs).
     """
-    opt = _prepare(name, n_particles, n_iters, n_runs, bounds, [settings])
+    opt = _prepare(name, n_particles, n_iters, n_runs, bounds, [settings], problem, ref_point)
     e = registry.resolve(name)
     params = e.cls.make_params(dtype, e.preset, **registry.split_settings(name, settings)[0])
     return _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress,
                   checkpoint, resume, False, 1, _record(name, opt, params, n_runs),
-                  checkpoint_at_end, plan)  # fmt: skip
+                  checkpoint_at_end, plan, ref_point)  # fmt: skip
 
 
 def run_batch(
@@ -276,17 +361,19 @@ def run_batch(
     resume: Checkpoint | None = None,
     checkpoint_at_end: bool = False,
     plan: Any = None,
+    ref_point: Sequence[float] | None = None,
 ) -> RunResult:
     """Run the optimizer once per settings dict in ``members``, all as one vmapped program.
 
     Every member uses the same run keys (common random numbers), so member i equals
     ``run(name, ..., **members[i])`` up to floating-point reassociation. Results carry a
-    leading member axis. String options must be equal across members.
+    leading member axis. String options must be equal across members. A
+    multi-objective optimizer's members share one reference point.
     """
     if not members:
         raise ValueError("members must hold at least one settings dict")
     members = [dict(m) for m in members]
-    opt = _prepare(name, n_particles, n_iters, n_runs, bounds, members)
+    opt = _prepare(name, n_particles, n_iters, n_runs, bounds, members, problem, ref_point)
     e = registry.resolve(name)
     plist = [
         e.cls.make_params(dtype, e.preset, **registry.split_settings(name, m)[0]) for m in members
@@ -294,4 +381,4 @@ def run_batch(
     params = jax.tree.map(lambda *a: jnp.stack(a), *plist)
     return _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress,
                   checkpoint, resume, True, len(members), _record(name, opt, params, n_runs),
-                  checkpoint_at_end, plan)  # fmt: skip
+                  checkpoint_at_end, plan, ref_point)  # fmt: skip

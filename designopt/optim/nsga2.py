@@ -1,0 +1,182 @@
+"""NSGA-II (Deb, Pratap, Agarwal & Meyarivan, "A fast and elitist multiobjective genetic
+algorithm: NSGA-II", 2002) as a multi-objective registry entry, with pymoo 0.6's default
+operators and constants so that the two can be compared at the same budget:
+
+- binary tournament (pymoo's ``comp_by_dom_and_crowding``): pairs drawn from concatenated
+  random permutations of the population; if either is infeasible the smaller violation
+  wins, else the dominating one, else the larger crowding distance, else a coin;
+- SBX crossover (Deb & Agrawal, "Simulated binary crossover for continuous search space",
+  1995), bounded form: per mating with probability ``p_cross`` 0.9, per variable with
+  ``p_cross_var`` 0.5, distribution index ``eta_c`` 15, the two children's values
+  exchanged with probability ``p_swap`` 0.5, clamped into the box; two children per
+  mating, P offspring per generation;
+- polynomial mutation (Deb's bounded form): per child with probability ``p_mut`` 0.9, per
+  variable with min(0.5, ``n_mut_var``/D) (default 1/D), distribution index ``eta_m`` 20;
+- survival of the P best of parents ∪ offspring by Deb's constrained domination
+  (``designopt.pareto.front_ranks``), the last front cut by crowding distance (ties at
+  random); the first generation is ranked the same way.
+
+One departure: pymoo discards offspring identical to an existing member and mates again
+(about 4 % of the offspring at these rates, copies made without crossover or mutation);
+here every offspring is evaluated, so the population size and the work per generation
+stay fixed. Random numbers come from ``designopt.optim.draws`` (option ``draws``, mix32 by
+default), each purpose from its own ``fold_in`` of the step key.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import ClassVar, NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from designopt.optim import draws as rng
+from designopt.optim.protocol import Front, Optimizer, Task, apply_bounds
+from designopt.pareto import crowding_distance, front_ranks
+
+Array = jnp.ndarray
+
+# fold_in slots of the step key, one per purpose
+_PERM, _COIN, _CROSS, _CROSS_VAR, _SBX, _SWAP, _MUT, _MUT_VAR, _PM, _EVAL, _TIE, _REINIT, _INIT = (
+    range(13)
+)
+
+
+class Params(NamedTuple):
+    eta_c: float = 15.0  # SBX distribution index
+    p_cross: float = 0.9  # probability that a mating crosses over
+    p_cross_var: float = 0.5  # SBX: probability per variable
+    p_swap: float = 0.5  # SBX: probability of exchanging the children's values
+    eta_m: float = 20.0  # polynomial mutation distribution index
+    p_mut: float = 0.9  # probability that a child is mutated at all
+    n_mut_var: float = 1.0  # expected mutated variables: rate min(0.5, n_mut_var / D)
+
+
+class State(NamedTuple):
+    x: Array  # (P, D)
+    f: Array  # (P, m)
+    v: Array  # (P,)
+    rank: Array  # (P,) int32
+    crowd: Array  # (P,)
+
+
+def sbx(x1: Array, x2: Array, lo: Array, hi: Array, p: Params, u: Array, cross: Array) -> tuple[Array, Array]:  # fmt: skip
+    """Bounded SBX children (pymoo 0.6 ``cross_sbx``) of parents x1, x2 (n, D) where
+    ``cross`` (n, D); ``u`` = (rand, swap draws), each (n, D) in [0, 1)."""
+    rand, swap = u
+    cross = cross & (jnp.abs(x1 - x2) > 1e-14)
+    sm = x1 < x2
+    y1, y2 = jnp.minimum(x1, x2), jnp.maximum(x1, x2)
+    delta = jnp.where(cross, y2 - y1, 1.0)
+    e1 = p.eta_c + 1.0
+
+    def betaq(beta):
+        alpha = 2.0 - beta ** (-e1)
+        return jnp.where(
+            rand <= 1.0 / alpha,
+            (rand * alpha) ** (1.0 / e1),
+            (1.0 / (2.0 - rand * alpha)) ** (1.0 / e1),
+        )
+
+    c1 = 0.5 * ((y1 + y2) - betaq(1.0 + 2.0 * (y1 - lo) / delta) * delta)
+    c2 = 0.5 * ((y1 + y2) + betaq(1.0 + 2.0 * (hi - y2) / delta) * delta)
+    ch1, ch2 = jnp.where(sm, c1, c2), jnp.where(sm, c2, c1)
+    b = (swap < p.p_swap) ^ (x1 > x2)
+    ch1, ch2 = jnp.where(b, ch2, ch1), jnp.where(b, ch1, ch2)
+    return jnp.where(cross, ch1, x1), jnp.where(cross, ch2, x2)
+
+
+def polynomial_mutation(x: Array, lo: Array, hi: Array, p: Params, r: Array, mut: Array) -> Array:
+    """Bounded polynomial mutation (pymoo 0.6 ``mut_pm``) of x (n, D) where ``mut``,
+    with draws ``r`` (n, D) in [0, 1); the result is clamped into the box."""
+    span = hi - lo
+    d1, d2 = (x - lo) / span, (hi - x) / span
+    e1 = p.eta_m + 1.0
+    val1 = 2.0 * r + (1.0 - 2.0 * r) * (1.0 - d1) ** e1
+    val2 = 2.0 * (1.0 - r) + 2.0 * (r - 0.5) * (1.0 - d2) ** e1
+    dq = jnp.where(
+        r <= 0.5,
+        jnp.maximum(val1, 0.0) ** (1.0 / e1) - 1.0,
+        1.0 - jnp.maximum(val2, 0.0) ** (1.0 / e1),
+    )
+    y = jnp.clip(x + dq * span, lo, hi)
+    return jnp.where(mut, y, x)
+
+
+def survive(X: Array, F: Array, V: Array, n: int, tie: Array) -> State:
+    """The n best of (X, F, V) by constrained non-dominated rank, then crowding distance
+    (larger first), then ``tie`` (random); ranks and crowding as computed on the whole
+    set (the crowding of the last front before it is cut, as pymoo stores it)."""
+    rank = front_ranks(F, V, n_stop=n)
+    crowd = crowding_distance(F, rank)
+    keep = jnp.lexsort((tie, -crowd, rank))[:n]
+    return State(X[keep], F[keep], V[keep], rank[keep], crowd[keep])
+
+
+@dataclass(frozen=True)
+class NSGA2(Optimizer):
+    """NSGA-II with population P = ``n`` (the runner's n_particles). Option ``draws``."""
+
+    draws: str = rng.DEFAULT
+
+    Params: ClassVar[type] = Params
+    options: ClassVar[dict[str, tuple[str, ...]]] = {"draws": rng.DRAWS}
+    min_population: ClassVar[int] = 4
+    multi_objective: ClassVar[bool] = True
+
+    def _u(self, key: jax.Array, slot: int, shape: tuple[int, ...], dt) -> Array:
+        return rng.uniform(self.draws, jax.random.fold_in(key, slot), 0, shape, dt)
+
+    def init(self, key: jax.Array, p: Params, task: Task) -> State:
+        lo, hi = task.lower, task.upper
+        dt = lo.dtype
+        P, D = self.n, lo.shape[0]
+        x = lo + (hi - lo) * self._u(key, _INIT, (P, D), dt)
+        f, v = task.evaluate(x, jax.random.fold_in(key, _EVAL))
+        return survive(x, f.astype(dt), v.astype(dt), P, self._u(key, _TIE, (P,), dt))
+
+    def step(self, key: jax.Array, s: State, p: Params, task: Task) -> State:
+        lo, hi = task.lower, task.upper
+        dt = lo.dtype
+        P, D = self.n, lo.shape[0]
+        nm = (P + 1) // 2  # matings, two children each
+        u = lambda slot, shape: self._u(key, slot, shape, dt)  # noqa: E731
+
+        # binary tournament on pairs from concatenated random permutations (pymoo)
+        n_perm = math.ceil(4 * nm / P)
+        perm = jnp.argsort(u(_PERM, (n_perm, P)), axis=1).reshape(-1)[: 4 * nm]
+        a, b = perm[0::2], perm[1::2]
+        coin = u(_COIN, (2 * nm,)) < 0.5
+        va, vb = s.v[a], s.v[b]
+        fa, fb = s.f[a], s.f[b]
+        a_dom = jnp.all(fa <= fb, axis=1) & jnp.any(fa < fb, axis=1)
+        b_dom = jnp.all(fb <= fa, axis=1) & jnp.any(fb < fa, axis=1)
+        ca, cb = s.crowd[a], s.crowd[b]
+        by_cd = jnp.where(ca > cb, a, jnp.where(cb > ca, b, jnp.where(coin, a, b)))
+        by_dom = jnp.where(a_dom, a, jnp.where(b_dom, b, by_cd))
+        by_cv = jnp.where(va < vb, a, jnp.where(vb < va, b, jnp.where(coin, a, b)))
+        win = jnp.where((va > 0) | (vb > 0), by_cv, by_dom)
+        x1, x2 = s.x[win[0::2]], s.x[win[1::2]]
+
+        # SBX, then polynomial mutation
+        cross = (u(_CROSS, (nm, 1)) < p.p_cross) & (u(_CROSS_VAR, (nm, D)) < p.p_cross_var)
+        o1, o2 = sbx(x1, x2, lo, hi, p, (u(_SBX, (nm, D)), u(_SWAP, (nm, D))), cross)
+        fresh = lambda: lo + (hi - lo) * u(_REINIT, (P, D))  # noqa: E731
+        xo = apply_bounds(jnp.concatenate([o1, o2])[:P], lo, hi, self.bounds, fresh)
+        rate = jnp.minimum(0.5, p.n_mut_var / D)
+        mut = (u(_MUT, (P, 1)) <= p.p_mut) & (u(_MUT_VAR, (P, D)) < rate)
+        xo = polynomial_mutation(xo, lo, hi, p, u(_PM, (P, D)), mut)
+
+        fo, vo = task.evaluate(xo, jax.random.fold_in(key, _EVAL))
+        return survive(
+            jnp.concatenate([s.x, xo]),
+            jnp.concatenate([s.f, fo.astype(dt)]),
+            jnp.concatenate([s.v, vo.astype(dt)]),
+            P,
+            u(_TIE, (2 * P,)),
+        )
+
+    def front(self, s: State) -> Front:
+        return Front(s.x, s.f, s.v, s.rank)
