@@ -9,6 +9,7 @@ The pipeline's interface: ``run``, ``run_batch``, ``validate``, ``setting_names`
 from designopt.optim.protocol import Best, Front, Optimizer, Task
 from designopt.optim.pso import constriction, penalty_coefficient
 from designopt.optim.registry import (
+    MULTI_OBJECTIVE,
     OPTIMIZERS,
     is_multi_objective,
     make_params,
@@ -29,6 +30,7 @@ from designopt.optim.runner import (
 )
 
 __all__ = [
+    "MULTI_OBJECTIVE",
     "OPTIMIZERS",
     "Best",
     "Checkpoint",
