@@ -1,0 +1,155 @@
+"""The Pareto-front section: 2-D, 3-D or a scatter matrix with ± 2 SE bars, ambiguous
+pairs marked, and the hypervolume history."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from designopt.figures import style
+from designopt.figures.html.model import (
+    MAX_MARKERS,
+    PALETTE,
+    Plot,
+    Section,
+    Z,
+    _every,
+    _f,
+    _Ids,
+    _names,
+    _s,
+    _table,
+    _thin_note,
+    esc,
+)
+from designopt.figures.html.plots import _convergence, _index_names, _lab, _layout, _rgba
+
+
+def _pairs(amb: Any, n: int) -> np.ndarray:
+    """Ambiguous pairs (p, 2) from an (n, n) boolean matrix or a (p, 2) index array."""
+    a = np.asarray(amb)
+    if a.ndim == 2 and a.shape == (n, n) and (a.dtype == bool or n != 2):
+        i, j = np.nonzero(np.triu(a.astype(bool) | a.astype(bool).T, 1))
+        return np.stack([i, j], axis=1)
+    if a.ndim == 2 and a.shape[1] == 2:
+        return a.astype(int)
+    return np.zeros((0, 2), int)
+
+
+def front_objectives(fr: Mapping[str, Any]) -> tuple[list[str], list[str]]:
+    """(objective names, senses) of a front group: attrs ``objectives`` and ``senses``
+    (``min``/``max``), else ``f1 … fm`` minimised."""
+    at = fr.get("attrs", {})
+    m = np.atleast_2d(_f(fr["f"])).shape[1]
+    names = [_s(x) for x in at.get("objectives", [])] or [f"f{i + 1}" for i in range(m)]
+    senses = [_s(x) for x in at.get("senses", [])] or ["min"] * m
+    return names[:m], senses[:m]
+
+
+def _front(tree: Mapping[str, Any], ids: _Ids, units: dict[str, str]) -> list[Section]:
+    fr = tree["front"]
+    F = np.atleast_2d(_f(fr["f"]))
+    n, m = F.shape
+    Fse = np.atleast_2d(_f(fr["f_se"])) if "f_se" in fr else np.full((n, m), np.nan)
+    names, senses = front_objectives(fr)
+    # shown in the indices' own values: front/<name> where archived, else f with max negated
+    vals = np.stack([_f(fr[k]) if k in fr and _f(fr[k]).shape == (n,) else
+                     (-F[:, i] if senses[i] == "max" else F[:, i]) for i, k in enumerate(names)],
+                    axis=1)  # fmt: skip
+    ses = np.stack([_f(fr[k + "_se"]) if k + "_se" in fr else Fse[:, i] for i, k in enumerate(names)],
+                   axis=1)  # fmt: skip
+    X = np.atleast_2d(_f(fr["x"])) if "x" in fr else np.zeros((n, 0))
+    prob = tree.get("problem", {})
+    vnames = _names(prob["names"]) if "names" in prob else [f"x{i}" for i in range(X.shape[1])]
+    inds = [k for k in _index_names(fr, skip=("x", "f", "ambiguous", "hypervolume"))
+            if _f(fr[k]).shape == (n,)]  # fmt: skip
+    pairs = _pairs(fr["ambiguous"], n) if "ambiguous" in fr else np.zeros((0, 2), int)
+    amb_count = np.bincount(pairs.ravel(), minlength=n) if len(pairs) else np.zeros(n, int)
+    keep = _every(n, MAX_MARKERS)
+    # hover: design number, variables, indices ± SE, ambiguity
+    cd = [np.arange(n)[:, None].astype(float), X, amb_count[:, None].astype(float)]
+    tpl = ["<b>design %{customdata[0]}</b>"]
+    c = 1
+    for j, v in enumerate(vnames[: X.shape[1]]):
+        tpl.append(f"{esc(v)} = %{{customdata[{c + j}]:.5~g}} {esc(style.unit_of(v, units))}")
+    c += X.shape[1]
+    tpl.append(f"in %{{customdata[{c}]}} ambiguous pairs")
+    c += 1
+    for k in inds:
+        se = _f(fr[k + "_se"]) if k + "_se" in fr else np.full(n, np.nan)
+        cd += [_f(fr[k])[:, None], se[:, None]]
+        tpl.append(f"{esc(k)} = %{{customdata[{c}]:.5~g}} ± %{{customdata[{c + 1}]:.2~g}} "
+                   f"{esc(style.unit_of(k, units))}")  # fmt: skip
+        c += 2
+    custom = np.concatenate(cd, axis=1)[keep]
+    hover = "<br>".join(tpl) + "<extra></extra>"
+    amb = amb_count[keep] > 0
+    colors = np.where(amb, PALETTE[1], PALETTE[0])
+    symbols = ["diamond" if a else "circle" for a in amb]
+    axl = [esc(style.label(f"{k} ({s})", style.unit_of(k, units))) for k, s in zip(names, senses, strict=True)]  # fmt: skip
+    title = (f"Pareto front: {n} designs{_thin_note(n, len(keep), 'designs')}; bars ± 2 SE; "
+             f"orange diamonds: in a pair whose order is within 2 SE ({len(pairs)} pairs)")  # fmt: skip
+    sec = Section("front", "Pareto front")
+    pts: dict[str, Any] = {"mode": "markers", "customdata": custom, "hovertemplate": hover,
+                           "name": "front", "marker": {"color": colors, "symbol": symbols,
+                                                       "size": 8, "line": {"width": 0.5, "color": "#333"}}}  # fmt: skip
+    if m == 2:
+        tr = {"type": "scatter", "x": vals[keep, 0], "y": vals[keep, 1], **pts,
+              "error_x": {"type": "data", "array": Z * ses[keep, 0], "visible": True,
+                          "thickness": 1, "width": 0, "color": "#999"},
+              "error_y": {"type": "data", "array": Z * ses[keep, 1], "visible": True,
+                          "thickness": 1, "width": 0, "color": "#999"}}  # fmt: skip
+        data = [tr]
+        if 0 < len(pairs) <= 2000:
+            px = np.full(3 * len(pairs), np.nan)
+            py = px.copy()
+            px[0::3], px[1::3] = vals[pairs[:, 0], 0], vals[pairs[:, 1], 0]
+            py[0::3], py[1::3] = vals[pairs[:, 0], 1], vals[pairs[:, 1], 1]
+            data.insert(0, {"type": "scatter", "mode": "lines", "x": px, "y": py,
+                            "name": "ambiguous pair", "hoverinfo": "skip",
+                            "line": {"color": _rgba(PALETTE[1], 0.5), "width": 1, "dash": "dot"}})  # fmt: skip
+        lay = _layout(esc(title), axl[0], axl[1], showlegend=bool(len(pairs)))
+        sec.items.append(Plot(ids("front"), {"data": data, "layout": lay}, wide=True))
+    elif m == 3:
+        tr = {
+            "type": "scatter3d",
+            "x": vals[keep, 0],
+            "y": vals[keep, 1],
+            "z": vals[keep, 2],
+            **pts,
+        }
+        tr["marker"] = tr["marker"] | {"size": 4}
+        for a, i in (("error_x", 0), ("error_y", 1), ("error_z", 2)):
+            tr[a] = {"type": "data", "array": Z * ses[keep, i], "visible": True,
+                     "thickness": 1, "width": 0, "color": "#999"}  # fmt: skip
+        scene = {a: {"title": {"text": t}} for a, t in zip(("xaxis", "yaxis", "zaxis"), axl, strict=True)}  # fmt: skip
+        lay = _layout(esc(title), scene=scene, height=560)
+        sec.items.append(Plot(ids("front3d"), {"data": [tr], "layout": lay}, wide=True))
+    else:
+        dims = [{"label": axl[i], "values": vals[keep, i]} for i in range(m)]
+        tr = {"type": "splom", "dimensions": dims, "customdata": custom, "hovertemplate": hover,
+              "marker": {"color": colors, "size": 5}, "diagonal": {"visible": False}}  # fmt: skip
+        lay = _layout(esc(title + " (pairwise projections)"), height=180 * m + 80)
+        sec.items.append(Plot(ids("front-splom"), {"data": [tr], "layout": lay}, wide=True))
+    rows = [(a, b) for a, b in zip(names, senses, strict=True)]
+    sec.items.append("<p class='note'>Values are the indices themselves (a <i>max</i> objective "
+                     "is shown as its index, not negated). Two designs form an <i>ambiguous</i> "
+                     "pair when their order in some objective is within 2 standard errors: "
+                     "the Monte-Carlo noise could swap them, so neither is known to be better "
+                     "there.</p>" + _table(["objective", "sense"], rows))  # fmt: skip
+    hv_tree = fr if "hypervolume" in fr else tree.get("optimizer", {})
+    if "hypervolume" in hv_tree:
+        hv = _f(hv_tree["hypervolume"])
+        ref = fr.get("attrs", {}).get("reference")
+        t = "hypervolume per iteration" + (f" (reference point {np.round(_f(ref), 6).tolist()})" if ref is not None else "")  # fmt: skip
+        if hv.ndim == 2:
+            p = _convergence(
+                hv, int(np.argmax(hv[:, -1])), ids, t, "hypervolume [-]", "hypervolume"
+            )
+        else:
+            p = Plot(ids("hv"), {"data": [{"type": "scatter", "mode": "lines", "x": np.arange(len(hv)), "y": hv}],
+                                 "layout": _layout(esc(t), _lab("iteration", {}), "hypervolume [-]")})  # fmt: skip
+        sec.items.append(p)
+    return [sec]

@@ -1,0 +1,162 @@
+"""The sections of a run: convergence, the best run's indices, the final design, the
+gradient polish, a replayed trajectory (``teleop/``) and a checkpoint."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from designopt.figures import style
+from designopt.figures.html.model import (
+    MAX_LINE_POINTS,
+    PALETTE,
+    Plot,
+    Section,
+    _every,
+    _f,
+    _Ids,
+    _names,
+    _num,
+    _s,
+    _table,
+    _thin_note,
+    esc,
+)
+from designopt.figures.html.plots import (
+    _convergence,
+    _index_names,
+    _int_ticks,
+    _lab,
+    _layout,
+    _value_band,
+    merged,
+)
+
+
+def _run_sections(tree: Mapping[str, Any], ids: _Ids, units: dict[str, str],
+                  rates: set[str]) -> list[Section]:  # fmt: skip
+    out = []
+    opt = tree.get("optimizer", {})
+    best = None
+    if "best_run" in tree:
+        best = int(tree["best_run"].get("attrs", {}).get("run_index", -1))
+        best = best if best >= 0 else None
+    if "history" in opt:
+        h = _f(opt["history"])
+        if best is None and "best_f" in opt:
+            best = int(np.argmin(_f(opt["best_f"])))
+        sec = Section("convergence", "Convergence")
+        sec.items.append(_convergence(h, best, ids, "best-so-far f per iteration",
+                                      style.label("best f", style.unit_of("f", units))))  # fmt: skip
+        if "history_v" in opt:
+            sec.items.append("<p class='note'>Constrained: each run's best-so-far design and the "
+                             "best run are chosen by Deb's rules (a smaller violation first, then "
+                             "f), so a run's f can rise while its violation falls.</p>")  # fmt: skip
+            sec.items.append(_convergence(_f(opt["history_v"]), best, ids,
+                                          "constraint violation of the best-so-far design",
+                                          style.label("violation", style.DIMENSIONLESS), "violation"))  # fmt: skip
+        out.append(sec)
+    if "best_run" in tree:
+        sec = Section("best-run", "The best run's indices")
+        sec.items += _best_run(tree["best_run"], ids, units, rates)
+        out.append(sec)
+    if "final" in tree:
+        out.append(Section("final", "Final design", [_final_tables(tree, units)]))
+    if "refine" in tree and "f0" in tree["refine"]:
+        r = tree["refine"]
+        rows = [(int(i), f"{a:.6g}", f"{b:.6g}", f"{a - b:.3g}")
+                for i, a, b in zip(np.atleast_1d(r.get("run_index", np.arange(len(np.atleast_1d(r["f0"]))))),
+                                   np.atleast_1d(_f(r["f0"])), np.atleast_1d(_f(r["f"])), strict=False)]  # fmt: skip
+        at = r.get("attrs", {})
+        cap = ", ".join(f"{k} {_s(at[k])}" for k in ("method", "steps", "learning_rate") if k in at)
+        out.append(Section("refine", "Gradient polish", [f"<p class='note'>{esc(cap)}</p>"
+                           + _table(["run", "f before", "f after", "gain"], rows)]))  # fmt: skip
+    if "teleop" in tree:
+        out += _teleop(tree["teleop"], ids)
+    ck = tree.get("checkpoint")
+    if isinstance(ck, Mapping) and "history" in ck:
+        sec = Section("checkpoint", "Checkpoint (incomplete run)")
+        sec.items.append(_convergence(_f(ck["history"]), None, ids,
+                                      f"best-so-far f, {_s(ck.get('attrs', {}).get('done', '?'))} iterations done",
+                                      style.label("best f", style.DIMENSIONLESS)))  # fmt: skip
+        out.append(sec)
+    return out
+
+
+def _best_run(br: Mapping[str, Any], ids: _Ids, units: dict[str, str], rates: set[str]) -> list[Plot]:  # fmt: skip
+    it = _f(br["iteration"])
+    keep = _every(len(it), MAX_LINE_POINTS)
+    out = []
+    inds = [k for k in _index_names(br, skip=("iteration",)) if _f(br[k]).shape == it.shape]
+    for j, (k, name) in enumerate(merged(br, inds)):
+        y = _f(br[k])
+        se = br.get(k + "_se")
+        col = PALETTE[j % len(PALETTE)]
+        rate = k in rates
+        yy = np.clip(y, 0, 1) if rate else y
+        band, what = _value_band(it[keep], yy[keep], None if se is None else _f(se)[keep], rate, col)  # fmt: skip
+        line = {"type": "scatter", "mode": "lines+markers" if len(keep) < 60 else "lines",
+                "x": it[keep], "y": yy[keep], "name": k, "line": {"color": col, "width": 2},
+                "marker": {"size": 4}}  # fmt: skip
+        if se is not None:
+            line["customdata"] = _f(se)[keep]
+            line["hovertemplate"] = "iteration %{x}: %{y:.6~g} ± %{customdata:.2~g} (SE)<extra></extra>"  # fmt: skip
+        t = f"{name} along the best run" + (f" (band: {what})" if what else "")
+        t += _thin_note(len(it), len(keep), "iterations")
+        lay = _layout(esc(t), _lab("iteration", {}), _lab(k, units), showlegend=False)
+        _int_ticks(lay, len(keep))
+        out.append(Plot(ids("best-" + k), {"data": [*band, line], "layout": lay}))
+    return out
+
+
+def _final_tables(tree: Mapping[str, Any], units: dict[str, str]) -> str:
+    fin, prob = tree["final"], tree.get("problem", {})
+    parts = []
+    x = np.atleast_1d(_f(fin["x"])) if "x" in fin else None
+    if x is not None:
+        names = _names(prob["names"]) if "names" in prob else [f"x{i}" for i in range(len(x))]
+        lo = _f(prob["lower"]) if "lower" in prob else np.full(len(x), np.nan)
+        hi = _f(prob["upper"]) if "upper" in prob else np.full(len(x), np.nan)
+        rows = [(n, f"{v:.6g}", f"{a:.6g}", f"{b:.6g}", style.unit_of(n, units))
+                for n, v, a, b in zip(names, x, lo, hi, strict=False)]  # fmt: skip
+        parts.append("<h3>Final design</h3>"
+                     + _table(["variable", "value", "lower", "upper", "unit"], rows))  # fmt: skip
+    rows = []
+    for k in _index_names(fin, skip=("x",)):
+        v = _f(fin[k])
+        if v.ndim:
+            continue
+        se = float(_f(fin[k + "_se"])) if k + "_se" in fin else None
+        rows.append((k, _num(float(v), se), style.unit_of(k, units)))
+    at = fin.get("attrs", {})
+    cap = f"stage: {_s(at['stage'])}" if "stage" in at else ""
+    if "n_samples_used" in at:
+        cap += f"; Monte-Carlo samples: {_s(at['n_samples_used'])}"
+    parts.append("<h3>Final indices (± 1 SE)</h3>" + (f"<p class='note'>{esc(cap)}</p>" if cap else "")
+                 + _table(["index", "value ± SE", "unit"], rows))  # fmt: skip
+    return "".join(parts)
+
+
+def _teleop(t: Mapping[str, Any], ids: _Ids) -> list[Section]:
+    sec = Section("teleop", "Replayed trajectory")
+    if "tip" in t and "command" in t:
+        tip, cmd = np.atleast_2d(_f(t["tip"])), np.atleast_2d(_f(t["command"]))
+        k = _every(len(tip), MAX_LINE_POINTS)
+        data = []
+        for nm, p, c, dash in (("commanded", cmd, PALETTE[0], "solid"), ("achieved", tip, PALETTE[3], "dash")):  # fmt: skip
+            data.append({"type": "scatter3d", "mode": "lines", "x": p[k, 0], "y": p[k, 1],
+                         "z": p[k, 2], "name": nm, "line": {"color": c, "width": 4, "dash": dash}})  # fmt: skip
+        scene = {a: {"title": {"text": esc(style.label(a, "mm"))}} for a in ("xaxis", "yaxis", "zaxis")}  # fmt: skip
+        sec.items.append(Plot(ids("teleop-path"), {"data": data, "layout": _layout(
+            "slave tip path" + _thin_note(len(tip), len(k), "samples"), scene=scene | {"aspectmode": "data"})}, wide=True))  # fmt: skip
+    if "t" in t and "error" in t:
+        tt, err = _f(t["t"]), _f(t["error"])
+        k = _every(len(tt), MAX_LINE_POINTS)
+        sec.items.append(Plot(ids("teleop-error"), {"data": [
+            {"type": "scatter", "mode": "lines", "x": tt[k], "y": err[k], "name": "error",
+             "line": {"color": PALETTE[3]}}],
+            "layout": _layout("tracking error", esc(style.label("t", "s")),
+                              esc(style.label("error", "mm")), showlegend=False)}))  # fmt: skip
+    return [sec] if sec.items else []
