@@ -8,7 +8,8 @@ import pytest
 from designopt import montecarlo as mc
 from designopt.studies.master9 import mechanism as m
 from designopt.studies.master9 import objective as obj
-from designopt.studies.master9.indices import IndexSettings, _features, inv_cond_fro_jv, jv_entries
+from designopt.studies.master9.indices import _features, inv_cond_fro_jv, jv_entries, swarm_indices
+from designopt.studies.master9.settings import Indices
 from designopt.studies.master9.volume import hull_volume, voxel_volume
 
 PUBLISHED = [(m.PAPER_INITIAL, 696.960), (m.PAPER_FINAL, 691.314)]
@@ -155,9 +156,11 @@ def test_kernel_matches_generic_closed_form_condition_number():
 
 def test_settings_reject_bad_values():
     with pytest.raises(ValueError, match="n_samples"):
-        IndexSettings(n_samples=-5)
+        Indices(n_samples=-5)
     with pytest.raises(ValueError, match="measure"):
-        IndexSettings(measure="polar")
+        Indices(measure="polar")
+    with pytest.raises(ValueError, match="replicates"):
+        Indices(sampler="rqmc", replicates=1)
 
 
 def test_generic_workspace_average_matches_study_kernel():
@@ -177,3 +180,70 @@ def test_generic_workspace_average_matches_study_kernel():
     assert abs(float(est.value) - ref["gci"]) < 4 * np.hypot(float(est.se), ref["gci_se"])
     joint, _ = mc.workspace_average(g_and_w, jax.random.key(8), lo, hi, 100_000, measure="joint")
     assert abs(float(joint.value) - float(est.value)) > 4 * float(est.se)  # the measures differ
+
+
+def test_problem_carries_its_bounds_and_samples_typed():
+    """Problem.norm_bounds is the Halton probe's (3, 2) min/max of (f_k, f_l, f_p) (the same
+    numbers as params["bounds"] and the archived info), recomputed here by scoring the
+    Halton designs with swarm_indices; n_samples_used is the plan's count."""
+    from designopt.studies import streams
+
+    keys = streams(3)
+    P = obj.problem({"indices": {"n_samples": 4096, "chunk": 1024}, "n_norm": 8}, keys)
+    s = Indices(n_samples=4096, chunk=1024)
+    Xn = mc.box_samples(keys["normalisation"], P.lower, P.upper, 8, "halton", jnp.float64)
+    d = {k: jnp.full((8,), v) for k, v in m.default_design().items()}
+    d |= {n: Xn[:, i] for i, n in enumerate(P.names)}
+    ind = swarm_indices(d, keys["samples"], s)
+    ref = np.array([[np.min(ind[k]), np.max(ind[k])] for k in ("f_k", "f_l", "f_p")])
+    np.testing.assert_allclose(P.norm_bounds, ref, rtol=1e-12)
+    np.testing.assert_array_equal(np.asarray(P.params["bounds"]), P.norm_bounds)
+    assert [P.info["norm_bounds"][k] for k in ("f_k", "f_l", "f_p")] == P.norm_bounds.tolist()
+    assert P.n_samples_used == P.info["n_samples_used"] == 4096
+    assert P.names == ("a1", "a3", "d3") and P.lower.tolist() == [250, 250, 50]
+
+
+def test_weighted_sum_and_flat_bounds():
+    """normalise.weighted_sum against the formula in numpy; a flat index gets max = min + 1."""
+    from designopt import normalise
+
+    rng = np.random.default_rng(5)
+    x = [rng.normal(size=7) for _ in range(3)]
+    se = [rng.uniform(0, 1, 7) for _ in range(3)]
+    b = np.sort(rng.normal(size=(3, 2)), 1)
+    w = [4.0, -2.0, 0.5]
+    f, f_se = normalise.weighted_sum(x, jnp.asarray(b), w, se)
+    span = b[:, 1] - b[:, 0]
+    np.testing.assert_allclose(f, sum(w[i] * (x[i] - b[i, 0]) / span[i] for i in range(3)))
+    np.testing.assert_allclose(f_se, sum(abs(w[i]) * se[i] / span[i] for i in range(3)))
+
+    def fn(params, X, key):  # index "c" is flat over the box
+        return X[:, 0], {"a": X[:, 0] + X[:, 1], "c": jnp.zeros(X.shape[0])}
+
+    from designopt.studies import streams
+
+    lo, hi = np.array([0.0, 1.0]), np.array([2.0, 3.0])
+    bb = normalise.probe_bounds(fn, None, ("a", "c"), lo, hi, 16, streams(0), jnp.float64)
+    Xn = np.asarray(mc.box_samples(streams(0)["normalisation"], lo, hi, 16, "halton"))
+    np.testing.assert_array_equal(bb, [[Xn.sum(1).min(), Xn.sum(1).max()], [0.0, 1.0]])
+
+
+def test_cost_names_the_config_keys_it_reads():
+    """Study.cost: each *_key resolves, in the settings dump, to the number it reports
+    (chunk: the smaller of chunk and n_samples, as a chunk never exceeds the samples)."""
+    from designopt.studies import STUDIES
+    from designopt.studies.master9.settings import Master9Settings
+
+    for idx, n_norm in (({"n_samples": 5000, "chunk": 9000}, 7), ({}, 64)):
+        s = Master9Settings.model_validate({"name": "master9", "indices": idx, "n_norm": n_norm})
+        c = STUDIES["master9"].cost(s)
+        dump = {"study": s.model_dump()}
+
+        def at(key, dump=dump):
+            for part in key.split("."):
+                dump = dump[part]
+            return dump
+
+        assert c.samples == at(c.samples_key) == s.indices.n_samples
+        assert c.chunk == min(at(c.chunk_key), c.samples)
+        assert c.n_norm == at(c.norm_key) == n_norm

@@ -23,7 +23,7 @@ import jax
 import jax.numpy as jnp
 
 from designopt.optim import draws as rng
-from designopt.optim.protocol import Best, Optimizer, Task, argbest, better
+from designopt.optim.protocol import Best, Optimizer, Task, apply_bounds, argbest, better
 
 Array = jnp.ndarray
 INERTIA_RULES = ("constant", "nonlinear", "linear", "adaptive", "random")
@@ -230,18 +230,19 @@ class PSO(Optimizer):
         v = jax.lax.cond(p.penalty != 0, velocity(True), velocity(False))
         x = s.x + v
         out = (x < lower) | (x > upper)
+        x = apply_bounds(
+            x,
+            lower,
+            upper,
+            self.bounds,
+            lambda: lower + (upper - lower) * self._u(key, _RB, (M, D), dt),
+        )
+        # the velocity of a coordinate that left the box: stopped at a clipped face,
+        # reversed at a reflecting one, kept by a re-initialised particle
         if self.bounds == "clip":
-            x = jnp.clip(x, lower, upper)
             v = jnp.where(out, 0.0, v)
         elif self.bounds == "reflect":
-            span = upper - lower
-            y = jnp.mod(x - lower, 2 * span)
-            x = lower + jnp.where(y > span, 2 * span - y, y)
             v = jnp.where(out, -v, v)
-        elif self.bounds == "reinit":
-            x = jnp.where(out, lower + (upper - lower) * self._u(key, _RB, (M, D), dt), x)
-        else:
-            raise ValueError(f"unknown bounds handling {self.bounds!r}")
         f, viol = task.evaluate(x, jax.random.fold_in(key, 99))
         imp = better(f, viol, s.pbest_f, s.pbest_v)
         pbest_x = jnp.where(imp[:, None], x, s.pbest_x)

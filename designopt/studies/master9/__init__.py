@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from designopt.studies.base import Study
+from designopt.studies.base import Cost, Study
 from designopt.studies.master9.settings import DESIGN_KEYS, Indices, Master9Settings
 
 SUMMARY = ("f_k", "f_l", "f_p", "gci", "gcsei", "gpi")
@@ -28,10 +28,10 @@ def _problem(settings: Master9Settings, keys, dtype):
     return objective.problem(settings, keys, dtype)
 
 
-def _figures(archive: dict[str, Any], folder: Path) -> list[Path]:
+def _figures(record: Any, folder: Path) -> list[Path]:
     from designopt.studies.master9 import figures
 
-    return figures.draw_run(archive, folder)
+    return figures.draw_run(record, folder)
 
 
 def _aliases(s: Master9Settings) -> dict[str, str]:
@@ -39,6 +39,15 @@ def _aliases(s: Master9Settings) -> dict[str, str]:
     out |= {f"design.{k}": f"study.fixed.{k}" for k in DESIGN_KEYS}  # variables: refused later
     out |= {f"study.fixed.{k}": f"study.fixed.{k}" for k in DESIGN_KEYS}
     return out
+
+
+def _cost(s: Master9Settings) -> Cost:
+    """Samples per design, the chunk in flight and the normalisation probes, with the
+    config keys a user lowers (the pre-flight estimate)."""
+    n = s.indices.n_samples
+    return Cost(samples=n, chunk=min(n, s.indices.chunk), n_norm=s.n_norm,
+                samples_key="study.indices.n_samples", chunk_key="study.indices.chunk",
+                norm_key="study.n_norm")  # fmt: skip
 
 
 def _extra(s: Master9Settings, fin) -> list[str]:
@@ -57,6 +66,7 @@ STUDY = Study(
     sweep_aliases=_aliases,
     units=lambda s: dict.fromkeys(s.variables, "mm") | INDEX_UNITS,
     extra_lines=_extra,
+    cost=_cost,
     example_config="configs/master9.yaml",
     tiny={"name": "master9", "indices": {"n_samples": 2048}, "n_norm": 8},
     meta={

@@ -11,8 +11,6 @@ Samples are shared by every design of a swarm (common random numbers).
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass, field
-from typing import Literal
 
 import jax
 import jax.numpy as jnp
@@ -20,63 +18,15 @@ import numpy as np
 
 from designopt import montecarlo as mc
 from designopt.kinematics.conditioning import inv_cond
-from designopt.studies.master9.mechanism import POSITION_LIMITS
+from designopt.studies.master9.settings import Indices
 
 Array = jnp.ndarray
 LINEAR_KEYS = ("a1", "a3", "a4", "d3")
 
 
-@dataclass(frozen=True)
-class IndexSettings:
-    """How the indices are estimated. Every field is recorded in archives.
-
-    n_samples: joint-space samples per design (shared by the swarm); chunk: samples per
-    step of the memory-bounded scan; measure: 'cartesian' (seed's ∫_W dW, weights
-    |det J_v|) or 'joint'; sampler: 'uniform', 'rqmc' or 'halton' with ``replicates``
-    (montecarlo.plan); backlash_deg: backlash of
-    (q1, q2, q3) in degrees (not in the seed; default 0.1°); norm/normalized: condition
-    number convention (default raw Frobenius, seed 000 eq. 51-53).
-    """
-
-    n_samples: int = 200_000
-    chunk: int = 32_768
-    measure: mc.Measure = "cartesian"
-    sampler: mc.Sampler = "uniform"
-    replicates: int | None = None  # rqmc: randomisations (default mc.DEFAULT_REPLICATES)
-    backlash_deg: tuple[float, float, float] = (0.1, 0.1, 0.1)
-    norm: Literal["fro", "2"] = "fro"
-    normalized: bool = False
-    weights: tuple[float, float, float] = (4.0, 2.0, 1.0)
-    joint_limits_deg: tuple[tuple[float, float], ...] = field(
-        default_factory=lambda: tuple(map(tuple, np.rad2deg(POSITION_LIMITS).tolist()))
-    )
-
-    def __post_init__(self) -> None:
-        if self.n_samples < 2:
-            raise ValueError(f"n_samples must be at least 2, got {self.n_samples}")
-        if self.chunk < 1:
-            raise ValueError(f"chunk must be positive, got {self.chunk}")
-        if self.measure not in ("cartesian", "joint"):
-            raise ValueError(f"measure must be 'cartesian' or 'joint', got {self.measure!r}")
-        if self.norm not in ("fro", "2"):
-            raise ValueError(f"norm must be 'fro' or '2', got {self.norm!r}")
-        mc.check_sampling(self.sampler, self.replicates)
-
-    @property
-    def box(self) -> tuple[np.ndarray, np.ndarray]:
-        lim = np.deg2rad(np.asarray(self.joint_limits_deg, dtype=np.float64))
-        return lim[:, 0], lim[:, 1]
-
-    @property
-    def plan(self) -> mc.Plan:
-        if self.sampler != "rqmc" and self.replicates in (None, 1):  # today's layout
-            c = min(self.chunk, self.n_samples)
-            return mc.Plan(self.sampler, 1, -(-self.n_samples // c), c)
-        return mc.plan(self.n_samples, self.chunk, self.sampler, self.replicates)
-
-    @property
-    def n_used(self) -> int:
-        return self.plan.n_used
+IndexSettings = Indices
+"""Transitional name of :class:`~designopt.studies.master9.settings.Indices` (the one
+settings model of the indices) for callers outside this study; use ``Indices``."""
 
 
 def features(q: Array) -> dict[str, Array]:
@@ -146,7 +96,7 @@ def emax(x: dict[str, Array], dP: Array) -> Array:
     return jnp.sqrt(jnp.max(ex * ex + ey * ey + ez * ez, axis=-2))  # max over corners
 
 
-def _chunk_sums(x, q, delta, s: IndexSettings):
+def _chunk_sums(x, q, delta, s: Indices):
     f = features(q)
     xm = {k: v[:, None] for k, v in x.items()}
     J = jv_entries(xm, f)
@@ -171,14 +121,14 @@ def _chunk_sums(x, q, delta, s: IndexSettings):
     return mc.power_sums(w, r), mc.power_sums(w, e), mc.power_sums(adet, jnp.ones_like(adet))
 
 
-def index_sums(x: dict[str, Array], key: jax.Array, s: IndexSettings, dtype=None, mesh=None):
+def index_sums(x: dict[str, Array], key: jax.Array, s: Indices, dtype=None, mesh=None):
     """Accumulated power sums for (1/k, e_max, |det J_v|) over all samples, per design
     (the chunks spread over the ``samples`` axis of ``mesh`` when given)."""
     dtype = mc.out_dtype(dtype)
     lo, hi = s.box
     lo, hi = jnp.asarray(lo, dtype), jnp.asarray(hi, dtype)
     p = s.plan
-    delta = jnp.deg2rad(jnp.asarray(s.backlash_deg, dtype))
+    delta = jnp.deg2rad(jnp.asarray(s.backlash, dtype))
     x = {k: jnp.asarray(x[k], dtype) for k in LINEAR_KEYS}
     M = x["a1"].shape[0]
 
@@ -192,7 +142,7 @@ def index_sums(x: dict[str, Array], key: jax.Array, s: IndexSettings, dtype=None
 
 
 def replicate_indices(
-    design: dict[str, Array], key: jax.Array, s: IndexSettings, dtype=None, mesh=None
+    design: dict[str, Array], key: jax.Array, s: Indices, dtype=None, mesh=None
 ) -> dict[str, Array]:
     """The indices of :func:`swarm_indices` per replicate: (M, R) arrays (with R = 1, (M,)
     arrays and the delta-method ``*_se``); reduce with ``mc.combine(v, se, s.plan)``."""
@@ -238,7 +188,7 @@ def reduce_replicates(rep: dict[str, Array], p: mc.Plan) -> dict[str, Array]:
 
 
 def swarm_indices(
-    design: dict[str, Array], key: jax.Array, s: IndexSettings, dtype=None, mesh=None
+    design: dict[str, Array], key: jax.Array, s: Indices, dtype=None, mesh=None
 ) -> dict[str, Array]:
     """All indices of eq. (35)-(42) for a swarm: design values of shape (M,). Returns (M,) arrays."""
     rep = replicate_indices(design, key, s, dtype, mesh)

@@ -3,33 +3,27 @@
 f = w_k·norm(f_k) + w_l·norm(f_l) + w_p·norm(f_p), norm(x) = (x - x_min)/(x_max - x_min),
 weights (4, 2, 1) as in eq. (43). With the ``rqmc`` sampler (default) f is computed per
 replicate and ``f_se`` is the SD of those values over √R (honest, docs/indices.md); with
-one i.i.d. stream, ``f_se`` = Σ |w_i| se_i/(x_max − x_min), an upper bound. The seed does not say where x_min/x_max come from: we
-score a space-filling (Halton) sample of ``n_norm`` designs over the design box once,
-before optimising, and keep the bounds fixed (they are returned in ``problem.info`` and
-archived).
+one i.i.d. stream, ``f_se`` = Σ |w_i| se_i/(x_max − x_min), an upper bound. The seed does
+not say where x_min/x_max come from: we score a space-filling (Halton) sample of
+``n_norm`` designs over the design box once, before optimising, and keep the bounds fixed
+(``designopt.normalise``; they are ``problem.norm_bounds`` and archived).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import asdict
 from typing import Any
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from designopt import montecarlo as mc
+from designopt import normalise
 from designopt.problems.base import Problem
 from designopt.studies.base import streams
 from designopt.studies.master9 import mechanism as m
-from designopt.studies.master9.indices import (
-    IndexSettings,
-    reduce_replicates,
-    replicate_indices,
-    swarm_indices,
-)
-from designopt.studies.master9.settings import Master9Settings
+from designopt.studies.master9.indices import reduce_replicates, replicate_indices, swarm_indices
+from designopt.studies.master9.settings import Indices, Master9Settings
 
 SUBOBJECTIVES = ("f_k", "f_l", "f_p")
 DEFAULT_VARIABLES = {"a1": (250.0, 350.0), "a3": (250.0, 350.0), "d3": (50.0, 150.0)}
@@ -43,7 +37,7 @@ def _full_design(params: Mapping[str, Any], X, names) -> dict:
     return d
 
 
-def build_fn(names: tuple[str, ...], settings: IndexSettings, dtype, mesh: Any = None):
+def build_fn(names: tuple[str, ...], settings: Indices, dtype, mesh: Any = None):
     """The pure swarm objective fn(params, X, key) for these design variables; the
     Monte-Carlo samples come from ``params["sample_key"]`` (common random numbers), their
     chunks spread over the ``samples`` axis of ``mesh`` when given."""
@@ -55,21 +49,14 @@ def build_fn(names: tuple[str, ...], settings: IndexSettings, dtype, mesh: Any =
         rep = replicate_indices(d, params["sample_key"], settings, dtype, mesh)
         ind = reduce_replicates(rep, p)
         b = params["bounds"]  # (3, 2): rows f_k, f_l, f_p; cols min, max
-        w = params["weights"]
+        w = [params["weights"][i] for i in range(len(SUBOBJECTIVES))]
         if p.replicates > 1:  # f per replicate: its SE from the replicate spread
-            f_r = sum(
-                w[i] * (rep[n] - b[i, 0]) / (b[i, 1] - b[i, 0]) for i, n in enumerate(SUBOBJECTIVES)
-            )
+            f_r = normalise.weighted_sum([rep[n] for n in SUBOBJECTIVES], b, w)
             f_est = mc.combine(f_r, None, p)
             return f_est.value, ind | {"f_se": f_est.se}
-        f = sum(
-            w[i] * (ind[n] - b[i, 0]) / (b[i, 1] - b[i, 0]) for i, n in enumerate(SUBOBJECTIVES)
-        )
         # the sub-objectives share samples: Σ |w_i| se_i / span_i bounds f's standard error
-        f_se = sum(
-            jnp.abs(w[i]) * ind[n + "_se"] / jnp.abs(b[i, 1] - b[i, 0])
-            for i, n in enumerate(SUBOBJECTIVES)
-        )
+        ses = [ind[n + "_se"] for n in SUBOBJECTIVES]
+        f, f_se = normalise.weighted_sum([ind[n] for n in SUBOBJECTIVES], b, w, ses)
         return f, ind | {"f_se": f_se}
 
     return fn
@@ -99,48 +86,39 @@ def problem(
     if dtype is None:
         dtype = jnp.float64 if jax.config.jax_enable_x64 else jnp.float32
     dtype = jnp.dtype(dtype)
-    variables = {k: tuple(map(float, v)) for k, v in settings.variables.items()}
+    names, lower, upper = settings.box()
     fixed = {**m.default_design(), **{k: float(v) for k, v in settings.fixed.items()}}
     m.check_design(fixed)
-    ind_cfg = settings.indices.model_dump()
-    for k in ("backlash_deg", "weights"):
-        v = ind_cfg[k]
-        ind_cfg[k] = tuple(float(x) for x in v) if isinstance(v, (list, tuple)) else (float(v),) * 3
-    ind = IndexSettings(**ind_cfg)
-    names = tuple(variables)
-    lower = np.array([variables[n][0] for n in names])
-    upper = np.array([variables[n][1] for n in names])
-    sample_key = keys["samples"]
+    ind = settings.indices
     fn = build_fn(names, ind, dtype)
     fixed_free = {k: v for k, v in fixed.items() if k not in names}
-
-    # normalisation bounds from a Halton sample of the design box (fixed during the run)
-    n_norm = settings.n_norm
-    Xn = mc.box_samples(keys["normalisation"], lower, upper, n_norm, "halton", dtype)
-    probe = {
+    params = {
         "fixed": {k: jnp.asarray(v, dtype) for k, v in fixed_free.items()},
-        "sample_key": sample_key,
-        "bounds": jnp.array([[0.0, 1.0]] * 3, dtype),
-        "weights": jnp.asarray(ind.weights, dtype),
+        "sample_key": keys["samples"],
+        "bounds": normalise.unit_bounds(len(SUBOBJECTIVES), dtype),
+        "weights": jnp.asarray(ind.weights3, dtype),
     }
-    _, sub = jax.jit(fn)(probe, Xn, sample_key)
-    sub = {n: np.asarray(sub[n]) for n in SUBOBJECTIVES}
-    bounds = np.array([[float(sub[n].min()), float(sub[n].max())] for n in SUBOBJECTIVES])
-    params = {**probe, "bounds": jnp.asarray(bounds, dtype)}
+    # normalisation bounds from a Halton sample of the design box (fixed during the run)
+    bounds = normalise.probe_bounds(
+        fn, params, SUBOBJECTIVES, lower, upper, settings.n_norm, keys, dtype
+    )
+    params["bounds"] = jnp.asarray(bounds, dtype)
     info = {
         "study": "master9",
-        "settings": asdict(ind),
+        "settings": ind.record(),
         "n_samples_used": ind.n_used,
         "fixed": fixed_free,
         "norm_bounds": {n: bounds[i].tolist() for i, n in enumerate(SUBOBJECTIVES)},
-        "n_norm": n_norm,
+        "n_norm": settings.n_norm,
         "dtype": dtype.name,
     }
+    typed = {"n_samples_used": ind.n_used, "norm_bounds": bounds}
 
     def shard_samples(mesh: Any) -> Problem:
-        return Problem(names, lower, upper, build_fn(names, ind, dtype, mesh), params, info)
+        sharded = build_fn(names, ind, dtype, mesh)
+        return Problem(names, lower, upper, sharded, params, info, **typed)
 
-    return Problem(names, lower, upper, fn, params, info, shard_samples=shard_samples)
+    return Problem(names, lower, upper, fn, params, info, shard_samples=shard_samples, **typed)
 
 
 def indices(
@@ -153,12 +131,12 @@ def indices(
 
     Returns gci, gcsei, f_k, gpi, f_p, volume (∫|det J_v| dq, mm³), L, f_l and the
     ``*_se`` standard errors; ``settings`` are fields of
-    :class:`~designopt.studies.master9.indices.IndexSettings` (measure, sampler,
-    backlash_deg, norm, …). Needs ``jax_enable_x64`` (float64 arrays).
+    :class:`~designopt.studies.master9.settings.Indices` (chunk, default 32768; measure,
+    sampler, backlash_deg, norm, …). Needs ``jax_enable_x64`` (float64 arrays).
     """
     design = {**m.default_design(), **(design or {})}
     m.check_design(design)
-    s = IndexSettings(n_samples=n_samples, **settings)
+    s = Indices.model_validate({"chunk": 32_768, **settings, "n_samples": n_samples})
     key = jax.random.key(0) if key is None else key
     batch = {k: jnp.asarray([v], jnp.float64) for k, v in design.items()}
     out = jax.jit(lambda d, k: swarm_indices(d, k, s))(batch, key)

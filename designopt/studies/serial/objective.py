@@ -23,62 +23,22 @@ import jax.numpy as jnp
 import numpy as np
 
 from designopt import montecarlo as mc
-from designopt.kinematics.conditioning import inv_cond_any, singular_values_sq
+from designopt import normalise
+from designopt.kinematics.conditioning import inv_cond
 from designopt.problems.base import Problem
 from designopt.studies.serial.mechanism import Mechanism, build
 from designopt.studies.serial.settings import SerialSettings
 
 
-def _det(A: jnp.ndarray) -> jnp.ndarray:
-    """det of (..., m, m) in closed form for m ≤ 3 (differentiable); LU otherwise (not on
-    the scoring path, which takes |det| from the Jacobi singular values for m ≥ 4)."""
-    m = A.shape[-1]
-    if m == 1:
-        return A[..., 0, 0]
-    if m == 2:
-        return A[..., 0, 0] * A[..., 1, 1] - A[..., 0, 1] * A[..., 1, 0]
-    if m == 3:
-        a, b, c = A[..., 0, 0], A[..., 0, 1], A[..., 0, 2]
-        d, e, f = A[..., 1, 0], A[..., 1, 1], A[..., 1, 2]
-        g, h, i = A[..., 2, 0], A[..., 2, 1], A[..., 2, 2]
-        return a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
-    return jnp.linalg.det(A)
-
-
-def _sqrt0(x: jnp.ndarray) -> jnp.ndarray:
-    """sqrt(max(x, 0)) with a finite gradient at 0."""
-    ok = x > 0
-    return jnp.where(ok, jnp.sqrt(jnp.where(ok, x, 1.0)), 0.0)
-
-
 def measures(
     J: jnp.ndarray, norm: str, normalized: bool
 ) -> tuple[jnp.ndarray, jnp.ndarray, jnp.ndarray]:
-    """(1/k, manipulability, |det J| or 0 if J is not square) of (..., r, n) Jacobians."""
+    """(1/k, manipulability, |det J| or 0 if J is not square) of (..., r, n) Jacobians;
+    manipulability = σ_1⋯σ_m = sqrt(det J Jᵀ) (sqrt(det JᵀJ) when r > n), |det J| if square
+    (``conditioning.inv_cond`` with ``with_volume``: one closed form or one Jacobi SVD)."""
     r, n = J.shape[-2:]
-    if min(r, n) >= 4:  # one Jacobi SVD gives all three (no LAPACK call in the scan)
-        s2 = singular_values_sq(J)
-        man = _sqrt0(jnp.prod(s2, -1))
-        if norm == "2":
-            smax2, smin2 = jnp.max(s2, -1), jnp.min(s2, -1)
-            ok = smin2 > (max(r, n) * jnp.finfo(J.dtype).eps) ** 2 * smax2
-            inv_k = jnp.where(
-                ok, jnp.sqrt(jnp.where(ok, smin2 / jnp.where(ok, smax2, 1.0), 1.0)), 0.0
-            )
-        else:
-            inv_k = inv_cond_any(J, norm, normalized)
-        return inv_k, man, man if r == n else jnp.zeros_like(man)
-    inv_k = inv_cond_any(J, norm, normalized)
-    if r == n:
-        det = _det(J)
-        return inv_k, jnp.abs(det), jnp.abs(det)
-    G = (
-        jnp.sum(J[..., :, None, :] * J[..., None, :, :], -1)
-        if r < n
-        else jnp.sum(J[..., :, :, None] * J[..., :, None, :], -3)
-    )
-    man = _sqrt0(_det(G))
-    return inv_k, man, jnp.zeros_like(man)
+    inv_k, man = inv_cond(J, norm, normalized, with_volume=True)
+    return inv_k, man, man if r == n else jnp.zeros_like(man)
 
 
 def chunk_sums(mech: Mechanism, s: SerialSettings, full: jnp.ndarray, q: jnp.ndarray):
@@ -135,12 +95,8 @@ def build_fn(mech: Mechanism, s: SerialSettings, dtype: Any, mesh: Any = None):
             if not k.endswith("_se"):
                 out[k], out[k + "_se"] = mc.combine(rep[k], rep[k + "_se"], pl)
         b = params["bounds"]  # (len(weights), 2): min, max per weighted index
-        f = 0.0
-        f_se = 0.0
-        for i, (k, w) in enumerate(weights.items()):
-            span = b[i, 1] - b[i, 0]
-            f = f + w * (rep[k] - b[i, 0]) / span
-            f_se = f_se + abs(w) * out[k + "_se"] / jnp.abs(span)
+        vals, ses = [rep[k] for k in weights], [out[k + "_se"] for k in weights]
+        f, f_se = normalise.weighted_sum(vals, b, list(weights.values()), ses)
         if pl.replicates > 1:  # f per replicate: its SE from the replicates' spread
             f, f_se = mc.combine(f, None, pl)
         return f, out | {"f_se": f_se}
@@ -153,9 +109,7 @@ def problem(s: SerialSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Pro
     ``objective`` (normalised over ``n_norm`` Halton designs when ``normalize: true``)."""
     dtype = jnp.dtype(dtype)
     mech = build(s)
-    names = tuple(s.variables)
-    lower = np.array([s.variables[n][0] for n in names], np.float64)
-    upper = np.array([s.variables[n][1] for n in names], np.float64)
+    names, lower, upper = s.box()
     weights = s.weights()
     fn = build_fn(mech, s, dtype)
     params = {
@@ -164,16 +118,13 @@ def problem(s: SerialSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Pro
         "q_lower": jnp.asarray(mech.lower, dtype),
         "q_upper": jnp.asarray(mech.upper, dtype),
         "sample_key": keys["samples"],
-        "bounds": jnp.asarray([[0.0, 1.0]] * len(weights), dtype),
+        "bounds": normalise.unit_bounds(len(weights), dtype),
     }
     norm_bounds = None
+    b = None
     if s.objective.get("normalize", False):
         n_norm = int(s.objective.get("n_norm", 64))
-        Xn = mc.box_samples(keys["normalisation"], lower, upper, n_norm, "halton", dtype)
-        _, sub = jax.jit(fn)(params, Xn, keys["samples"])
-        sub = {k: np.asarray(sub[k]) for k in weights}
-        b = np.array([[float(sub[k].min()), float(sub[k].max())] for k in weights])
-        b[:, 1] = np.where(b[:, 1] > b[:, 0], b[:, 1], b[:, 0] + 1.0)  # flat index: no scaling
+        b = normalise.probe_bounds(fn, params, tuple(weights), lower, upper, n_norm, keys, dtype)
         params["bounds"] = jnp.asarray(b, dtype)
         norm_bounds = {k: b[i].tolist() for i, k in enumerate(weights)}
     ind = s.indices
@@ -205,7 +156,10 @@ def problem(s: SerialSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Pro
             """G = A x − b (M, n_c): the linear constraints, feasible when ≤ 0."""
             return X @ p["lin_A"].astype(X.dtype).T - p["lin_b"].astype(X.dtype)
 
-    def shard_samples(mesh: Any) -> Problem:
-        return Problem(names, lower, upper, build_fn(mech, s, dtype, mesh), params, info, cons)
+    typed = {"n_samples_used": n_used, "norm_bounds": b}
 
-    return Problem(names, lower, upper, fn, params, info, cons, shard_samples)
+    def shard_samples(mesh: Any) -> Problem:
+        sharded = build_fn(mech, s, dtype, mesh)
+        return Problem(names, lower, upper, sharded, params, info, cons, **typed)
+
+    return Problem(names, lower, upper, fn, params, info, cons, shard_samples, **typed)
