@@ -2,8 +2,8 @@
 (designopt.kinematics.kernel) against hand-derived closed forms.
 
 50 designs × 20,000 configurations, float32 and float64, in configurations per second:
-- master9 (seed 000): numpy closed form (baseline), DHChain + jacfwd (the old generic
-  path), the hand closed form, the generic kernel; FK + J + 1/k and the dexterity part
+- master9 (seed 000): numpy closed form (baseline), the hand closed form, the generic
+  kernel; FK + J + 1/k and the dexterity part
   alone (J_v + 1/k_F + power sums) against study A's specialised kernel (the one
   benchmarks/swarm_scoring.py times); compile times; agreement with the closed form;
 - a 6-joint textbook arm (PUMA 560, standard DH), the same arm read from its URDF
@@ -13,7 +13,7 @@
 Every timing is repeated; "best [median – worst]" is printed.
 
     python benchmarks/kernels.py [--designs 50] [--configs 20000] [--repeats 7]
-                                 [--no-autodiff] [--memory]
+                                 [--memory]
 
 ``--memory`` streams 10^7 samples × 100 designs of the 6-joint arm through the kernel in
 chunks (lax.scan, accumulating Σ 1/k and Σ (1/k)²) in a fresh process and prints that
@@ -37,7 +37,7 @@ import numpy as np  # noqa: E402
 from _timing import best_of, compile_time, header  # noqa: E402
 
 from designopt import montecarlo as mc  # noqa: E402
-from designopt.kinematics import ET, ETChain, inv_cond_fro3  # noqa: E402
+from designopt.kinematics import ET, inv_cond  # noqa: E402
 from designopt.kinematics.kernel import dh_model, et_model  # noqa: E402
 from designopt.studies.master9 import mechanism as m  # noqa: E402
 from designopt.studies.master9.indices import (  # noqa: E402
@@ -129,24 +129,22 @@ def davinci_model():
     wrist offset l_IJ and tool length l_tool as length variables; angles fixed."""
     al = np.deg2rad(20.0)
     beta = np.deg2rad(30.45)
-    chain = ETChain(
-        (
-            ET("Rx", const=-(np.pi - al)),
-            ET("Rz", joint=0),
-            ET("Tz", param="l_QH"),
-            ET("Rx", const=-(beta - HP)),
-            ET("Ry", const=HP),
-            ET("Rz", joint=1),
-            ET("Ty", joint=2),
-            ET("Rx", const=-HP),
-            ET("Rz", joint=3),
-            ET("Rx", const=HP),
-            ET("Rz", joint=4),
-            ET("Ty", param="l_IJ"),
-            ET("Ry", const=HP),
-            ET("Rz", joint=5),
-            ET("Tz", param="l_tool"),
-        )
+    chain = (
+        ET("Rx", const=-(np.pi - al)),
+        ET("Rz", joint=0),
+        ET("Tz", param="l_QH"),
+        ET("Rx", const=-(beta - HP)),
+        ET("Ry", const=HP),
+        ET("Rz", joint=1),
+        ET("Ty", joint=2),
+        ET("Rx", const=-HP),
+        ET("Rz", joint=3),
+        ET("Rx", const=HP),
+        ET("Rz", joint=4),
+        ET("Ty", param="l_IJ"),
+        ET("Ry", const=HP),
+        ET("Rz", joint=5),
+        ET("Tz", param="l_tool"),
     )
     return et_model(chain, variables=("l_QH", "l_IJ", "l_tool"))
 
@@ -179,7 +177,7 @@ def main() -> None:
     ap.add_argument("--designs", type=int, default=50)
     ap.add_argument("--configs", type=int, default=20_000)
     ap.add_argument("--repeats", type=int, default=7)
-    ap.add_argument("--no-autodiff", action="store_true", help="skip the slow jacfwd column")
+    ap.add_argument("--no-autodiff", action="store_true", help=argparse.SUPPRESS)  # no-op now
     ap.add_argument("--memory", action="store_true")
     ap.add_argument("--memory-only", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
@@ -215,15 +213,9 @@ def main() -> None:
         a4 = D["a4"]
 
         @jax.jit
-        def chain_path(q, D):
-            T = m.fk(q, D)
-            J = m.jacobian(q, D)
-            return T[..., :3, 3], inv_cond_fro3(J[..., :3, :3])
-
-        @jax.jit
         def closed_path(q, D):
             P = m.position(q[:, :3], D)
-            return P, inv_cond_fro3(m.jacobian_v_closed(q[:, :3], D))
+            return P, inv_cond(m.jacobian_v_closed(q[:, :3], D))
 
         @jax.jit
         def generic_path(X, q):
@@ -246,17 +238,14 @@ def main() -> None:
         print(f"-- {name}")
         res = {}
         paths = [
-            ("autodiff chain (DHChain+jacfwd)", lambda: chain_path(q, D)),
             ("closed form                    ", lambda: closed_path(q, D)),
             ("generic kernel FK+J+1/k        ", lambda: generic_path(X, q)),
             ("specialised dexterity (study A)", lambda: specialised_dex(X, q, a4)),
             ("generic dexterity (J_v+1/k_F)  ", lambda: generic_dex(X, q)),
         ]
-        if args.no_autodiff:
-            paths = paths[1:]
         for label, fn in paths:
             tc = compile_time(fn)
-            t = timings(fn, R if "autodiff" not in label else 2)
+            t = timings(fn, R)
             res[label.strip()] = t
             if label.startswith("generic"):
                 compiles.append(tc)

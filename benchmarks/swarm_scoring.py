@@ -25,12 +25,12 @@ from designopt import montecarlo as mc
 from designopt.studies.master9 import mechanism as m
 from designopt.studies.master9 import objective as obj
 from designopt.studies.master9.indices import (
-    IndexSettings,
     _features,
     inv_cond_fro_jv,
     jv_entries,
     swarm_indices,
 )
+from designopt.studies.master9.settings import Indices
 
 
 def numpy_dexterity(X: np.ndarray, q: np.ndarray, a4: float) -> tuple[np.ndarray, np.ndarray]:
@@ -104,7 +104,7 @@ def main() -> None:
         )
 
     if a.memory:
-        s = IndexSettings(n_samples=10_000_000, chunk=32_768)
+        s = Indices(n_samples=10_000_000, chunk=32_768)
         D = {k: jnp.full((M,), v, jnp.float32) for k, v in m.default_design().items()}
         D.update(
             a1=jnp.asarray(Xn[:, 0], jnp.float32),
