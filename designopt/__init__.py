@@ -1,22 +1,31 @@
 """designopt: a vectorized JAX design-space optimizer for surgical-robot mechanisms.
 
+The Python API (``designopt.api``; README "Python"): ``load_config(path, overrides)``,
+``run(config, out=None) -> RunRecord``, ``scan(config, out=None) ->
+ScanRecord``, ``evaluate(config, designs)`` (arrays, one entry per design) and
+``load(path) -> Record``; a user's own study or optimizer registers with
+``designopt.studies.register`` / ``designopt.optim.register``. They are imported on first
+use, so that the command line starts without JAX.
+
 Importing the package changes no global state: JAX's 64-bit mode stays as the caller set
 it. The ``designopt`` command turns it on for configs with ``precision: float64``; a
 script that wants float64 calls ``jax.config.update("jax_enable_x64", True)`` first.
-``designopt.evaluate`` is :func:`designopt.pipeline.evaluate` (imported on first use, so
-that the command line starts without JAX).
 """
 
 from typing import Any
 
+from designopt.errors import ConfigError, WriteError
+
 __version__ = "0.1.0"
 
-__all__ = ["__version__", "evaluate"]
+API = ("load_config", "run", "scan", "evaluate", "load")
+
+__all__ = ["ConfigError", "WriteError", "__version__", *API]
 
 
 def __getattr__(name: str) -> Any:
-    if name == "evaluate":
-        from designopt.pipeline import evaluate
+    if name in API:
+        from designopt import api
 
-        return evaluate
+        return getattr(api, name)
     raise AttributeError(f"module 'designopt' has no attribute {name!r}")

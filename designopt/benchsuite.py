@@ -8,8 +8,8 @@ share it too (the shift is an array parameter). Statistics per function: mean, s
 median, best of the final value, mean and std of the convergence iteration, success rate,
 and Mann-Whitney U of every entry against the reference (PTPSO) with Holm's correction.
 
-``command`` is what ``designopt bench CONFIG`` runs; ``draw_figures`` redraws a bench
-archive's figures (``designopt report``).
+``command`` is what ``designopt bench CONFIG`` runs; it writes a ``BenchRecord``, whose
+figures ``designopt report`` redraws (``designopt.figures.bench.draw_record``).
 """
 
 from __future__ import annotations
@@ -211,6 +211,7 @@ def _command(cfg: BenchConfig, text: str, path: Path, quiet: bool, parallel: Any
     from tqdm import tqdm
 
     from designopt import archive, output
+    from designopt.results import BenchRecord
 
     b = cfg.bench
     n_ent = len(b.variants)
@@ -238,7 +239,7 @@ def _command(cfg: BenchConfig, text: str, path: Path, quiet: bool, parallel: Any
     attrs = {"kind": "bench", "config_yaml": text, "config_resolved": cfg.model_dump_json(),
              "seed": cfg.seed, "wall_time_s": sw.wall, "compile_time_s": sw.compile,
              "run_time_s": sw.run}  # fmt: skip
-    archive.write(path, tree, attrs)
+    archive.save(path, BenchRecord(attrs, tree, cfg))
     hist = {c: {v: rec["history"] for v, rec in per.items()} for c, per in res["results"].items()}
     from designopt.figures import bench as bench_figs
 
@@ -249,18 +250,3 @@ def _command(cfg: BenchConfig, text: str, path: Path, quiet: bool, parallel: Any
     print(f"archive: {path}")
     print(f"figures: {', '.join(p.name for p in figs if p.suffix == '.png')} in {path.parent}")
     return 0
-
-
-def draw_figures(a: dict[str, Any], folder: str | Path) -> list[Path]:
-    """Redraw a bench archive's figures (``a`` as ``archive.read`` returns it) into folder."""
-    import json
-
-    from designopt.figures import bench as bench_figs
-
-    cfg = a["attrs"]["config_resolved"]
-    if isinstance(cfg, str):
-        cfg = json.loads(cfg)
-    groups = {c: g for c, g in a["bench"].items() if c != "attrs"}
-    st = {c: g["attrs"]["stats"] for c, g in groups.items()}
-    hist = {c: {v: g[v]["history"] for v in g if v != "attrs"} for c, g in groups.items()}
-    return bench_figs.draw(Path(folder), st, hist, cfg["bench"]["n_runs"])

@@ -5,6 +5,7 @@ stopped), and the text saying what is kept; ``load`` reads a checkpoint back for
 
 from __future__ import annotations
 
+import json
 import time
 from pathlib import Path
 from typing import Any
@@ -31,7 +32,8 @@ def load(partial: Path, resolved: str) -> Any:
         raise ConfigError(f"{partial}: not a readable checkpoint ({e})") from None
     if not isinstance(rec, CheckpointRecord):
         raise ConfigError(f"{partial}: not a readable checkpoint (a {rec.kind} archive)")
-    if rec.attrs.get("resume_key") != resolved:
+    stored = rec.attrs.get("resume_key")  # JSON: read back decoded
+    if (json.loads(stored) if isinstance(stored, str) else stored) != json.loads(resolved):
         raise ConfigError(f"{partial}: the interrupted run used a different config or seed; "
                           "run without --resume to start afresh")  # fmt: skip
     try:

@@ -162,9 +162,9 @@ def run_config_model() -> type[RunConfigBase]:
     return _run_config(tuple(s.settings for s in STUDIES.values()))
 
 
-def load(path: str | Path, model: type[BaseModel] | None = None) -> tuple[Any, str]:
-    """Parse and validate a config file (a run config unless ``model`` says otherwise);
-    returns (config, the file's text)."""
+def parse(path: str | Path) -> tuple[Any, str]:
+    """Read and parse a config file's YAML (not validated): (raw, the file's text);
+    ConfigError naming the file for a missing, unreadable or malformed one."""
     p = Path(path)
     if p.is_dir():
         raise ConfigError(f"{p}: is a folder, not a config file")
@@ -185,7 +185,14 @@ def load(path: str | Path, model: type[BaseModel] | None = None) -> tuple[Any, s
     except yaml.YAMLError as e:
         msg = " ".join(str(e).split()).replace('in "<unicode string>", ', "")
         raise ConfigError(f"{p}: malformed YAML: {msg}") from None
-    return validate(raw, str(p), model, folder=p.parent), text
+    return raw, text
+
+
+def load(path: str | Path, model: type[BaseModel] | None = None) -> tuple[Any, str]:
+    """Parse and validate a config file (a run config unless ``model`` says otherwise);
+    returns (config, the file's text)."""
+    raw, text = parse(path)
+    return validate(raw, str(path), model, folder=Path(path).parent), text
 
 
 def validate(raw: Any, where: str, model: type[BaseModel] | None = None,

@@ -16,8 +16,7 @@ from __future__ import annotations
 
 import contextlib
 import math
-import time
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -31,6 +30,7 @@ from designopt.errors import ConfigError, WriteError
 from designopt.preflight import DESIGN_SAMPLES_PER_CHUNK, Estimate, estimate
 from designopt.prepare import base_attrs, build_problem, check_optimizer, dtype_of, study_of
 from designopt.problems.base import Problem
+from designopt.reporting import draw_figures, write_html
 from designopt.results import Record, ReplayRecord, RunRecord, ScanRecord, SweepRecord
 from designopt.scoring import check_finite, problem_group, run_groups, score
 from designopt.studies import streams
@@ -272,6 +272,7 @@ def sweep(cfg: Any, text: str | None = None, where: str = "config", out: Path | 
                                   "config_resolved_yaml": sw.resolved(cfg, m)}  # fmt: skip
                     tree["members"][f"{i:03d}"] = t
                     rows.append((i, m, t["final"]))
+        tree["members"] = dict(sorted(tree["members"].items()))  # the sweep's order
         attrs = base_attrs("sweep", cfg, text, streams(cfg.seed), where) | {
             "n_members": len(members), "wall_time_s": total.wall, "compile_time_s": total.compile,
             "run_time_s": total.run, "vmapped_batches": len(groups)}  # fmt: skip
@@ -347,25 +348,5 @@ def scan(cfg: Any, text: str | None = None, where: str = "config", out: Path | N
     return Report(out, lines, rec)
 
 
-# -------------------------------------------------------------------------- figures
-
-
-def draw_figures(path: Path, record: Record | None = None) -> list[Path]:
-    """Draw the figures an archive supports beside it (run: the study's figures; sweep:
-    final f per member; scan: a curve or heat map; bench: Fig. 10-11), through the one
-    writer: drawn into a temporary folder, then moved into place (a disk fault: one
-    WriteError line, the archive and any earlier figures kept)."""
-    from designopt import figures
-
-    path = Path(path)
-    rec = archive.load(path) if record is None else record
-    with output.session() as ses:
-        if not ses.covers(path):
-            output.claim(path, overwrite=True)  # lock: no run may write it meanwhile
-        draw, folder, swap = figures.drawer(rec, path)
-        return output.publish_figures(lambda d: draw(rec, d), folder, swap=swap)
-
-
-# a problem that ``evaluate`` and the tests reach through the pipeline
 __all__ = ["Report", "build_problem", "draw_figures", "evaluate", "optimise", "run", "scan",
-           "score", "sweep", "time", "Mapping"]  # fmt: skip
+           "score", "sweep", "write_html"]  # fmt: skip

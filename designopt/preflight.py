@@ -17,10 +17,10 @@ from designopt import output
 from designopt.errors import ConfigError
 
 BYTES_PER_DESIGN_SAMPLE = 128
-"""Peak memory per (design × Monte-Carlo sample in flight), conservative: master9 measures
+"""Peak memory per (design × Monte-Carlo sample in flight), conservative: the 9-DOF master study measures
 80-280 B in float64 and float32 on CPU (XLA's buffers of one sample chunk)."""
 BASE_BYTES = 1 << 29  # JAX, XLA and the compiled programs
-DESIGN_SAMPLES_PER_S = 2e7  # master9 on 2 CPU cores: 50 × 20k samples in 27-59 ms (#14)
+DESIGN_SAMPLES_PER_S = 2e7  # the 9-DOF master on 2 CPU cores: 50 × 20k samples in 27-59 ms (#14)
 HUGE_WORK = 3600 * DESIGN_SAMPLES_PER_S  # an hour or more: warn before starting
 DESIGN_SAMPLES_PER_CHUNK = 10_000_000
 """Work per optimizer chunk (designs × samples × iterations): ≈ 0.5 s at

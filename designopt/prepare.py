@@ -49,8 +49,12 @@ def build_problem(cfg: Any, keys: Mapping[str, jax.Array], where: str = "config"
            repr(key_data(keys)))  # fmt: skip
     if key in _PROBLEMS:
         return _PROBLEMS[key]
+    st = study_of(cfg)
+    if st.problem is None:
+        raise ConfigError(f"{where}: study '{st.name}' has no design problem (its run is a "
+                          "replay); use `designopt run`")  # fmt: skip
     try:
-        problem = study_of(cfg).problem(cfg.study, keys, dtype)
+        problem = st.problem(cfg.study, keys, dtype)
     except ValueError as e:
         raise ConfigError(f"{where}: study: {e}") from None
     while len(_PROBLEMS) >= 4:

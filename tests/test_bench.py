@@ -5,6 +5,7 @@ import pytest
 
 from designopt import archive, benchsuite
 from designopt.config import ConfigError
+from designopt.figures import bench as bench_figs
 
 BENCH = """
 bench:
@@ -46,7 +47,7 @@ def test_bench_small_suite(tmp_path, capsys):
     names = ("fig10_final_values", "fig11_convergence_iterations", "convergence_curves")
     for n in names:
         assert (tmp_path / f"{n}.png").exists() and (tmp_path / f"{n}.pdf").exists()
-    figs = benchsuite.draw_figures(a, tmp_path / "again")
+    figs = bench_figs.draw_record(archive.load(tmp_path / "a.h5"), tmp_path / "again")
     assert {p.stem for p in figs} == set(names)
 
 

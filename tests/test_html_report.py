@@ -13,6 +13,7 @@ import re
 import select
 import shutil
 import subprocess
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -472,7 +473,10 @@ class Browser:
     def __init__(self, profile: Path, log: Path) -> None:
         to_r, self._w = os.pipe()  # we write commands, Chromium reads its fd 3
         self._r, from_w = os.pipe()  # Chromium writes its fd 4, we read
-        cmd = ["/bin/sh", "-c", f'exec "$0" "$@" 3<&{to_r} 4>&{from_w}', CHROMIUM, *FLAGS,
+        # a Python trampoline puts the pipes on fds 3 and 4 (a shell's `3<&N` fails for
+        # N > 9 in dash: "Bad fd number" once a long test session holds many fds)
+        hop = "import os, sys; os.dup2(int(sys.argv[1]), 3); os.dup2(int(sys.argv[2]), 4); os.execv(sys.argv[3], sys.argv[3:])"  # noqa: E501
+        cmd = [sys.executable, "-c", hop, str(to_r), str(from_w), CHROMIUM, *FLAGS,
                f"--user-data-dir={profile}", "--remote-debugging-pipe", "about:blank"]  # fmt: skip
         self._log = open(log, "wb")  # noqa: SIM115 - closed in close()
         self.proc = subprocess.Popen(cmd, pass_fds=(to_r, from_w), stdin=subprocess.DEVNULL,

@@ -76,6 +76,38 @@ def test_gradients_are_finite(study_problem):
     assert np.all(np.isfinite(np.asarray(g))) and np.any(np.asarray(g) != 0)
 
 
+BEFORE = {
+    "davinci": {
+        "x": [22.966670799255375, 17.706257467733643],
+        "f": -1.582461029725005,
+        "best_f": [-1.5824610297250052, -1.582460599452099],
+    },
+    "master9": {
+        "x": [297.3866139883051, 266.6010130755288, 50.0],
+        "f": -1.3693410225508915,
+        "best_f": [-1.361047475828413, -1.3693410225509726],
+    },
+    "plas": {
+        "x": [87.70244507199195, 79.60540902478498],
+        "f": 0.01455093160333798,
+        "best_f": [0.016966863020385192, 0.01455093160333798],
+    },
+    "rcm": {
+        "x": [109.19623368963633, 252.2223143988924],
+        "f": -0.5611102016462723,
+        "best_f": [-0.5542628953837776, -0.5611102016462725],
+    },
+    "serial": {
+        "x": [0.8486084070508499, 0.05006753917671065],
+        "f": -1.1649587500633616,
+        "best_f": [-1.1649587500633625, -1.164727904703354],
+    },
+}
+"""Final design, f and every run's best f of each study's tiny run (ptpso 6 × 8 × 2,
+float64, seed 3) as the release before the records/pipeline redesign (#23, commit
+0fb6917) computed them: the redesign must not change a number."""
+
+
 @pytest.mark.parametrize("name", NAMES)
 def test_run_stays_in_box_resumes_bit_exact_and_round_trips(name, tmp_path):
     cfg = config(name, tmp_path, optimizer={"name": "ptpso", "n_particles": 6, "n_iters": 8,
@@ -89,16 +121,22 @@ def test_run_stays_in_box_resumes_bit_exact_and_round_trips(name, tmp_path):
     resumed = pipeline.optimise(cfg, P, key, resume=cks[0])
     np.testing.assert_array_equal(resumed.history, full.history)
     np.testing.assert_array_equal(resumed.history_x, full.history_x)
-    # config round trip through the archive
+    # config round trip through the archive, and the record read back equals the run's
     rep = pipeline.run(cfg, "tiny", "tiny", tmp_path / "a.h5")
-    a = archive.read(rep.out)
-    back = validate(a["attrs"]["config_resolved"], "archive")
-    assert back == cfg
-    assert set(a["attrs"]["keys"]) == {"optimizer", "samples", "normalisation", "figures"}
-    np.testing.assert_array_equal(a["optimizer"]["history"], full.history)
+    rec = archive.load(rep.out)
+    assert rec == rep.record, rec.differs(rep.record)
+    # the numbers of the release before the records/pipeline redesign (#23)
+    np.testing.assert_allclose(list(rec.x.values()), BEFORE[name]["x"], rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(rec.f, BEFORE[name]["f"], rtol=1e-9)
+    np.testing.assert_allclose(rec.data()["optimizer"]["best_f"], BEFORE[name]["best_f"],
+                               rtol=1e-9)  # fmt: skip
+    back = validate(rec.attrs["config_resolved"], "archive")
+    assert back == cfg and rec.config == cfg
+    assert set(rec.keys()) == {"optimizer", "samples", "normalisation", "figures"}
+    np.testing.assert_array_equal(rec.history, full.history)
     figures.RECORD = []  # every figure drawn also passes the figure checks (docs/figures.md)
     try:
-        figs = get(name).figures(a, tmp_path / "figs")
+        figs = get(name).figures(rec, tmp_path / "figs")
         assert figs and all(p.exists() for p in figs)
         assert_clean(figures.RECORD)
     finally:
@@ -115,11 +153,13 @@ def test_eval_agrees_with_scan(name, tmp_path):
     scan = {"vary": {v0: {"from": float(lo), "to": float(hi), "num": 3}}, "batch": 2}
     cfg = config(name, tmp_path, scan=scan)
     rep = pipeline.scan(cfg, "tiny", "tiny", tmp_path / "s.h5")
-    a = archive.read(rep.out)["scan"]
-    assert a["x"].shape == (3, P.dim)
-    one = pipeline.evaluate(cfg, {v0: float(a["x"][1, 0]), v1: float(a["x"][1, -1])})
-    assert not set(one) & set(P.names)  # indices only: {index: value, index_se: value}
+    rec = archive.load(rep.out)
+    X, a = rec.X, rec.values
+    assert X.shape == (3, P.dim)
+    one = pipeline.evaluate(cfg, {v0: float(X[1, 0]), v1: float(X[1, -1])})
+    assert not set(one) & set(P.names)  # indices only: {index: (1,), index_se: (1,)}
     for k, v in one.items():
-        np.testing.assert_allclose(v, a[k][1], rtol=1e-10, err_msg=k)
-    many = pipeline.evaluate(cfg, {v0: a["x"][:, 0], v1: a["x"][:, -1]})
+        assert v.shape == (1,), k
+        np.testing.assert_allclose(v[0], a[k][1], rtol=1e-10, err_msg=k)
+    many = pipeline.evaluate(cfg, {v0: X[:, 0], v1: X[:, -1]})
     np.testing.assert_allclose(many["f"], a["f"], rtol=1e-12)

@@ -45,7 +45,7 @@ def study_hints(rec: ScanRecord) -> tuple[dict[str, str], Any]:
         units = dict(st.units(s)) | {"__summary__": tuple(st.summary(s))}
     except (ValueError, KeyError, TypeError, ConfigError):
         return {}, None
-    home = st.figures.__module__  # a study package ("designopt.studies.rcm") or a module in it
+    home = st.figures.__module__  # the study package itself, or a module inside it
     for name in (home + ".figures", home.rsplit(".", 1)[0] + ".figures"):
         try:
             return units, importlib.import_module(name)

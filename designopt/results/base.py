@@ -47,8 +47,8 @@ def _json(v: Any) -> Any:
 
 def _canon(v: Any) -> Any:
     """A comparable form: arrays as numpy, names as str, JSON attrs decoded."""
-    if isinstance(v, Mapping):
-        return {k: _canon(x) for k, x in v.items()}
+    if isinstance(v, Mapping):  # an empty attrs entry is the same as none (HDF5 adds it)
+        return {k: _canon(x) for k, x in v.items() if not (k == "attrs" and not x)}
     if isinstance(v, list | tuple):
         return [_canon(x) for x in v]
     if isinstance(v, bytes | np.bytes_):
@@ -166,7 +166,7 @@ class Record:
 
     def keys(self) -> dict[str, Any]:
         """The named PRNG streams the record was made with (``studies.STREAMS``)."""
-        from designopt.studies import archived_keys
+        from designopt.studies.base import archived_keys
 
         return archived_keys({"attrs": self.attrs})
 

@@ -158,25 +158,29 @@ class Study:
       named streams (``samples``, ``normalisation``). ``Problem.fn`` returns
       (f, aux) with every index of ``indices`` and its ``*_se`` in aux.
     - ``summary``: the sub-objectives ``run``/``show`` print with ± SE.
-    - ``figures(archive, folder) -> [paths]``: the figures of a run archive.
+    - ``figures(record, folder) -> [paths]``: the figures of a run (a ``RunRecord``; a
+      replay study gets its ``ReplayRecord``).
     - ``sweep_aliases(settings) -> {short path: full path}``: sweep short forms.
     - ``indices(settings) -> names``: what ``eval``/``scan`` report (f included).
     - ``units(settings) -> {name: unit}``: every design variable and index (``"-"``:
       dimensionless); printed with designs and used for every figure axis
       (docs/figures.md).
     - ``tiny``: the ``study:`` section of a config that runs in seconds (contract tests).
-    - ``replay(settings, keys, dtype, where) -> (tree, lines)``: for a study whose ``run``
-      is not a design optimisation (e.g. replaying a teleoperation trajectory); the
-      pipeline archives ``tree`` (kind "run") and prints ``lines``. None: optimise.
+    - ``replay(settings, keys, dtype, where) -> (groups, lines)``: for a study whose
+      ``run`` is not a design optimisation (e.g. replaying a teleoperation trajectory);
+      its ``problem`` is None; the pipeline archives the groups as a ``ReplayRecord``
+      (kind "run") and prints ``lines``. None: optimise.
+    - ``cost(settings) -> Cost``: the pre-flight estimate's inputs.
+    - ``commands``: the study's own subcommands (``Command``), added by the CLI.
     """
 
     name: str
     title: str
     settings: type[StudySettings]
-    problem: Callable[[Any, Mapping[str, jax.Array], Any], Problem]
+    problem: Callable[[Any, Mapping[str, jax.Array], Any], Problem] | None
     summary: Callable[[Any], tuple[str, ...]]
     indices: Callable[[Any], tuple[str, ...]]
-    figures: Callable[[dict[str, Any], Path], list[Path]]
+    figures: Callable[[Any, Path], list[Path]]  # (RunRecord or ReplayRecord, folder)
     sweep_aliases: Callable[[Any], dict[str, str]] = lambda s: {}
     units: Callable[[Any], dict[str, str]] = lambda s: {}
     extra_lines: Callable[[Any, Mapping[str, Any]], list[str]] = lambda s, fin: []
@@ -189,6 +193,10 @@ class Study:
     for the pre-flight memory and time estimate (``designopt.preflight``)."""
     commands: tuple[Command, ...] = ()
     """Extra subcommands of this study (e.g. the da Vinci ``ik``)."""
+    cloud: Callable[[Any], dict[str, Any] | None] | None = None
+    """``cloud(record)``: the workspace of a run's final design as a point cloud for the
+    interactive report, {"xyz": (n, 3), "value": (n,), "label", "unit"} (e.g. coloured
+    by 1/k); None: the study has none."""
     replay: (
         Callable[[Any, Mapping[str, jax.Array], Any, str], tuple[dict[str, Any], list[str]]] | None
     ) = None

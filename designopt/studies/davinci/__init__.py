@@ -29,10 +29,10 @@ def _problem(settings: DavinciSettings, keys, dtype):
     return objective.problem(settings, keys, dtype)
 
 
-def _figures(archive: dict[str, Any], folder: Path) -> list[Path]:
+def _figures(record: Any, folder: Path) -> list[Path]:
     from designopt.studies.davinci import figures
 
-    return figures.draw_run(archive, folder)
+    return figures.draw_run(record, folder)
 
 
 def _aliases(s: DavinciSettings) -> dict[str, str]:

@@ -29,7 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from designopt import montecarlo as mc
-from designopt.kinematics.conditioning import inv_cond_any
+from designopt.kinematics.conditioning import inv_cond
 from designopt.problems.base import Problem
 from designopt.studies.davinci import ik
 from designopt.studies.davinci import mechanism as mech
@@ -162,7 +162,7 @@ def inv_k(s: DavinciSettings, x: jnp.ndarray, q: jnp.ndarray) -> jnp.ndarray:
     L = s.indices.length_mm
     col = jnp.asarray([1.0, 1.0, L, 1.0, 1.0, 1.0], q.dtype)
     J = mech.ARM.jacobian(x, q, char_length=L) * col
-    return inv_cond_any(J, "fro", normalized=True)
+    return inv_cond(J, "fro", normalized=True)
 
 
 def dexterity(s: DavinciSettings, params, x: jnp.ndarray, dtype: Any):
@@ -232,9 +232,7 @@ def make_params(s: DavinciSettings, keys: Mapping[str, jax.Array], dtype: Any) -
 def problem(s: DavinciSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Problem:
     """The da Vinci study's Problem: design box from ``variables`` (deg, mm)."""
     dtype = jnp.dtype(dtype)
-    names = tuple(s.variables)
-    lower = np.array([s.variables[k][0] for k in names], np.float64)
-    upper = np.array([s.variables[k][1] for k in names], np.float64)
+    names, lower, upper = s.box()
     info = {
         "study": "davinci",
         "n_samples_used": sample_plan(s).n_used,
@@ -246,4 +244,5 @@ def problem(s: DavinciSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Pr
         "weights": s.objective.model_dump(),
         "dtype": dtype.name,
     }
-    return Problem(names, lower, upper, build_fn(s, dtype), make_params(s, keys, dtype), info)
+    return Problem(names, lower, upper, build_fn(s, dtype), make_params(s, keys, dtype), info,
+                   n_samples_used=info["n_samples_used"])  # fmt: skip

@@ -170,23 +170,18 @@ def draw(
     return out
 
 
-def draw_run(a: dict[str, Any], folder: Path, resolution: int = MAP_RESOLUTION) -> list[Path]:
-    """Fig. 12-15 of a run archive (read by ``designopt.archive.read``) into ``folder``:
-    the initial design of the best run (iteration 0) against the final design."""
-    cfg = a["attrs"]["config_resolved"]
-    names = [n.decode() for n in a["problem"]["names"]]
-    fixed = a["problem"]["attrs"]["info"]["fixed"]
-    br = a["best_run"]
-    run = int(br["attrs"]["run_index"])
-    x0 = a["optimizer"]["history_x"][run, 0]
-    xf = a["final"]["x"]
+def draw_run(rec: Any, folder: Path, resolution: int = MAP_RESOLUTION) -> list[Path]:
+    """Fig. 12-15 of a run (a ``RunRecord``) into ``folder``: the initial design of the
+    best run (iteration 0) against the final design."""
+    fixed = rec.info["fixed"]
+    br = rec.best_run
+    x0 = rec.history_x[rec.best_run_index, 0]
     designs = {
-        "initial (iteration 0)": {**fixed, **dict(zip(names, x0, strict=True)),
+        "initial (iteration 0)": {**fixed, **dict(zip(rec.names, x0, strict=True)),
                                   "volume": float(br["volume"][0])},
-        "final": {**fixed, **dict(zip(names, xf, strict=True)),
-                  "volume": float(a["final"]["volume"])},
+        "final": {**fixed, **rec.x, "volume": float(rec.final["volume"])},
     }  # fmt: skip
-    bl = cfg["study"]["indices"]["backlash_deg"]
+    bl = rec.config.study.model_dump()["indices"]["backlash_deg"]
     bl = bl if isinstance(bl, list) else [bl] * 3
-    key_data = np.asarray(a["attrs"]["keys"]["figures"], np.uint32)
+    key_data = np.asarray(jax.random.key_data(rec.keys()["figures"]), np.uint32)
     return draw(folder, br["iteration"], br, designs, bl, key_data, resolution=resolution)

@@ -264,9 +264,7 @@ def problem(s: PlasSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Probl
     """The plas Problem: design box from ``variables``, the other master lengths from
     ``fixed`` (built values otherwise), constraints as above."""
     dtype = jnp.dtype(dtype)
-    names = tuple(s.variables)
-    lower = np.array([s.variables[n][0] for n in names], np.float64)
-    upper = np.array([s.variables[n][1] for n in names], np.float64)
+    names, lower, upper = s.box()
     base = s.design()
     select = np.zeros((len(names), 3))
     fixed_row = np.array([base[k] for k in m.MASTER_KEYS])
@@ -310,4 +308,5 @@ def problem(s: PlasSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Probl
         "joint_ranges_deg": s.joint_ranges_deg.model_dump(),
         "dtype": dtype.name,
     }
-    return Problem(names, lower, upper, fn, params, info, constraints=constraint_fn)
+    return Problem(names, lower, upper, fn, params, info, constraints=constraint_fn,
+                   n_samples_used=info["n_samples_used"])  # fmt: skip

@@ -29,10 +29,10 @@ def _problem(settings: RcmSettings, keys, dtype):
     return objective.problem(settings, keys, dtype)
 
 
-def _figures(archive: dict[str, Any], folder: Path) -> list[Path]:
+def _figures(record: Any, folder: Path) -> list[Path]:
     from designopt.studies.rcm import figures
 
-    return figures.draw_run(archive, folder)
+    return figures.draw_run(record, folder)
 
 
 def _extra(s: RcmSettings, fin) -> list[str]:
@@ -77,19 +77,17 @@ def _replay(s, keys, dtype, where: str):
     return replay.run(s, dtype, where)
 
 
-def _teleop_figures(archive: dict[str, Any], folder: Path) -> list[Path]:
+def _teleop_figures(record: Any, folder: Path) -> list[Path]:
     from designopt.studies.rcm import figures
 
-    return figures.draw_teleop(archive, folder)
+    return figures.draw_teleop(record, folder)
 
 
 STUDY_TELEOP = Study(
     name="rcm_teleop",
     title="planar RCM arm (Sensors 2023): a master trajectory replayed through the incremental mapping",
     settings=TeleopSettings,
-    problem=lambda s, keys, dtype: (_ for _ in ()).throw(
-        ValueError("rcm_teleop replays a trajectory and has no design problem; use `designopt run`")
-    ),
+    problem=None,  # a replay: no design problem
     summary=lambda s: (),
     indices=lambda s: (),
     figures=_teleop_figures,

@@ -225,9 +225,7 @@ def problem(s: RcmSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Proble
     dtype = jnp.dtype(dtype)
     params = make_params(s, keys, dtype)
     check_reach(s, params, dtype)
-    names = tuple(s.variables)
-    lower = np.array([s.variables[k][0] for k in names])
-    upper = np.array([s.variables[k][1] for k in names])
+    names, lower, upper = s.box()
     pl = sample_plan(s)
     info = {
         "study": "rcm",
@@ -243,7 +241,7 @@ def problem(s: RcmSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Proble
 
     def shard_samples(mesh: Any) -> Problem:
         return Problem(names, lower, upper, build_fn(s, mesh), params, info,
-                       build_constraints(s, mesh))  # fmt: skip
+                       build_constraints(s, mesh), n_samples_used=pl.n_used)  # fmt: skip
 
     return Problem(names, lower, upper, build_fn(s), params, info, build_constraints(s),
-                   shard_samples)  # fmt: skip
+                   shard_samples, n_samples_used=pl.n_used)  # fmt: skip

@@ -18,10 +18,16 @@ def _problem(settings: SerialSettings, keys, dtype):
     return objective.problem(settings, keys, dtype)
 
 
-def _figures(archive: dict[str, Any], folder: Path) -> list[Path]:
+def _figures(record: Any, folder: Path) -> list[Path]:
     from designopt.studies.serial import figures
 
-    return figures.draw_run(archive, folder)
+    return figures.draw_run(record, folder)
+
+
+def _cloud(record: Any) -> dict[str, Any]:
+    from designopt.studies.serial import figures
+
+    return figures.cloud(record)
 
 
 def _units(s: SerialSettings) -> dict[str, str]:
@@ -77,6 +83,7 @@ STUDY = Study(
     example_config="configs/planar2r.yaml",
     cost=_cost,
     commands=COMMANDS,
+    cloud=_cloud,
     tiny={
         "name": "serial",
         "chain": {

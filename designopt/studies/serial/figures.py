@@ -11,6 +11,7 @@ singularity such as the PUMA 560's wrist at q5 = 0. The figure states where they
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -168,3 +169,18 @@ def draw_run(rec: RunRecord, folder: Path, resolution: int = MAP_RESOLUTION) -> 
                  "(L: the chain's length unit)", fontsize=9)  # fmt: skip
     out += save(fig, folder, "workspace")
     return out
+
+
+def cloud(rec: RunRecord, n: int = 8000) -> dict[str, Any]:
+    """The final design's workspace for the interactive report: tip positions of ``n``
+    uniform joint samples (the run's ``figures`` stream), coloured by 1/k."""
+    s: SerialSettings = rec.config.study
+    mech = build(s)
+    lo, hi = mech.lower, mech.upper
+    rng = np.random.default_rng(np.asarray(jax.random.key_data(rec.keys()["figures"]), np.uint32))
+    q = lo + (hi - lo) * rng.uniform(size=(n, mech.n))
+    X = _full(mech, np.asarray(list(rec.x.values()), np.float64))
+    z, P = _kernel(mech, s)(X, q.astype(X.dtype))
+    length = STUDY_UNITS(s).get("__length__", "L")
+    return {"xyz": np.asarray(P[0], np.float64), "value": np.asarray(z[0], np.float64),
+            "label": f"1/k ({s.indices.norm}-norm)", "unit": "-", "xyz_unit": length}  # fmt: skip

@@ -1,0 +1,146 @@
+"""The public Python API: the same pipeline the ``designopt`` command runs, returning
+typed records (``designopt.results``) instead of printing.
+
+    import designopt
+    cfg = designopt.load_config("configs/planar2r.yaml", {"optimizer.n_iters": 20})
+    rec = designopt.run(cfg)                  # in memory: nothing written
+    rec.x, rec.f, rec.indices["gci"]          # {variable: value}, f, (value, se)
+    rec = designopt.run(cfg, out="results/m9.h5")   # the archive the CLI writes
+    designopt.load("results/m9.h5") == rec    # True
+    designopt.evaluate(cfg, {"l2": [0.5, 0.7]})["f"]     # one entry per design
+
+Errors in a config or a design raise ``designopt.ConfigError`` naming the key; float64
+configs need ``jax.config.update("jax_enable_x64", True)`` first (the CLI does it).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from collections.abc import Callable, Iterator, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from designopt.errors import ConfigError
+from designopt.results import Record, RunRecord, ScanRecord, SweepRecord
+
+Config = Any
+"""A validated run config (``load_config``), a config path, or a parsed config dict."""
+
+
+def _set(raw: dict[str, Any], key: str, value: Any) -> None:
+    node = raw
+    *head, last = key.split(".")
+    for i, part in enumerate(head):
+        nxt = node.get(part)
+        if nxt is None:
+            nxt = node[part] = {}
+        if not isinstance(nxt, dict):
+            raise ConfigError(f"override '{key}': '{'.'.join(head[: i + 1])}' is not a section")
+        node = nxt
+    node[last] = value
+
+
+def load_config(path: str | os.PathLike, overrides: Mapping[str, Any] | None = None) -> Any:
+    """The validated config of a YAML file; ``overrides`` maps dotted keys to values
+    (``{"optimizer.n_iters": 5, "study.indices.n_samples": 4096}``), set in the parsed
+    YAML before validation, so they are checked exactly like the file's own keys."""
+    from designopt.config import parse, validate
+
+    raw, _ = parse(path)
+    for k, v in (overrides or {}).items():
+        if not isinstance(k, str) or not k:
+            raise ConfigError(f"{path}: override key {k!r}: give a dotted key, e.g. 'seed'")
+        _set(raw, k, v)
+    return validate(raw, str(path), folder=Path(path).parent)
+
+
+def _config(config: Config) -> tuple[Any, str]:
+    """(validated config, where) of a path, a parsed dict or a validated config."""
+    from designopt import finite
+    from designopt.config import validate
+
+    if isinstance(config, str | os.PathLike):
+        return load_config(config), str(config)
+    if isinstance(config, Mapping):
+        return validate(dict(config), "config"), "config"
+    finite.check_tree(config, "config")  # a config built or changed in Python
+    finite.check_seed(config.seed, "config: key 'seed'")
+    return config, "config"
+
+
+@contextlib.contextmanager
+def _bar(total: int, desc: str) -> Iterator[Callable[[int], None]]:
+    from tqdm import tqdm
+
+    with tqdm(total=total, desc=desc, unit="it") as t:
+        yield t.update
+
+
+def _progress(progress: bool) -> Any:
+    from designopt.pipeline import no_progress
+
+    return _bar if progress else no_progress
+
+
+def run(config: Config, out: str | os.PathLike | None = None, progress: bool = False,
+        overwrite: bool = False) -> RunRecord:  # fmt: skip
+    """Optimise the config's study → ``RunRecord``. ``out=None``: in memory, nothing
+    written; with ``out``: the archive the CLI writes (claimed, atomic; an existing one
+    refused unless ``overwrite``)."""
+    from designopt import pipeline
+
+    cfg, where = _config(config)
+    if overwrite:
+        cfg = cfg.model_copy(update={"overwrite": True})
+    rep = pipeline.run(cfg, None, where, None if out is None else Path(out),
+                       progress=_progress(progress))  # fmt: skip
+    return rep.record  # type: ignore[return-value]
+
+
+def sweep(config: Config, out: str | os.PathLike | None = None, progress: bool = False,
+          overwrite: bool = False) -> SweepRecord:  # fmt: skip
+    """Every member of the config's ``sweep:`` section → ``SweepRecord``."""
+    from designopt import pipeline
+
+    cfg, where = _config(config)
+    if overwrite:
+        cfg = cfg.model_copy(update={"overwrite": True})
+    rep = pipeline.sweep(cfg, None, where, None if out is None else Path(out),
+                         progress=_progress(progress))  # fmt: skip
+    return rep.record  # type: ignore[return-value]
+
+
+def scan(config: Config, out: str | os.PathLike | None = None, progress: bool = False,
+         overwrite: bool = False) -> ScanRecord:  # fmt: skip
+    """Score the designs of the config's ``scan:`` section → ``ScanRecord``."""
+    from designopt import pipeline
+
+    cfg, where = _config(config)
+    if overwrite:
+        cfg = cfg.model_copy(update={"overwrite": True})
+    rep = pipeline.scan(cfg, None, where, None if out is None else Path(out),
+                        progress=_progress(progress))  # fmt: skip
+    return rep.record  # type: ignore[return-value]
+
+
+def evaluate(config: Config, designs: Any) -> dict[str, np.ndarray]:
+    """Every index of the given designs with its standard error, without optimising:
+    ``{"f": (n,), "gci": (n,), "gci_se": (n,), ...}``, one entry per design, always
+    arrays (``float(res["f"][0])`` for one design). ``designs``: {variable: value or
+    array} (arrays broadcast) or a list of such dicts; a variable not given takes the
+    middle of its box."""
+    from designopt import pipeline
+
+    cfg, where = _config(config)
+    return pipeline.evaluate(cfg, designs, where)
+
+
+def load(path: str | os.PathLike) -> Record:
+    """The record an archive holds (run, scan, sweep, bench, IK; a checkpoint; a
+    replay)."""
+    from designopt import archive
+
+    return archive.load(path)
