@@ -115,6 +115,20 @@ class Scan(_Strict):
         return {k: (v.values() if isinstance(v, Range) else list(v)) for k, v in self.vary.items()}
 
 
+class Front(_Strict):
+    """How a Pareto front (``study.objective.pareto``) is finished and measured."""
+
+    n_samples: int | None = Field(None, gt=1)
+    """Monte-Carlo samples per design when the final front is re-scored on fresh samples
+    (default: 4 × the study's own)."""
+    reference: list[float] | None = None
+    """The hypervolume's reference point in the indices' own values, one per objective
+    (default: the nadir of the first generation)."""
+    max_points: int = Field(200, ge=2)
+    """At most this many front designs are re-scored and archived (the most crowded are
+    thinned)."""
+
+
 class RunConfigBase(_Strict):
     """Everything but the ``study`` section, whose model comes from the study registry."""
 
@@ -122,6 +136,7 @@ class RunConfigBase(_Strict):
     refine: Refine | None = None
     sweep: Sweep | None = None
     scan: Scan | None = None
+    front: Front = Front()
     precision: Literal["float32", "float64"] = "float64"
     seed: int = Field(0, ge=0, le=finite.SEED_MAX)
     output: str | None = None  # default results/<study>/<study>.h5

@@ -23,15 +23,15 @@ from typing import Any
 
 import numpy as np
 
-from designopt import archive, output, parallel
+from designopt import archive, front, output, parallel
 from designopt import checkpoint as ckpt
 from designopt.designs import Designs, matrix, scan_designs
+from designopt.driver import optimise
 from designopt.errors import ConfigError, WriteError
-from designopt.preflight import DESIGN_SAMPLES_PER_CHUNK, Estimate, estimate
+from designopt.preflight import Estimate, estimate
 from designopt.prepare import base_attrs, build_problem, check_optimizer, dtype_of, study_of
-from designopt.problems.base import Problem
 from designopt.reporting import draw_figures, write_html
-from designopt.results import Record, ReplayRecord, RunRecord, ScanRecord, SweepRecord
+from designopt.results import FrontRecord, Record, ReplayRecord, RunRecord, ScanRecord, SweepRecord
 from designopt.scoring import check_finite, problem_group, run_groups, score
 from designopt.studies import streams
 from designopt.timing import Stopwatch
@@ -89,42 +89,6 @@ def _writing(out: Path | None, cfg: Any, est: Estimate) -> Iterator[output.Sessi
 # ------------------------------------------------------------------------ optimise
 
 
-def optimise(cfg: Any, problem: Problem, key: Any, members: list[dict[str, float]] | None = None,
-             progress: Callable[[int], None] | None = None,
-             checkpoint: Callable[[Any], None] | None = None,
-             resume: Any = None, where: str = "config") -> Any:  # fmt: skip
-    """The configured optimizer on ``problem``; with ``members`` (overrides of optimizer
-    settings) one vmapped batch on common keys. Chunks are small (≤ 5 % of the run and
-    about DESIGN_SAMPLES_PER_CHUNK of work), so a stop meets an iteration boundary soon.
-    A ``parallel:`` section shards the job over devices (designopt.parallel)."""
-    from designopt import optim
-    from designopt.problems import penalty
-
-    o = cfg.optimizer
-    plan = parallel.plan(cfg.parallel, n_runs=o.n_runs, n_particles=o.n_particles,
-                         members=None if members is None else len(members), problem=problem,
-                         where=where)  # fmt: skip
-    if plan is not None:
-        problem = plan.problem(problem)
-    if o.constraints.method == "penalty":
-        problem = penalty.quadratic(problem, o.constraints.weight)
-    work = estimate(cfg, members=len(members or [None])).work_per_iter
-    chunk = max(1, min(o.n_iters // 20, DESIGN_SAMPLES_PER_CHUNK // max(work, 1)))
-    common = dict(n_particles=o.n_particles, n_iters=o.n_iters, n_runs=o.n_runs, bounds=o.bounds,
-                  dtype=dtype_of(cfg), chunk_iters=chunk,
-                  progress=progress, checkpoint=checkpoint, resume=resume,
-                  checkpoint_at_end=checkpoint is not None)  # fmt: skip
-    if plan is not None:
-        common["plan"] = plan
-    if members is None:
-        res = optim.run(o.name, problem, key, **common, **o.settings)
-    else:
-        res = optim.run_batch(o.name, problem, key, [o.settings | m for m in members], **common)
-    if plan is not None:
-        res.settings["parallel"] = plan.describe()
-    return res
-
-
 # ------------------------------------------------------------------------------ run
 
 
@@ -143,6 +107,8 @@ def run(cfg: Any, text: str | None = None, where: str = "config", out: Path | No
     if study_of(cfg).replay is not None:
         return _replay(cfg, text, where, out, dry_run)
     check_optimizer(cfg, where)
+    pareto = cfg.study.pareto
+    front.check(cfg, where)
     dtype_of(cfg)
     est = estimate(cfg)
     est.check(where)
@@ -151,7 +117,8 @@ def run(cfg: Any, text: str | None = None, where: str = "config", out: Path | No
     o = cfg.optimizer
     keys = streams(cfg.seed)
     resolved = ckpt.resume_key(cfg)
-    attrs = base_attrs("run", cfg, text, keys, where) | {"resume_key": resolved}
+    kind = "run" if pareto is None else "front"
+    attrs = base_attrs(kind, cfg, text, keys, where) | {"resume_key": resolved}
     with _writing(out, cfg, est) as ses:
         ck, saver = None, None
         if ses is not None:
@@ -161,10 +128,13 @@ def run(cfg: Any, text: str | None = None, where: str = "config", out: Path | No
         with Stopwatch() as total:
             with Stopwatch() as setup:
                 problem = build_problem(cfg, keys, where)
+                if pareto is not None:
+                    problem = front.objective_problem(problem, pareto)
             with Stopwatch() as opt, progress(o.n_iters, f"{o.name} on {cfg.study.name}") as bar:
                 try:
                     res = optimise(cfg, problem, keys["optimizer"], progress=bar,
-                                   checkpoint=saver, resume=ck, where=where)  # fmt: skip
+                                   checkpoint=saver, resume=ck, where=where,
+                                   ref_point=None if pareto is None else front.reference(cfg))  # fmt: skip
                 except KeyboardInterrupt as e:
                     if saver is None:
                         raise
@@ -173,7 +143,10 @@ def run(cfg: Any, text: str | None = None, where: str = "config", out: Path | No
                 ses.set_phase("prompt")
                 saver.stop_if_requested()
             with Stopwatch() as post:
-                groups = run_groups(cfg, problem, res)
+                if pareto is None:
+                    groups = run_groups(cfg, problem, res)
+                else:
+                    groups = front.groups(cfg, problem, res, keys, where)
         attrs |= {"wall_time_s": total.wall, "compile_time_s": total.compile,
                   "run_time_s": total.run, "setup_time_s": setup.wall,
                   "optimizer_time_s": opt.wall, "post_time_s": post.wall,
@@ -182,14 +155,19 @@ def run(cfg: Any, text: str | None = None, where: str = "config", out: Path | No
                                             "optimizer": opt.compilations,
                                             "scoring_polish": post.compilations}}  # fmt: skip
         try:
-            check_finite(groups["final"], where, "the final design")
+            if pareto is None:
+                check_finite(groups["final"], where, "the final design")
         except ConfigError:
             if saver is not None:
                 saver.discard()
             raise
-        rec = RunRecord(attrs, groups, cfg)
+        rec = RunRecord(attrs, groups, cfg) if pareto is None else FrontRecord(attrs, groups, cfg)
         if ses is not None:
             _write_run(out, rec, ses, saver)
+    if pareto is not None:
+        return Report(
+            out, [*rec.summary()[1:], rec.stages_line(groups["front"]["attrs"]["n_samples"])], rec
+        )
     return Report(out, [*rec.design_lines(), rec.run_line()], rec)
 
 

@@ -74,7 +74,14 @@ def drawer(record, path: Path):
     in ``<stem>_figures``; sweeps and scans: the generic ones there too; benchmarks: the
     PTPSO paper's figures beside the archive."""
     from designopt.errors import ConfigError
-    from designopt.results import BenchRecord, ReplayRecord, RunRecord, ScanRecord, SweepRecord
+    from designopt.results import (
+        BenchRecord,
+        FrontRecord,
+        ReplayRecord,
+        RunRecord,
+        ScanRecord,
+        SweepRecord,
+    )
 
     path = Path(path)
     figs = path.parent / f"{path.stem}_figures"
@@ -86,6 +93,10 @@ def drawer(record, path: Path):
         from designopt.studies import get
 
         return get(record.study).figures, figs, True
+    if isinstance(record, FrontRecord):
+        from designopt.figures import front
+
+        return front.draw, figs, True
     if isinstance(record, SweepRecord):
         from designopt.figures import sweep
 

@@ -9,12 +9,13 @@ from typing import Any
 
 from designopt.results.base import Record
 from designopt.results.bench import BenchRecord
+from designopt.results.front import FrontRecord
 from designopt.results.ik import IKRecord
 from designopt.results.run import CheckpointRecord, ReplayRecord, RunRecord, SweepRecord
 from designopt.results.scan import ScanRecord, best_lines
 
 KINDS: dict[str, type[Record]] = {"run": RunRecord, "scan": ScanRecord, "sweep": SweepRecord,
-                                  "bench": BenchRecord, "ik": IKRecord}  # fmt: skip
+                                  "bench": BenchRecord, "ik": IKRecord, "front": FrontRecord}  # fmt: skip
 
 
 def record_class(tree: Mapping[str, Any]) -> type[Record]:
@@ -36,5 +37,5 @@ def from_tree(tree: Mapping[str, Any], config: Any = None) -> Record:
     return record_class(tree).from_tree(tree, config)
 
 
-__all__ = ["KINDS", "BenchRecord", "CheckpointRecord", "IKRecord", "Record", "ReplayRecord",
+__all__ = ["KINDS", "BenchRecord", "CheckpointRecord", "FrontRecord", "IKRecord", "Record", "ReplayRecord",
            "RunRecord", "ScanRecord", "SweepRecord", "best_lines", "from_tree", "record_class"]  # fmt: skip

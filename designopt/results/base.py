@@ -175,6 +175,17 @@ class Record:
         return (f"wall time {float(a.get('wall_time_s', 0)):.1f} s "
                 f"(compile {float(a.get('compile_time_s', 0)):.1f} s)")  # fmt: skip
 
+    def stages_line(self, samples: int | str = "-") -> str:
+        """Samples per design and the wall time split by stage (printed after a run)."""
+        a = self.attrs
+        by = a.get("compilations_by_stage", {})
+        return (f"samples per design: {samples or '-'}; wall "
+                f"{a['wall_time_s']:.1f} s = compile {a['compile_time_s']:.1f} s + run "
+                f"{a['run_time_s']:.1f} s (setup {a['setup_time_s']:.1f} s, optimizer "
+                f"{a['optimizer_time_s']:.1f} s, scoring/polish {a['post_time_s']:.1f} s); "
+                f"{a['compilations']} XLA compilations ({by.get('setup', 0)} + "
+                f"{by.get('optimizer', 0)} + {by.get('scoring_polish', 0)})")  # fmt: skip
+
     def summary(self) -> list[str]:
         """The lines ``designopt show`` prints after the header."""
         return [self.timing_line()]

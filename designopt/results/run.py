@@ -133,14 +133,7 @@ class RunRecord(Record):
 
     def run_line(self) -> str:
         """Samples and the wall time split by stage (printed after a run)."""
-        a = self.attrs
-        by = a.get("compilations_by_stage", {})
-        return (f"samples per design: {self.n_samples_used or '-'}; wall "
-                f"{a['wall_time_s']:.1f} s = compile {a['compile_time_s']:.1f} s + run "
-                f"{a['run_time_s']:.1f} s (setup {a['setup_time_s']:.1f} s, optimizer "
-                f"{a['optimizer_time_s']:.1f} s, scoring/polish {a['post_time_s']:.1f} s); "
-                f"{a['compilations']} XLA compilations ({by.get('setup', 0)} + "
-                f"{by.get('optimizer', 0)} + {by.get('scoring_polish', 0)})")  # fmt: skip
+        return self.stages_line(self.n_samples_used)
 
     def summary(self) -> list[str]:
         """What ``designopt show`` prints: the final design, f and the study's indices."""

@@ -16,7 +16,7 @@ from typing import Any
 
 import jax
 import numpy as np
-from pydantic import BaseModel, ConfigDict, field_validator
+from pydantic import BaseModel, ConfigDict, field_validator, model_validator
 
 from designopt.problems.base import Problem
 
@@ -35,6 +35,32 @@ class StudySettings(BaseModel):
 
     name: str
     variables: dict[str, tuple[float, float]]
+    pareto: dict[str, str] | None = None
+    """``objective: {pareto: {index: min | max, ...}}`` (given under ``objective``, kept
+    here for every study): optimise the front of these indices instead of the weighted
+    f (docs/pareto.md)."""
+
+    @model_validator(mode="before")
+    @classmethod
+    def _front(cls, data: Any) -> Any:
+        """Lift ``objective.pareto`` out of the study's own objective section: at least
+        two indices, each ``min`` or ``max``, and no weights beside them."""
+        if not isinstance(data, dict) or not isinstance(data.get("objective"), dict):
+            return data
+        obj = dict(data["objective"])
+        if "pareto" not in obj:
+            return data
+        front = obj.pop("pareto")
+        if obj:
+            raise ValueError(f"objective: give weights or pareto, not both (also {sorted(obj)})")
+        if not isinstance(front, dict) or len(front) < 2:
+            n = len(front) if isinstance(front, dict) else 0
+            raise ValueError(f"objective.pareto: a front needs at least 2 indices, got {n}")
+        for k, sense in front.items():
+            if sense not in ("min", "max"):
+                raise ValueError(f"objective.pareto.{k}: sense must be 'min' or 'max', got {sense!r}")
+        out = {k: v for k, v in data.items() if k != "objective"}
+        return out | {"pareto": dict(front)}
 
     @field_validator("variables")
     @classmethod
