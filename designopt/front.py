@@ -24,7 +24,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from designopt import pareto
 from designopt.errors import ConfigError
 from designopt.problems.base import Problem
 
@@ -98,6 +97,8 @@ def reference(cfg: Any) -> np.ndarray | None:
 def candidates(res: Any) -> np.ndarray:
     """Indices into the pooled final populations (runs × P) of the non-dominated designs:
     among the feasible ones when there are any, else among the least violating."""
+    from designopt import pareto
+
     F = np.asarray(res.front.f, np.float64).reshape(-1, np.shape(res.front.f)[-1])
     V = np.asarray(res.front.v, np.float64).reshape(-1)
     pool = np.flatnonzero(V <= 0) if np.any(V <= 0) else np.flatnonzero(V == V.min())
@@ -110,6 +111,8 @@ def candidates(res: Any) -> np.ndarray:
 def thin(F: np.ndarray, n: int) -> np.ndarray:
     """Indices of at most ``n`` rows of a front F, dropping the most crowded first
     (the extremes, with infinite crowding distance, always stay)."""
+    from designopt import pareto
+
     keep = np.arange(len(F))
     while len(keep) > n:
         d = pareto.crowding_distance_np(F[keep], np.zeros(len(keep), np.int32))
@@ -151,6 +154,7 @@ def groups(cfg: Any, problem: Problem, res: Any, keys: Mapping[str, jax.Array],
     """The groups of a front's record: optimizer (hypervolume history, final
     populations), front (re-scored designs, objectives ± SE, every index ± SE,
     ambiguous pairs) and problem."""
+    from designopt import pareto
     from designopt.scoring import check_finite, problem_group, score
 
     front = cfg.study.pareto
