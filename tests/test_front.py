@@ -1,0 +1,134 @@
+"""Pareto fronts of a study's indices (study.objective.pareto, docs/pareto.md): the planar
+2R arm's front against its known geometry and a brute-force grid, re-scoring honesty,
+the record's round trip, and the bad inputs (exit 2, one line naming the key)."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+import designopt
+from designopt import front as fr
+from designopt import pareto, results
+from designopt.cli import main
+from designopt.scoring import score
+from designopt.studies import streams
+
+ROOT = Path(__file__).resolve().parents[1]
+PLANAR = ROOT / "configs" / "planar2r.yaml"
+FRONT = {"optimizer.name": "nsga2", "optimizer.n_particles": 40, "optimizer.n_iters": 40,
+         "optimizer.n_runs": 2, "study.indices.n_samples": 2048,
+         "study.objective": {"pareto": {"gci": "max", "volume": "max"}}}  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def front(tmp_path_factory):
+    cfg = designopt.load_config(PLANAR, FRONT)
+    out = tmp_path_factory.mktemp("front") / "f.h5"
+    return cfg, designopt.run(cfg, out=out), out
+
+
+def test_the_planar_2r_front_has_the_known_shape(front):
+    """Volume ∫|det J| dq = 8π·l1·l2 grows with both lengths; the GCI depends on l2/l1 only
+    and peaks at l2/l1 = 1/√2 (the isotropic ratio). So the front is l1 at its upper bound
+    (2) with l2 from √2 (best GCI) to 2 (largest volume)."""
+    _, rec, _ = front
+    assert isinstance(rec, results.FrontRecord) and rec.objectives == {
+        "gci": "max",
+        "volume": "max",
+    }
+    X = rec.X
+    assert len(X) >= 10
+    np.testing.assert_allclose(X[:, 0], 2.0, atol=0.05)  # l1 at its bound
+    ratio = X[:, 1] / X[:, 0]
+    assert ratio.min() == pytest.approx(1 / np.sqrt(2), abs=0.04)  # the best-GCI end
+    assert ratio.max() == pytest.approx(1.0, abs=0.02)  # the largest-volume end
+    vol = rec.values["volume"]
+    z = (vol - 8 * np.pi * X[:, 0] * X[:, 1]) / rec.values["volume_se"]
+    assert np.all(np.abs(z) < 5)
+    # sorted by the first objective (gci, max): descending
+    assert np.all(np.diff(rec.F[:, 0]) <= 0)
+
+
+def test_the_front_matches_a_brute_force_grid(front):
+    """Every point of a 41 × 41 grid scored with the same fresh samples is dominated by
+    the front or within 2 SE of it; the front's hypervolume is at least 99 % of the
+    grid's non-dominated set's."""
+    cfg, rec, _ = front
+    g = np.linspace(0.2, 2.0, 41)
+    L1, L2 = np.meshgrid(g, g, indexing="ij")
+    problem, _ = fr.rescoring_problem(cfg, streams(cfg.seed), "t")
+    vals = score(problem, np.stack([L1.ravel(), L2.ravel()], -1))
+    G = np.stack([-vals["gci"], -vals["volume"]], -1)  # minimised
+    nd = pareto.non_dominated(G)
+    ref = -rec.reference
+    hv_grid = pareto.hypervolume(G[nd], ref)
+    assert rec.hypervolume >= 0.99 * hv_grid
+
+
+def test_rescoring_changes_values_only_as_much_as_their_ses_explain(front):
+    """The front's designs scored on the optimizer's samples and on the fresh ones differ
+    by independent Monte-Carlo errors: |z| > 3 is rare and z² averages about 1 (the
+    selection favours lucky samples, so a little above 1 is expected)."""
+    cfg, rec, _ = front
+    old = designopt.evaluate(cfg, {"l1": rec.X[:, 0], "l2": rec.X[:, 1]})
+    z = []
+    for j, k in enumerate(rec.objectives):
+        z.append((old[k] - rec.F[:, j]) / np.hypot(old[k + "_se"], rec.F_se[:, j]))
+    z = np.concatenate(z)
+    assert np.mean(np.abs(z) > 3) <= 0.05
+    assert 0.2 < np.mean(z**2) < 3.0
+
+
+def test_ambiguous_pairs_are_those_within_two_ses(front):
+    _, rec, _ = front
+    F, se = rec.F, rec.F_se
+    want = {(i, j) for i in range(len(F)) for j in range(i + 1, len(F))
+            if np.any(np.abs(F[i] - F[j]) <= 2 * np.hypot(se[i], se[j]))}  # fmt: skip
+    assert {tuple(p) for p in rec.ambiguous.tolist()} == want
+
+
+def test_the_front_record_round_trips_and_shows(front, capsys):
+    _, rec, out = front
+    back = designopt.load(out)
+    assert back == rec, back.differs(rec)
+    assert results.from_tree(rec.to_tree()) == rec
+    assert back.history.shape == (2, 41)
+    assert np.all(back.history[:, -1] > back.history[:, 0])  # the search improved the front
+    assert main(["show", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "Pareto front of gci (max), volume (max)" in text and "hypervolume" in text
+
+
+def _cfg_file(tmp_path, **over):
+    raw = yaml.safe_load(PLANAR.read_text())
+    raw["optimizer"] = {"name": "nsga2", "n_particles": 8, "n_iters": 2, "n_runs": 2}
+    raw["study"]["objective"] = {"pareto": {"gci": "max", "volume": "max"}}
+    for k, v in over.items():
+        node = raw
+        *head, last = k.split(".")
+        for h in head:
+            node = node.setdefault(h, {})
+        node[last] = v
+    p = tmp_path / "c.yaml"
+    p.write_text(yaml.safe_dump(raw))
+    return p
+
+
+@pytest.mark.parametrize("over,needle", [
+    ({"study.objective": {"pareto": {"gci": "max"}}}, "a front needs at least 2 indices"),
+    ({"study.objective": {"pareto": {"gci": "max", "lenght": "min"}}},
+     "key 'study.objective.pareto.lenght': unknown index"),
+    ({"study.objective": {"pareto": {"gci": "up", "volume": "max"}}},
+     "objective.pareto.gci: sense must be 'min' or 'max'"),
+    ({"optimizer.name": "ptpso"}, "key 'optimizer.name': 'ptpso' is single-objective"),
+    ({"study.objective": {"gci": -1.0}}, "key 'optimizer.name': 'nsga2' optimises a Pareto front"),
+    ({"front.reference": [0.1, 2.0, 3.0]}, "key 'front.reference': 3 values for 2 objectives"),
+])  # fmt: skip
+def test_bad_fronts_exit_2_with_one_line(tmp_path, capsys, over, needle):
+    p = _cfg_file(tmp_path, **over)
+    assert main(["run", str(p), "--out", str(tmp_path / "o" / "a.h5"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and needle in err, err
+    assert not (tmp_path / "o" / "a.h5").exists()
