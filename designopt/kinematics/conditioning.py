@@ -385,7 +385,3 @@ def cond(J: ArrayLike, norm: Norm = "fro", normalized: bool = False) -> Array:
     r = inv_cond(J, norm, normalized)
     return jnp.where(r > 0, 1.0 / jnp.where(r > 0, r, 1.0), jnp.inf)
 
-
-inv_cond_any = inv_cond
-"""Transitional alias for the one importer outside this package that still uses the old
-name (the da Vinci study's objective); remove once it imports ``inv_cond``."""

@@ -121,7 +121,7 @@ def problem(s: SerialSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Pro
         "bounds": normalise.unit_bounds(len(weights), dtype),
     }
     norm_bounds = None
-    b = None
+    b = np.asarray([[0.0, 1.0]] * len(weights))  # params["bounds"]: unit rows unless normalised
     if s.objective.get("normalize", False):
         n_norm = int(s.objective.get("n_norm", 64))
         b = normalise.probe_bounds(fn, params, tuple(weights), lower, upper, n_norm, keys, dtype)
