@@ -99,3 +99,24 @@ class FrontRecord(Record):
         if len(rows) < n:
             lines.append(f"  ({len(rows)} of {n} designs shown, evenly along the front)")
         return lines
+
+    @property
+    def lower(self) -> np.ndarray:
+        """The design box's lower bounds (D,), in the order of ``names``."""
+        return np.asarray(self.groups["problem"]["lower"], np.float64)
+
+    @property
+    def upper(self) -> np.ndarray:
+        """The design box's upper bounds (D,)."""
+        return np.asarray(self.groups["problem"]["upper"], np.float64)
+
+    @property
+    def n_samples(self) -> int:
+        """Samples per design of the re-scoring that gave ``F`` and ``F_se``."""
+        return int(self.groups["front"]["attrs"]["n_samples"])
+
+    @property
+    def rank(self) -> np.ndarray:
+        """Each front design's non-domination rank (n,) after re-scoring (0: on the
+        re-scored front; constrained domination where the study has a violation)."""
+        return np.asarray(self.groups["front"]["rank"], np.int64)
