@@ -103,8 +103,8 @@ def _panel(ax: plt.Axes, F: np.ndarray, se: np.ndarray, pairs: np.ndarray,
     kw = {"s": 16, "zorder": 3}
     ax.scatter(F[on, 0], F[on, 1], c=FRONT, gid="front:rank0", **kw)
     ax.scatter(F[dom, 0], F[dom, 1], c=DOMINATED, marker="s", gid="front:dominated", **kw)
-    ax.scatter(F[bad, 0], F[bad, 1], facecolors="none", edgecolors=INFEASIBLE,
-               gid="front:infeasible", **kw)  # fmt: skip
+    ax.scatter(F[bad, 0], F[bad, 1], facecolors="none", edgecolors=INFEASIBLE, s=30,
+               zorder=4, gid="front:infeasible")  # fmt: skip
     ax.grid(alpha=0.3)
     for w in "xy":
         style.auto_log(ax, F[:, 0 if w == "x" else 1], axis=w)
@@ -230,9 +230,9 @@ def designs(rec: FrontRecord, folder: Path, units: Mapping[str, str]) -> list[Pa
     ax.axvspan(D - 0.5, K - 0.5, color="0.93", zorder=0, lw=0)
     on, dom, bad = _groups(rec)
     seg = np.stack([np.broadcast_to(x, P.shape), P], -1)
-    lc = LineCollection(seg, array=F[:, 0], cmap="viridis", lw=1.1, alpha=0.85, zorder=2,
-                        linestyles=np.where(on, "solid", "dashed").tolist(),
-                        gid="designs")  # fmt: skip
+    lc = LineCollection(seg, array=F[:, 0], cmap="viridis", alpha=0.85, zorder=2,
+                        linewidths=np.where(on, 1.1, 2.0), gid="designs",
+                        linestyles=np.where(on, "solid", "dashed").tolist())  # fmt: skip
     ax.add_collection(lc)
     ax.set_xlim(-0.4, K - 0.6)
     ax.set_ylim(-0.04, 1.04)
