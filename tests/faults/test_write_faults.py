@@ -158,7 +158,7 @@ def test_real_full_and_read_only_file_system(small_fs, tmp_path, monkeypatch, ca
     assert os.listdir(small_fs) == []
     # past the estimate (as if it were wrong), the disk really fills up: exit 1, one line
     Usage = namedtuple("Usage", "total used free")
-    monkeypatch.setattr(output.shutil, "disk_usage", lambda p: Usage(1 << 40, 0, 1 << 40))
+    monkeypatch.setattr(shutil, "disk_usage", lambda p: Usage(1 << 40, 0, 1 << 40))
     (small_fs / "pad").write_bytes(b"\0" * 40_000)
     rc, _, err = cli(capsys, "run", cfg, "--quiet", "--no-figures", "--out", out)
     assert rc == 1, err
