@@ -154,10 +154,11 @@ def test_sweep_figure(tmp_path, record):
     vary = {"optimizer.gamma": [1e-7, 1e-3], "optimizer.n_particles": [4, 6]}
     cfg = _config("rcm", sweep={"vary": vary})
     rep = pipeline.sweep(cfg, "tiny", "tiny", tmp_path / "s.h5")
-    # in memory the members come in vmapped batches (one per swarm size), read back by name
-    assert list(rep.record.members) == ["000", "002", "001", "003"]
+    # the members run in vmapped batches (one per swarm size) and are kept in the sweep's
+    # order, in memory as in the archive
+    assert list(rep.record.members) == ["000", "001", "002", "003"]
     rec = archive.load(rep.out)
-    assert isinstance(rec, SweepRecord)
+    assert isinstance(rec, SweepRecord) and rec == rep.record
     sweep_figs.draw(rec, tmp_path / "f")
     assert_clean(record)
     (_, fig), = record  # fmt: skip
