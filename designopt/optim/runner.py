@@ -115,7 +115,7 @@ def _track(opt: Optimizer, state, ref) -> tuple[jax.Array, jax.Array, jax.Array]
 
 
 @partial(jax.jit, static_argnames=("opt", "fn", "cons", "length", "batched"))
-def _advance(carry, params, pparams, lower, upper, ref, opt, fn, cons, length, batched=False):
+def _advance(carry, params, pparams, lower, upper, opt, fn, cons, length, batched=False, ref=None):
     task = _task(fn, cons, pparams, lower, upper)
 
     def one(c, p):
@@ -241,7 +241,7 @@ def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress
     while done < n_iters:
         length = min(chunk, n_iters - done)
         carry, (x, f, v) = _advance(
-            carry, params, pparams, lower, upper, ref, length=length, **statics
+            carry, params, pparams, lower, upper, length=length, ref=ref, **statics
         )
         if plan is not None:
             carry = place(carry)  # the same placement every chunk: one compiled program
