@@ -47,8 +47,23 @@ class Entry(_Strict):
     settings: dict[str, float | str] = {}
 
 
+MO_FUNCTIONS = ("zdt1", "zdt2", "zdt3", "dtlz2", "bnh", "srn")
+"""Multi-objective test problems (``designopt.problems.multi``; run by ``designopt.benchmo``)."""
+
+
+class Function(_Strict):
+    """A multi-objective function with its sizes: ``{name: dtlz2, dim: 12, n_objectives: 3}``."""
+
+    name: Literal[MO_FUNCTIONS]  # type: ignore[valid-type]
+    dim: int | None = Field(None, ge=2)
+    n_objectives: int | None = Field(None, ge=2)
+
+
 class Bench(_Strict):
-    functions: list[Literal[BENCH_FUNCTIONS]] = ["griewank", "rastrigin", "ackley", "sphere"]  # type: ignore[valid-type]
+    functions: list[Literal[BENCH_FUNCTIONS + MO_FUNCTIONS] | Function] = [  # type: ignore[valid-type]
+        "griewank", "rastrigin", "ackley", "sphere"]  # fmt: skip
+    hypervolume_reference: list[float] | None = None
+    """Multi-objective cases: the hypervolume's reference point (default 1.1 per objective)."""
     dim: int = Field(30, ge=1)
     shifted: bool = True  # also run every function with a seeded shift of its optimum
     shift_seed: int = Field(1, ge=0, le=SEED_MAX)
@@ -95,6 +110,25 @@ def check(cfg: BenchConfig, path: str) -> None:
         if label in labels:
             raise ConfigError(f"{path}: key 'bench.variants.{i}': label {label!r} used twice")
         labels.append(label)
+    from designopt import benchmo
+
+    multi = {
+        lab: getattr(optim.resolve(n).cls, "multi_objective", False) for lab, n, _ in entries(cfg)
+    }
+    have = {False: bool(cases(cfg)), True: bool(benchmo.cases(cfg))}
+    for i, (label, _, _) in enumerate(entries(cfg)):
+        if not have[multi[label]]:
+            kind = "multi" if multi[label] else "single"
+            raise ConfigError(f"{path}: key 'bench.variants.{i}': {label!r} is {kind}-objective "
+                              f"and bench.functions has no {kind}-objective function")  # fmt: skip
+    ref = b.hypervolume_reference
+    for c, _, _, m in benchmo.cases(cfg):
+        from designopt.problems.multi import MULTI_FUNCTIONS
+
+        m = m or MULTI_FUNCTIONS[c.split("_")[0]].n_objectives
+        if ref is not None and len(ref) != m:
+            raise ConfigError(f"{path}: key 'bench.hypervolume_reference': {len(ref)} values "
+                              f"for {m} objectives (case {c})")  # fmt: skip
     if b.reference not in labels:
         raise ConfigError(f"{path}: key 'bench.reference': {b.reference!r} is not one of the "
                           f"compared entries {labels}")  # fmt: skip
@@ -106,12 +140,21 @@ def check(cfg: BenchConfig, path: str) -> None:
 
 
 def cases(cfg: BenchConfig) -> list[tuple[str, str, int | None]]:
-    """(case name, function, shift seed) for every function, and shifted if asked."""
+    """(case name, function, shift seed) for every single-objective function, and shifted
+    if asked (the multi-objective cases: ``benchmo.cases``)."""
     b = cfg.bench
-    out = [(f, f, None) for f in b.functions]
+    single = [f for f in b.functions if isinstance(f, str) and f in BENCH_FUNCTIONS]
+    out = [(f, f, None) for f in single]
     if b.shifted:
-        out += [(f"{f}_shifted", f, b.shift_seed) for f in b.functions]
+        out += [(f"{f}_shifted", f, b.shift_seed) for f in single]
     return out
+
+
+def case_names(cfg: BenchConfig) -> list[str]:
+    """Every case in the order the suite runs them: single-, then multi-objective."""
+    from designopt import benchmo
+
+    return [c for c, _, _ in cases(cfg)] + [c for c, *_ in benchmo.cases(cfg)]
 
 
 def run_suite(cfg: BenchConfig, progress: Callable[[int], None] | None = None,
@@ -133,6 +176,8 @@ def run_suite(cfg: BenchConfig, progress: Callable[[int], None] | None = None,
         problem = benchmark(fname, b.dim, shift)
         results[case] = {}
         for label, name, settings in ents:
+            if getattr(optim.resolve(name).cls, "multi_objective", False):
+                continue  # the multi-objective cases below
             with Stopwatch() as sw:
                 r = optim.run(
                     name, problem, jax.random.fold_in(key, ci), b.n_particles, b.n_iters,
@@ -148,7 +193,13 @@ def run_suite(cfg: BenchConfig, progress: Callable[[int], None] | None = None,
                 "compile_s": sw.compile,
                 "settings": r.settings,
             }
-    return {"results": results, "stats": statistics(cfg, results)}
+    from designopt import benchmo
+
+    mo = benchmo.run_cases(cfg, ents, key, len(cases(cfg)), progress, plan)
+    return {
+        "results": results | mo,
+        "stats": statistics(cfg, results) | benchmo.statistics(cfg, mo),
+    }
 
 
 def statistics(cfg: BenchConfig, results: dict[str, dict[str, Any]]) -> dict[str, Any]:
@@ -197,6 +248,10 @@ def command(config_path: str, seed: int | None, out: str | None, quiet: bool,
     from designopt.finite import check_seed
 
     cfg, text = load(config_path, BenchConfig)
+    if cfg.precision == "float64":  # the command is the program: it may switch JAX to 64-bit
+        import jax
+
+        jax.config.update("jax_enable_x64", True)
     if seed is not None:
         cfg.seed = check_seed(seed, f"--seed {seed}")
     check(cfg, config_path)
@@ -215,18 +270,25 @@ def _command(cfg: BenchConfig, text: str, path: Path, quiet: bool, parallel: Any
 
     b = cfg.bench
     n_ent = len(b.variants)
-    total = len(cases(cfg)) * n_ent * b.n_iters
+    mo = [getattr(optim.resolve(n).cls, "multi_objective", False) for _, n, _ in entries(cfg)]
+    n_single = len(cases(cfg))
+    n_multi = len(case_names(cfg)) - n_single
+    total = (n_single * mo.count(False) + n_multi * mo.count(True)) * b.n_iters
     with Stopwatch() as sw, tqdm(total=total, desc="bench", unit="it", disable=quiet) as bar:
         res = run_suite(cfg, progress=bar.update, parallel=parallel)
     st = res["stats"]
     if not output.writes():  # a non-zero process of a multi-process job: process 0 reports
         return 0
+    from designopt import benchmo
+
     for case in st:
-        print(format_table(case, st[case], b.reference), end="\n\n")
+        table = benchmo.format_table if st[case].get("higher_is_better") else format_table
+        print(table(case, st[case], b.reference), end="\n\n")
+    keep = ("history", "best_f", "best_x", "converged_at", "hypervolume", "igd_plus", "front_f")
     tree: dict[str, Any] = {"bench": {}}
     for case, per in res["results"].items():
         tree["bench"][case] = {
-            v: {k: rec[k] for k in ("history", "best_f", "best_x", "converged_at")}
+            v: {k: rec[k] for k in keep if k in rec}
             | {
                 "attrs": {
                     "wall_s": rec["wall_s"],
@@ -235,12 +297,14 @@ def _command(cfg: BenchConfig, text: str, path: Path, quiet: bool, parallel: Any
                 }
             }  # fmt: skip
             for v, rec in per.items()
+            if v != "attrs"
         } | {"attrs": {"stats": st[case]}}
     attrs = {"kind": "bench", "config_yaml": text, "config_resolved": cfg.model_dump_json(),
              "seed": cfg.seed, "wall_time_s": sw.wall, "compile_time_s": sw.compile,
              "run_time_s": sw.run}  # fmt: skip
     archive.save(path, BenchRecord(attrs, tree, cfg))
-    hist = {c: {v: rec["history"] for v, rec in per.items()} for c, per in res["results"].items()}
+    hist = {c: {v: rec["history"] for v, rec in per.items() if v != "attrs"}
+            for c, per in res["results"].items()}  # fmt: skip
     from designopt.figures import bench as bench_figs
 
     figs = output.publish_figures(lambda d: bench_figs.draw(d, st, hist, b.n_runs), path.parent,

@@ -93,3 +93,65 @@ def test_shipped_config_is_valid():
     benchsuite.check(cfg, str(p))
     labels = [lab for lab, _, _ in benchsuite.entries(cfg)]
     assert labels == ["p1", "p2", "p3", "p4", "p5", "p6", "p7", "cmaes"]
+
+
+MO_BENCH = """
+bench:
+  functions: [zdt1, {name: dtlz2, n_objectives: 3, dim: 7}, sphere]
+  dim: 4
+  shifted: false
+  variants: [nsga2, {name: nsga2, label: wide, settings: {eta_c: 5.0}}, p3]
+  reference: nsga2
+  n_particles: 24
+  n_iters: 20
+  n_runs: 5
+precision: float64
+output: OUT
+"""
+
+
+def test_multi_objective_cases_compare_hypervolumes(tmp_path, capsys):
+    """ZDT1 and DTLZ2 (3 objectives) beside a single-objective case: each entry runs the
+    cases of its kind; the archived hypervolume of every run equals moocore's of the
+    archived front (NaN rows: dominated or infeasible), against (1.1, …, 1.1)."""
+    moocore = pytest.importorskip("moocore")
+    import numpy as np
+
+    cfg = write(tmp_path, MO_BENCH)
+    assert benchsuite.command(str(cfg), None, None, True) == 0
+    out = capsys.readouterr().out
+    assert "zdt1  (hypervolume against (1.1, 1.1)" in out and "dtlz2_m3_d7" in out
+    assert "IGD+ med" in out and "sphere  (success" in out
+    rec = archive.load(tmp_path / "a.h5")
+    assert set(rec.entries("zdt1")) == {"nsga2", "wide"} and set(rec.entries("sphere")) == {"p3"}
+    for case, m in (("zdt1", 2), ("dtlz2_m3_d7", 3)):
+        st = rec.stats(case)
+        assert st["higher_is_better"] and set(st["rows"]) == {"nsga2", "wide"}
+        assert "p_holm" in st["rows"]["wide"]
+        for e in ("nsga2", "wide"):
+            g = rec.entries(case)[e]
+            F = np.asarray(g["front_f"])
+            assert F.shape == (5, 24, m)
+            for i in range(5):
+                pts = F[i][~np.isnan(F[i]).any(-1)]
+                want = moocore.hypervolume(pts, ref=np.full(m, 1.1)) if len(pts) else 0.0
+                assert g["hypervolume"][i] == pytest.approx(want, rel=1e-12, abs=1e-15)
+            assert np.all(np.asarray(g["igd_plus"]) > 0)
+        assert st["rows"]["nsga2"]["median"] == pytest.approx(
+            np.median(rec.entries(case)["nsga2"]["hypervolume"])
+        )
+    assert "best hypervolume" in " ".join(rec.summary())
+
+
+def test_multi_objective_bench_refuses_a_wrong_reference(tmp_path):
+    cfg = write(
+        tmp_path,
+        MO_BENCH.replace(
+            "reference: nsga2", "reference: nsga2\n  hypervolume_reference: [1.1, 1.1]"
+        ),
+    )
+    with pytest.raises(ConfigError, match=r"key 'bench.hypervolume_reference': 2 values for 3"):
+        benchsuite.command(str(cfg), None, None, True)
+    cfg = write(tmp_path, MO_BENCH.replace("zdt1, {name: dtlz2, n_objectives: 3, dim: 7}, ", ""))
+    with pytest.raises(ConfigError, match=r"'nsga2' is multi-objective and bench.functions has no"):
+        benchsuite.command(str(cfg), None, None, True)

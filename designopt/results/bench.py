@@ -37,18 +37,22 @@ class BenchRecord(Record):
     def summary(self) -> list[str]:
         lines = [self.timing_line()]
         for case in self.cases:
-            rows = self.stats(case)["rows"]
-            best = min(rows, key=lambda v: rows[v]["mean"])
-            lines.append(f"  {case}: best mean {best} ({rows[best]['mean']:.3e})")
+            st = self.stats(case)
+            rows, up = st["rows"], bool(st.get("higher_is_better", False))
+            best = (max if up else min)(rows, key=lambda v: rows[v]["mean"])
+            if up:
+                lines.append(f"  {case}: best hypervolume {best} ({rows[best]['mean']:.5f})")
+            else:
+                lines.append(f"  {case}: best mean {best} ({rows[best]['mean']:.3e})")
         return lines
 
     def case_names(self) -> list[str]:
         """The cases in the order the suite ran them (the config's functions, then their
         shifted copies; an archive gives its groups sorted by name)."""
-        from designopt.benchsuite import cases
+        from designopt.benchsuite import case_names
 
         have = list(self.cases)
-        ran = [c for c, _, _ in cases(self.config) if c in have]
+        ran = [c for c in case_names(self.config) if c in have]
         return ran + [c for c in have if c not in ran]
 
     def histories(self, case: str) -> dict[str, np.ndarray]:
