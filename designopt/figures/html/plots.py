@@ -21,6 +21,7 @@ from designopt.figures.html.model import (
     _thin_note,
     esc,
 )
+from designopt.figures.scan import merged  # noqa: F401 (re-exported: indices equal to f drawn once, as in the static figures)
 
 
 def _lab(name: str, units: Mapping[str, str]) -> str:
@@ -128,32 +129,6 @@ def _int_ticks(lay: dict[str, Any], n: int) -> None:
     lay["xaxis"]["tickformat"] = "d"
     if n <= 12:
         lay["xaxis"]["dtick"] = 1
-
-
-def _same(y0: np.ndarray, y1: np.ndarray) -> int:
-    """+1 when y1 equals y0, −1 when it equals −y0, 0 otherwise."""
-    if y0.shape != y1.shape or not (np.all(np.isfinite(y0)) and np.all(np.isfinite(y1))):
-        return 0
-    tol = 1e-9 * max(float(np.max(np.abs(y0))), 1e-300)
-    if np.allclose(y0, y1, rtol=0, atol=tol):
-        return 1
-    return -1 if np.allclose(y0, -y1, rtol=0, atol=tol) else 0
-
-
-def merged(g: Mapping[str, Any], inds: Sequence[str]) -> list[tuple[str, str]]:
-    """[(index drawn, its name with every index equal to it or to its negative)], as the
-    static figures draw them (``eta = eta_cone = −f``)."""
-    out: list[tuple[str, list[str]]] = []
-    for k in sorted(inds, key=lambda k: k == "f"):
-        y = _f(g[k])
-        for rep, names in out:
-            s = _same(_f(g[rep]), y)
-            if s:
-                names.append(k if s > 0 else f"−{k}")
-                break
-        else:
-            out.append((k, [k]))
-    return [(rep, " = ".join(names)) for rep, names in out]
 
 
 def _index_names(g: Mapping[str, Any], skip: Sequence[str] = ()) -> list[str]:
