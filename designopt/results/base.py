@@ -164,6 +164,26 @@ class Record:
     def config_model(self) -> Any:
         return None  # the run-config model
 
+    @property
+    def names(self) -> list[str]:
+        """The design variables (the ``problem`` group's names)."""
+        return names(self.groups["problem"]["names"])
+
+    @property
+    def lower(self) -> np.ndarray:
+        """The design box's lower bounds (D,), in the order of ``names``."""
+        return np.asarray(self.groups["problem"]["lower"], np.float64)
+
+    @property
+    def upper(self) -> np.ndarray:
+        """The design box's upper bounds (D,)."""
+        return np.asarray(self.groups["problem"]["upper"], np.float64)
+
+    @property
+    def info(self) -> dict[str, Any]:
+        """What the study's problem says about itself (the ``problem`` group's info)."""
+        return dict(self.groups["problem"].get("attrs", {}).get("info", {}))
+
     def keys(self) -> dict[str, Any]:
         """The named PRNG streams the record was made with (``studies.STREAMS``)."""
         from designopt.studies.base import archived_keys

@@ -24,10 +24,6 @@ class FrontRecord(Record):
     GROUPS: ClassVar[tuple[str, ...]] = ("optimizer", "front", "problem")
 
     @property
-    def names(self) -> list[str]:
-        return names(self.groups["problem"]["names"])
-
-    @property
     def objectives(self) -> dict[str, str]:
         """Objective → sense (``min`` or ``max``)."""
         at = self.groups["front"]["attrs"]
@@ -88,8 +84,7 @@ class FrontRecord(Record):
                  f"hypervolume {self.hypervolume:.6g} against the reference point "
                  f"{np.round(self.reference, 6).tolist()}; {len(self.ambiguous)} pairs "
                  f"ambiguous (order within {at.get('z', 2):g} SE in some objective)"]  # fmt: skip
-        head = "  ".join(f"{v:>10}" for v in self.names) + "  " + "  ".join(
-            f"{k:>20}" for k in obj)
+        head = "  ".join(f"{v:>10}" for v in self.names) + "  " + "  ".join(f"{k:>20}" for k in obj)
         lines.append("  " + head)
         rows = np.unique(np.linspace(0, n - 1, min(n, SHOWN)).round().astype(int))
         for i in rows:
@@ -99,16 +94,6 @@ class FrontRecord(Record):
         if len(rows) < n:
             lines.append(f"  ({len(rows)} of {n} designs shown, evenly along the front)")
         return lines
-
-    @property
-    def lower(self) -> np.ndarray:
-        """The design box's lower bounds (D,), in the order of ``names``."""
-        return np.asarray(self.groups["problem"]["lower"], np.float64)
-
-    @property
-    def upper(self) -> np.ndarray:
-        """The design box's upper bounds (D,)."""
-        return np.asarray(self.groups["problem"]["upper"], np.float64)
 
     @property
     def n_samples(self) -> int:

@@ -9,7 +9,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from designopt.results.base import Record, names
+from designopt.results.base import Record
 
 
 def _pm(name: str, v: float, se: float | None) -> str:
@@ -34,10 +34,6 @@ class RunRecord(Record):
 
     KIND: ClassVar[str] = "run"
     GROUPS: ClassVar[tuple[str, ...]] = ("optimizer", "best_run", "problem", "final")
-
-    @property
-    def names(self) -> list[str]:
-        return names(self.groups["problem"]["names"])
 
     @property
     def x(self) -> dict[str, float]:
@@ -80,19 +76,6 @@ class RunRecord(Record):
     def final(self) -> dict[str, Any]:
         """The final design's values: ``x`` (D,), f and every index with ``_se``."""
         return {k: v for k, v in self.groups["final"].items() if k != "attrs"}
-
-    @property
-    def info(self) -> dict[str, Any]:
-        """What the study's problem says about itself (the ``problem`` group's info)."""
-        return dict(self.groups["problem"].get("attrs", {}).get("info", {}))
-
-    @property
-    def lower(self) -> np.ndarray:
-        return np.asarray(self.groups["problem"]["lower"], np.float64)
-
-    @property
-    def upper(self) -> np.ndarray:
-        return np.asarray(self.groups["problem"]["upper"], np.float64)
 
     @property
     def best_run_index(self) -> int:
