@@ -88,13 +88,7 @@ def problem_group(problem: Problem) -> dict[str, Any]:
                          "upper": problem.upper, "attrs": {"info": problem.info}}  # fmt: skip
     if problem.norm_bounds is not None:
         g["norm_bounds"] = np.asarray(problem.norm_bounds)
-    elif isinstance(problem.params, Mapping) and "bounds" in problem.params:
-        g["norm_bounds"] = np.asarray(problem.params["bounds"])
     return g
-
-
-def samples_used(problem: Problem) -> int:
-    return int(problem.n_samples_used or problem.info.get("n_samples_used", 0))
 
 
 def run_groups(cfg: Any, problem: Problem, res: Any) -> dict[str, Any]:
@@ -141,5 +135,5 @@ def run_groups(cfg: Any, problem: Problem, res: Any) -> dict[str, Any]:
             x_final, stage = rr.x[i][None], "refine"
     fin = {k: v[0] for k, v in score(problem, x_final).items()}
     tree["final"] = fin | {"x": x_final[0], "attrs": {"stage": stage,
-                           "n_samples_used": samples_used(problem)}}  # fmt: skip
+                           "n_samples_used": int(problem.n_samples_used)}}  # fmt: skip
     return tree

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from kinref import ETChain
 
-from designopt.kinematics.chain import ETChain
 from designopt.studies.davinci import ik, paper
 from designopt.studies.davinci import mechanism as m
 

@@ -118,9 +118,10 @@ def test_combine_is_mean_and_sd_over_root_r():
 
 def _master9_spread(sampler: str, R: int | None, n: int, n_seeds: int):
     from designopt.studies.master9 import mechanism as m
-    from designopt.studies.master9.indices import IndexSettings, swarm_indices
+    from designopt.studies.master9.indices import swarm_indices
+    from designopt.studies.master9.settings import Indices
 
-    s = IndexSettings(n_samples=n, chunk=8192, sampler=sampler, replicates=R)
+    s = Indices(n_samples=n, chunk=8192, sampler=sampler, replicates=R)
     d = {k: jnp.asarray([v], jnp.float64) for k, v in {**m.default_design(),
                                                        **m.PAPER_FINAL}.items()}  # fmt: skip
     f = jax.jit(lambda k: swarm_indices(d, k, s))

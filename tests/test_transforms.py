@@ -3,11 +3,10 @@
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from kinref import DHChain, DHParams, ETChain
 
 from designopt.kinematics import (
     ET,
-    DHChain,
-    ETChain,
     dh_modified,
     dh_standard,
     rotx,
@@ -15,7 +14,6 @@ from designopt.kinematics import (
     rotz,
     trans,
 )
-from designopt.kinematics.chain import DHParams
 
 
 def np_rx(t):

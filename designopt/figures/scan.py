@@ -45,13 +45,19 @@ def study_hints(rec: ScanRecord) -> tuple[dict[str, str], Any]:
         units = dict(st.units(s)) | {"__summary__": tuple(st.summary(s))}
     except (ValueError, KeyError, TypeError, ConfigError):
         return {}, None
+    return units, figures_module(st)
+
+
+def figures_module(st: Any) -> Any:
+    """A study's figures module (its ``RATES``, ``UNDEFINED_WHEN_ZERO``, ``SCAN_PANELS``
+    hints), found beside its ``figures`` hook; None when it has none."""
     home = st.figures.__module__  # the study package itself, or a module inside it
     for name in (home + ".figures", home.rsplit(".", 1)[0] + ".figures"):
         try:
-            return units, importlib.import_module(name)
+            return importlib.import_module(name)
         except ImportError:
             continue
-    return units, None
+    return None
 
 
 def _same(y0: np.ndarray, y1: np.ndarray) -> int:

@@ -53,8 +53,6 @@ def sections(tree: Mapping[str, Any], *, cloud: Mapping[str, Any] | None = None,
 def _hints(tree: Mapping[str, Any]) -> tuple[dict[str, str], Any]:
     """(units, the study's figures module or None) from the registry, for the study and
     config the archive names; ({}, None) for an unknown study or config."""
-    import importlib
-
     from designopt.studies import get
 
     at = tree.get("attrs", {})
@@ -65,13 +63,9 @@ def _hints(tree: Mapping[str, Any]) -> tuple[dict[str, str], Any]:
         units = dict(st.units(st.settings.model_validate(cfg["study"])))
     except Exception:  # noqa: BLE001 - a report of an unknown study or config still draws
         return {}, None
-    home = st.figures.__module__
-    for name in (home + ".figures", home.rsplit(".", 1)[0] + ".figures"):
-        try:
-            return units, importlib.import_module(name)
-        except ImportError:
-            continue
-    return units, None
+    from designopt.figures.scan import figures_module
+
+    return units, figures_module(st)
 
 
 def _meta(tree: Mapping[str, Any]) -> str:

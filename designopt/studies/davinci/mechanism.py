@@ -22,8 +22,7 @@ import math
 import jax.numpy as jnp
 import numpy as np
 
-from designopt.kinematics.chain import ET
-from designopt.kinematics.kernel import SerialModel, et_model
+from designopt.kinematics.kernel import ET, SerialModel, et_model
 
 HP = math.pi / 2
 DESIGN_KEYS: tuple[str, ...] = ("alpha", "beta", "l_QH", "l_IJ")

@@ -24,11 +24,6 @@ Array = jnp.ndarray
 LINEAR_KEYS = ("a1", "a3", "a4", "d3")
 
 
-IndexSettings = Indices
-"""Transitional name of :class:`~designopt.studies.master9.settings.Indices` (the one
-settings model of the indices) for callers outside this study; use ``Indices``."""
-
-
 def features(q: Array) -> dict[str, Array]:
     """Per-sample trigonometry (C,) arrays: everything J_v and det need."""
     q1, q2, q3 = q[:, 0], q[:, 1], q[:, 2]
