@@ -134,6 +134,12 @@ def test_run_stays_in_box_resumes_bit_exact_and_round_trips(name, tmp_path):
     assert back == cfg and rec.config == cfg
     assert set(rec.keys()) == {"optimizer", "samples", "normalisation", "figures"}
     np.testing.assert_array_equal(rec.history, full.history)
+    st = get(name)
+    if st.cloud is not None:  # the interactive report's workspace cloud
+        c = st.cloud(rec)
+        n = len(c["value"])
+        assert c["xyz"].shape == (n, 3) and n >= 1000 and c["label"] and c["unit"]
+        assert np.all(np.isfinite(c["xyz"])) and np.all((c["value"] >= 0) & (c["value"] <= 1))
     figures.RECORD = []  # every figure drawn also passes the figure checks (docs/figures.md)
     try:
         figs = get(name).figures(rec, tmp_path / "figs")

@@ -34,6 +34,12 @@ def _figures(record: Any, folder: Path) -> list[Path]:
     return figures.draw_run(record, folder)
 
 
+def _cloud(record: Any) -> dict[str, Any]:
+    from designopt.studies.master9 import figures
+
+    return figures.cloud(record)
+
+
 def _aliases(s: Master9Settings) -> dict[str, str]:
     out = {f"study.{k}": f"study.indices.{k}" for k in Indices.model_fields}
     out |= {f"design.{k}": f"study.fixed.{k}" for k in DESIGN_KEYS}  # variables: refused later
@@ -67,6 +73,7 @@ STUDY = Study(
     units=lambda s: dict.fromkeys(s.variables, "mm") | INDEX_UNITS,
     extra_lines=_extra,
     cost=_cost,
+    cloud=_cloud,
     example_config="configs/master9.yaml",
     tiny={"name": "master9", "indices": {"n_samples": 2048}, "n_norm": 8},
     meta={

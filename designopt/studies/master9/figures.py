@@ -185,3 +185,26 @@ def draw_run(rec: Any, folder: Path, resolution: int = MAP_RESOLUTION) -> list[P
     bl = bl if isinstance(bl, list) else [bl] * 3
     key_data = np.asarray(jax.random.key_data(rec.keys()["figures"]), np.uint32)
     return draw(folder, br["iteration"], br, designs, bl, key_data, resolution=resolution)
+
+
+@jax.jit
+def _cloud_kernel(x, q):
+    """Tip positions (N, 3) and raw Frobenius 1/k of J_v (eq. 51-53) at q (N, 3) for one
+    design x {k: ()}."""
+    inv = ind.inv_cond_fro_jv(ind.jv_entries(x, ind.features(q)))[1]
+    return m.position(q, x), inv
+
+
+def cloud(rec: Any, n: int = 8000) -> dict[str, Any]:
+    """The final design's workspace for the interactive report: the tip positions of
+    ``n`` uniform position-joint samples (the run's ``figures`` stream), coloured by the
+    Frobenius 1/k of J_v (eq. 51-53)."""
+    dt = mc.out_dtype()
+    full = {**m.default_design(), **rec.info.get("fixed", {}), **rec.x}
+    x = {k: np.asarray(full[k], dt) for k in m.DESIGN_KEYS}
+    lim = m.JOINT_LIMITS[:3]
+    key = np.asarray(jax.random.key_data(rec.keys()["figures"]), np.uint32)
+    q = np.random.default_rng(key).uniform(lim[:, 0], lim[:, 1], (n, 3)).astype(dt)
+    P, inv = _cloud_kernel(x, q)
+    return {"xyz": np.asarray(P, np.float64), "value": np.asarray(inv, np.float64),
+            "label": "1/k (Frobenius, J_v)", "unit": "-", "xyz_unit": "mm"}  # fmt: skip
