@@ -111,19 +111,20 @@ def spare_matings(P: int) -> int:
 
 def first_unique(X: Array, C: Array, n: int) -> Array:
     """Indices of the first n candidates C (K, D) that equal no member of X (P, D) and no
-    earlier candidate (duplicates go last when fewer than n are unique). Rows are compared
-    by a fingerprint Σ_d x_d·w_d (fixed irrational weights) computed by one reduction over
-    both sets, so equal rows give equal fingerprints; distinct rows colliding is a
-    rounding accident that at worst drops one candidate."""
+    earlier candidate (duplicates go last when fewer than n are unique). Rows are matched
+    by a fingerprint Σ_d x_d·w_d (fixed irrational weights; one reduction over both sets,
+    so equal rows give equal fingerprints) and a match is confirmed by comparing the
+    candidate with the first row of the same fingerprint coordinate by coordinate, so a
+    rounding collision of distinct rows never drops a candidate (float32 included)."""
     D = X.shape[1]
     w = 1.0 + jnp.mod(jnp.arange(1, D + 1, dtype=X.dtype) * 0.6180339887498949, 1.0)
-    fp = jnp.sum(jnp.concatenate([X, C]) * w, axis=1)
-    fx, fc = fp[: X.shape[0]], fp[X.shape[0] :]
-    K = C.shape[0]
-    earlier = jnp.arange(K)[None, :] < jnp.arange(K)[:, None]  # [i, j]: j before i
-    dup = jnp.any(fc[:, None] == fx[None, :], axis=1) | jnp.any(
-        (fc[:, None] == fc[None, :]) & earlier, axis=1
-    )
+    A = jnp.concatenate([X, C])
+    fp = jnp.sum(A * w, axis=1)
+    P, K = X.shape[0], C.shape[0]
+    before = jnp.arange(P + K)[None, :] < (P + jnp.arange(K))[:, None]  # rows before C_i
+    same = (fp[P:, None] == fp[None, :]) & before
+    j = jnp.argmax(same, axis=1)  # the first earlier row with the same fingerprint
+    dup = jnp.any(same, axis=1) & jnp.all(A[j] == C, axis=1)
     return jnp.argsort(dup, stable=True)[:n]
 
 
