@@ -244,7 +244,7 @@ def sweep(cfg: Any, text: str | None = None, where: str = "config", out: Path | 
                 res = optimise(c, problem, keys["optimizer"], members=opt_sets, progress=bar,
                                where=where)  # fmt: skip
                 for j, (i, m) in enumerate(mem):
-                    t = run_groups(c, problem, sw.member(res, j))
+                    t = run_groups(c, problem, res.member(j))
                     check_finite(t["final"], where, f"sweep member {i} {m}")
                     t["attrs"] = {"overrides": m,
                                   "config_resolved_yaml": sw.resolved(cfg, m)}  # fmt: skip

@@ -124,15 +124,6 @@ def groups(cfg: Any, where: str) -> tuple[dict[str, list[tuple[int, dict]]], dic
     return out, cfgs, mem
 
 
-def member(res: Any, j: int) -> Any:
-    """Member ``j`` of a batched optimizer result (``optim.run_batch``): every array
-    field sliced on its leading member axis, the settings picked per member."""
-    sets = {a: (b[j] if isinstance(b, list) else b) for a, b in res.settings.items()}
-    return res._replace(**{k: (None if v is None else v[j])
-                           for k, v in res._asdict().items() if k != "settings"},
-                        settings=sets)  # fmt: skip
-
-
 def resolved(cfg: Any, overrides: dict[str, Any]) -> str:
     """The resolved YAML of one member's config."""
     from designopt.prepare import resolved_yaml

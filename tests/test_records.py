@@ -209,3 +209,50 @@ def test_report_html_writes_one_page_with_the_workspace_cloud(run_pair, capsys):
     np.testing.assert_allclose(c["xyz"][:, :2], tip, atol=1e-12)
     np.testing.assert_allclose(c["xyz"][:, 2], 0.0, atol=1e-12)
     np.testing.assert_allclose(c["value"], sv[:, 1] / sv[:, 0], rtol=1e-9, atol=1e-12)
+
+
+def test_a_registered_optimizer_runs_from_a_config(cfg):
+    """optim.register: a user's optimizer (here a plain random search) becomes a name a
+    config can give; its run is a RunRecord like any other."""
+    from typing import NamedTuple
+
+    import jax
+    import jax.numpy as jnp
+
+    from designopt import optim
+    from designopt.optim.protocol import Best, Optimizer, argbest
+
+    class RandomSearch(Optimizer):
+        class Params(NamedTuple):
+            shrink: float = 0.5
+
+        def init(self, key, params, task):
+            x = jax.random.uniform(key, (self.n, task.lower.size), task.lower.dtype)
+            x = task.lower + (task.upper - task.lower) * x
+            f, v = task.evaluate(x, key)
+            i = argbest(f, v)
+            return x[i], f[i], v[i]
+
+        def step(self, key, state, params, task):
+            x0, f0, v0 = state
+            w = params.shrink * (task.upper - task.lower)
+            x = jnp.clip(x0 + w * jax.random.uniform(key, (self.n, x0.size), x0.dtype, -1, 1),
+                         task.lower, task.upper)  # fmt: skip
+            f, v = task.evaluate(x, key)
+            i = argbest(f, v)
+            take = (v[i] < v0) | ((v[i] == v0) & (f[i] < f0))
+            return (jnp.where(take, x[i], x0), jnp.where(take, f[i], f0),
+                    jnp.where(take, v[i], v0))  # fmt: skip
+
+        def best(self, state):
+            return Best(*state)
+
+    optim.register("random_search_test", RandomSearch, source="a test's random search")
+    with pytest.raises(ValueError, match="already registered"):
+        optim.register("random_search_test", RandomSearch)
+    c = cfg.model_copy(update={"optimizer": cfg.optimizer.model_copy(
+        update={"name": "random_search_test", "settings": {"shrink": 0.3}})})  # fmt: skip
+    rec = designopt.run(c)
+    assert rec.config.optimizer.name == "random_search_test"
+    assert rec.data()["optimizer"]["attrs"]["settings"]["shrink"] == pytest.approx(0.3)
+    assert np.all(np.diff(rec.history, axis=1) <= 0) and rec.f <= rec.history[:, 0].min()

@@ -47,6 +47,21 @@ MULTI_OBJECTIVE: dict[str, Entry] = {
 }
 
 
+def register(name: str, cls: type[Optimizer], preset: dict[str, float] | None = None,
+             source: str = "") -> Entry:  # fmt: skip
+    """Add a user's optimizer (an ``Optimizer`` subclass: ``Params``, ``init``, ``step``,
+    ``best``; or ``front`` with ``multi_objective = True``) under ``name``; configs then
+    name it in ``optimizer.name``. A name may be registered once."""
+    key = str(name).lower()
+    if key in OPTIMIZERS or key in MULTI_OBJECTIVE:
+        raise ValueError(f"an optimizer named {key!r} is already registered")
+    if not (isinstance(cls, type) and issubclass(cls, Optimizer)):
+        raise ValueError(f"{cls!r} is not a designopt.optim.Optimizer subclass")
+    e = Entry(key, cls, dict(preset or {}), source or cls.__name__)
+    (MULTI_OBJECTIVE if cls.multi_objective else OPTIMIZERS)[key] = e
+    return e
+
+
 def names() -> list[str]:
     """Every accepted single-objective optimizer name (canonical names and aliases);
     ``multi_objective_names()`` lists the others."""

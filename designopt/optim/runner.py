@@ -54,6 +54,14 @@ class RunResult(NamedTuple):
     front: Front | None = None  # MO: x ([B,] n_runs, P, D), f (…, P, m), v (…, P), rank (…, P)
     ref_point: np.ndarray | None = None  # MO: (m,) the hypervolume's reference point
 
+    def member(self, j: int) -> RunResult:
+        """Member ``j`` of a batched result (``run_batch``, a sweep): every array sliced on
+        its leading member axis, the settings that vary per member picked."""
+        sets = {a: (b[j] if isinstance(b, list) else b) for a, b in self.settings.items()}
+        sliced = {k: (None if v is None else jax.tree.map(lambda a: a[j], v))
+                  for k, v in self._asdict().items() if k not in ("settings", "ref_point")}  # fmt: skip
+        return self._replace(**sliced, settings=sets)
+
 
 class Checkpoint(NamedTuple):
     """Everything needed to continue a run bit-for-bit: the optimizer state and run keys
