@@ -121,6 +121,9 @@ def test_contract_seeds_resume_batch():
         one = optim.run("nsga2", P, key, **kb, **m)
         np.testing.assert_allclose(batch.history[i], one.history, rtol=1e-9, atol=1e-12)
     assert batch.settings["eta_c"] == [15.0, 5.0]
+    one = batch.member(1)
+    assert one.settings["eta_c"] == 5.0 and one.settings["ref_point"] == (1.1, 1.1)
+    np.testing.assert_array_equal(one.front.f, batch.front.f[1])
 
 
 def test_operators_equal_pymoos_given_the_same_random_numbers():

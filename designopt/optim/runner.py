@@ -277,7 +277,7 @@ def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress
         best_x=history_x[..., -1, :],
         converged_at=convergence_iteration(-history if mo else history),
         history_x=history_x,
-        settings=record | ({"ref_point": host(ref).tolist()} if mo else {}),
+        settings=record | ({"ref_point": tuple(host(ref).tolist())} if mo else {}),
         history_v=history_v,
         best_v=history_v[..., -1],
         front=front,
