@@ -63,7 +63,9 @@ def dtlz2(x, m: int):
     """DTLZ2 with m objectives (the first m − 1 variables are the angles)."""
     g = jnp.sum((x[:, m - 1 :] - 0.5) ** 2, axis=1)
     th = x[:, : m - 1] * (jnp.pi / 2)
-    c, s = jnp.cos(th), jnp.sin(th)
+    # cos(π/2) is −4.4e-8 in float32: clamped at 0 (exact on [0, π/2]), else designs at
+    # x_i = 1 get a negative objective that falls as g grows and crowd the front's edges
+    c, s = jnp.maximum(jnp.cos(th), 0.0), jnp.maximum(jnp.sin(th), 0.0)
     cols = []
     for j in range(m):  # f_j = (1+g) Π_{i<m−1−j} cos θ_i · (sin θ_{m−1−j} if j > 0)
         f = jnp.prod(c[:, : m - 1 - j], axis=1)
