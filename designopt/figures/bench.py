@@ -54,7 +54,8 @@ def _final(stats: dict[str, Any], histories: dict[str, dict[str, np.ndarray]], n
         ax.set_xticks(x, names, rotation=45, fontsize=7)
         ax.set_xlabel("optimizer (category)", fontsize=8)
         ax.set_title(case.replace("_", " "), fontsize=9)
-        ax.set_ylabel(style.label("final best f(x)", style.DIMENSIONLESS), fontsize=8)
+        what = "final hypervolume" if stats[case].get("higher_is_better") else "final best f(x)"
+        ax.set_ylabel(style.label(what, style.DIMENSIONLESS), fontsize=8)
         ax.tick_params(labelsize=7)
     for ax in list(axes.flat)[len(cases) :]:
         ax.set_visible(False)
@@ -113,7 +114,8 @@ def draw(folder: Path, stats: dict[str, Any], histories: dict[str, dict[str, np.
         style.auto_log(ax, hs)
         ax.set_title(case.replace("_", " "), fontsize=9)
         ax.set_xlabel(style.label("iteration", "-"), fontsize=8)
-        ax.set_ylabel(style.label("best f (median, IQR)", "-"), fontsize=8)
+        what = "hypervolume" if stats[case].get("higher_is_better") else "best f"
+        ax.set_ylabel(style.label(f"{what} (median, IQR)", "-"), fontsize=8)
         ax.tick_params(labelsize=7)
     for ax in list(axes.flat)[len(cases) :]:
         ax.set_visible(False)
