@@ -198,7 +198,7 @@ def test_max_minutes_stops_cleanly_and_the_printed_command_finishes(tmp_path, ch
         if partial.exists():
             cmd = resume_args(err)
             i = cmd.index("--max-minutes")
-            assert float(cmd[i + 1]) == pytest.approx(minutes, rel=1e-5)
+            assert float(cmd[i + 1]) == pytest.approx(float(f"{minutes:.6f}"), rel=1e-9)  # as given
             args = cmd[:i] + cmd[i + 2 :]
             with archive.h5py.File(partial) as h:
                 now = int(h["checkpoint"].attrs["done"])
