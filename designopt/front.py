@@ -54,7 +54,15 @@ def check(cfg: Any, where: str) -> None:
                               "(docs/pareto.md)")  # fmt: skip
         return
     known = get(cfg.study.name).indices(cfg.study)
+    for k, w in linear(front).items():
+        for v in w:
+            if v not in cfg.study.variables:
+                raise ConfigError(f"{where}: key 'study.objective.pareto.{k}.{senses(front)[k]}"
+                                  f".{v}': not a design variable; variables: "
+                                  f"{list(cfg.study.variables)}")  # fmt: skip
     for k in front:
+        if k in linear(front):
+            continue
         if k not in known:
             raise ConfigError(f"{where}: key 'study.objective.pareto.{k}': unknown index; "
                               f"this study's indices: {list(known)}")  # fmt: skip
@@ -68,20 +76,45 @@ def check(cfg: Any, where: str) -> None:
                           f"{len(front)} objectives ({', '.join(front)})")  # fmt: skip
 
 
-def signs(front: Mapping[str, str]) -> np.ndarray:
-    """+1 for a minimised index, −1 for a maximised one (F = sign × index)."""
-    return np.array([1.0 if s == "min" else -1.0 for s in front.values()])
+def senses(front: Mapping[str, Any]) -> dict[str, str]:
+    """Objective → ``min`` or ``max`` (an index's sense, or a linear objective's key)."""
+    return {k: (next(iter(s)) if isinstance(s, dict) else s) for k, s in front.items()}
 
 
-def objective_problem(problem: Problem, front: Mapping[str, str]) -> Problem:
-    """The study's problem with F (M, m) = sign × the front's indices; the indices stay
-    in aux (f too)."""
+def linear(front: Mapping[str, Any]) -> dict[str, dict[str, float]]:
+    """The linear objectives of the design variables: name → {variable: weight}."""
+    return {k: dict(next(iter(s.values()))) for k, s in front.items() if isinstance(s, dict)}
+
+
+def signs(front: Mapping[str, Any]) -> np.ndarray:
+    """+1 for a minimised objective, −1 for a maximised one (F = sign × value)."""
+    return np.array([1.0 if s == "min" else -1.0 for s in senses(front).values()])
+
+
+def weights(front: Mapping[str, Any], names: tuple[str, ...]) -> dict[str, np.ndarray]:
+    """Each linear objective's weights as a (D,) vector over the problem's variables."""
+    return {k: np.array([w.get(n, 0.0) for n in names]) for k, w in linear(front).items()}
+
+
+def linear_units(front: Mapping[str, Any], units: Mapping[str, str]) -> dict[str, str]:
+    """A linear objective's unit: its variables' common unit, else ``mixed``."""
+    out = {}
+    for k, w in linear(front).items():
+        us = {units.get(v, "-") for v in w}
+        out[k] = us.pop() if len(us) == 1 else "mixed"
+    return out
+
+
+def objective_problem(problem: Problem, front: Mapping[str, Any]) -> Problem:
+    """The study's problem with F (M, m) = sign × the front's objectives (indices, or
+    linear objectives X·w); the indices stay in aux (f too)."""
     names, sg = tuple(front), signs(front)
+    lin = weights(front, problem.names)
     fn0 = problem.fn
 
     def fn(params, X, key):
         f, aux = fn0(params, X, key)
-        aux = {"f": f, **aux}
+        aux = {"f": f, **aux, **{k: X @ jnp.asarray(w, X.dtype) for k, w in lin.items()}}
         F = jnp.stack([aux[k] for k in names], -1)
         return F * jnp.asarray(sg, F.dtype), aux
 
@@ -156,6 +189,7 @@ def groups(cfg: Any, problem: Problem, res: Any, keys: Mapping[str, jax.Array],
     ambiguous pairs) and problem."""
     from designopt import pareto
     from designopt.scoring import check_finite, problem_group, score
+    from designopt.studies import get
 
     front = cfg.study.pareto
     names, sg = list(front), signs(front)
@@ -168,6 +202,8 @@ def groups(cfg: Any, problem: Problem, res: Any, keys: Mapping[str, jax.Array],
     X = X[thin(F_opt, cfg.front.max_points)]
     rescore, n_samples = rescoring_problem(cfg, keys, where)
     vals = score(rescore, X)
+    for k, w in weights(front, problem.names).items():  # exact: no samples behind them
+        vals[k], vals[k + "_se"] = X @ w, np.zeros(len(X))
     check_finite(vals, where, "the re-scored front", problem.names, X)
     F = np.stack([vals[k] for k in names], -1)
     se = np.stack([vals.get(k + "_se", np.zeros(len(X))) for k in names], -1)
@@ -187,7 +223,8 @@ def groups(cfg: Any, problem: Problem, res: Any, keys: Mapping[str, jax.Array],
     idx = {k: v for k, v in vals.items() if k not in ("f", "f_se")}  # the weighted f: moot
     fr = {"x": X, "f": F, "f_se": se, **idx, "rank": rank,
           "ambiguous": ambiguous(F, se),
-          "attrs": {"objectives": names, "senses": list(front.values()),
+          "attrs": {"objectives": names, "senses": list(senses(front).values()),
                     "reference": (ref * sg).tolist(), "hypervolume": hv,
-                    "n_samples": n_samples, "n_candidates": int(len(keep)), "z": Z}}  # fmt: skip
+                    "n_samples": n_samples, "n_candidates": int(len(keep)), "z": Z,
+                    "units": linear_units(front, get(cfg.study.name).units(cfg.study))}}  # fmt: skip
     return {"optimizer": opt, "front": fr, "problem": problem_group(problem)}

@@ -27,8 +27,8 @@ def draw_figures(path: Path, record: Record | None = None) -> list[Path]:
 
 def write_html(path: Path, record: Record | None = None) -> Path:
     """The interactive report of an archive: ``<stem>.html`` beside it, one self-contained
-    page (``designopt.figures.html``), with the study's workspace cloud when it has one
-    (``Study.cloud``)."""
+    page (``designopt.figures.html``), with the workspace of a run's final design when
+    the study draws one (``Study.cloud``)."""
     from designopt.figures import html
     from designopt.studies import STUDIES
 
@@ -38,6 +38,10 @@ def write_html(path: Path, record: Record | None = None) -> Path:
     with output.session() as ses:
         if not ses.covers(out):
             output.claim(out, overwrite=True)
+        from designopt.results import RunRecord
+
         st = STUDIES.get(rec.study)
-        cloud = st.cloud(rec) if st is not None and st.cloud is not None else None
-        return html.write(rec.to_tree(), out, cloud=cloud)
+        has = isinstance(rec, RunRecord) and st is not None and st.cloud is not None
+        cloud = st.cloud(rec) if has else None  # a run's final design has one workspace
+        extra = rec.units() if hasattr(rec, "units") else None  # a front's own objectives
+        return html.write(rec.to_tree(), out, cloud=cloud, units=extra)

@@ -132,3 +132,31 @@ def test_bad_fronts_exit_2_with_one_line(tmp_path, capsys, over, needle):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and needle in err, err
     assert not (tmp_path / "o" / "a.h5").exists()
+
+
+def test_gci_against_total_length_follows_the_known_ratios():
+    """GCI (max) against the total length l1 + l2 (min), a linear objective. The GCI
+    depends on l2/l1 only and peaks at 1/√2; below the length 0.2·(1 + √2) that ratio
+    cannot be had with l2 ≥ 0.2, so the front is l2 at its lower bound with l1 from 0.2
+    (ratio 1) to 0.2·√2 (ratio 1/√2); every longer arm is dominated."""
+    over = FRONT | {"study.objective": {"pareto": {"gci": "max",
+                                                  "length": {"min": {"l1": 1, "l2": 1}}}}}  # fmt: skip
+    rec = designopt.run(designopt.load_config(PLANAR, over))
+    X = rec.X
+    np.testing.assert_allclose(X[:, 1], 0.2, atol=0.01)  # l2 at its bound
+    ratio = X[:, 1] / X[:, 0]
+    assert ratio.min() == pytest.approx(1 / np.sqrt(2), abs=0.03)
+    assert ratio.max() == pytest.approx(1.0, abs=0.03)
+    assert X[:, 0].max() <= 0.2 * np.sqrt(2) + 0.02
+    j = list(rec.objectives).index("length")
+    np.testing.assert_allclose(rec.F[:, j], X.sum(1), rtol=1e-12)  # exact, no samples
+    assert np.all(rec.F_se[:, j] == 0)
+    assert rec.objectives == {"gci": "max", "length": "min"}
+
+
+def test_a_linear_objective_names_design_variables(tmp_path, capsys):
+    p = _cfg_file(tmp_path, **{"study.objective": {"pareto": {
+        "gci": "max", "length": {"min": {"l1": 1, "l3": 1}}}}})  # fmt: skip
+    assert main(["run", str(p), "--out", str(tmp_path / "a.h5"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "key 'study.objective.pareto.length.min.l3': not a design variable" in err

@@ -34,9 +34,8 @@ _POWER = re.compile(r"^([A-Za-zµ]+)(?:\^(\d+)|([⁰¹²³⁴⁵⁶⁷⁸⁹]+))
 
 def draw(rec: FrontRecord, folder: Path) -> list[Path]:
     """The figures of a front record into ``folder``."""
-    from designopt.studies import get
 
-    units = get(rec.study).units(rec.config.study)
+    units = rec.units()
     paths = front(rec, folder, units)
     paths += designs(rec, folder, units)
     if rec.history.size:

@@ -105,3 +105,14 @@ class FrontRecord(Record):
         """Each front design's non-domination rank (n,) after re-scoring (0: on the
         re-scored front; constrained domination where the study has a violation)."""
         return np.asarray(self.groups["front"]["rank"], np.int64)
+
+    def units(self) -> dict[str, str]:
+        """Every variable's, index's and objective's unit: the study's, and the linear
+        objectives' own (their variables' common unit)."""
+        from designopt.studies import get
+
+        own = dict(self.groups["front"]["attrs"].get("units", {}) or {})
+        try:
+            return {**get(self.study).units(self.config.study), **own}
+        except ValueError:  # a study not registered in this process
+            return own

@@ -35,10 +35,11 @@ class StudySettings(BaseModel):
 
     name: str
     variables: dict[str, tuple[float, float]]
-    pareto: dict[str, str] | None = None
+    pareto: dict[str, Any] | None = None
     """``objective: {pareto: {index: min | max, ...}}`` (given under ``objective``, kept
     here for every study): optimise the front of these indices instead of the weighted
-    f (docs/pareto.md)."""
+    f; an entry ``name: {min: {variable: weight, ...}}`` is a linear objective of the
+    design variables, e.g. a total length (docs/pareto.md)."""
 
     @model_validator(mode="before")
     @classmethod
@@ -57,7 +58,16 @@ class StudySettings(BaseModel):
             n = len(front) if isinstance(front, dict) else 0
             raise ValueError(f"objective.pareto: a front needs at least 2 indices, got {n}")
         for k, sense in front.items():
-            if sense not in ("min", "max"):
+            if isinstance(sense, dict):  # a linear objective {min | max: {variable: weight}}
+                if len(sense) != 1 or next(iter(sense)) not in ("min", "max"):
+                    raise ValueError(f"objective.pareto.{k}: a linear objective is "
+                                     "{min: {variable: weight, ...}} or {max: {...}}")  # fmt: skip
+                w = next(iter(sense.values()))
+                if not isinstance(w, dict) or not w or not all(
+                    isinstance(x, int | float) and not isinstance(x, bool) for x in w.values()
+                ):
+                    raise ValueError(f"objective.pareto.{k}: weights {{variable: number, ...}}")
+            elif sense not in ("min", "max"):
                 raise ValueError(f"objective.pareto.{k}: sense must be 'min' or 'max', got {sense!r}")
         out = {k: v for k, v in data.items() if k != "objective"}
         return out | {"pareto": dict(front)}
