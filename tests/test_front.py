@@ -68,17 +68,22 @@ def test_the_front_matches_a_brute_force_grid(front):
 
 
 def test_rescoring_changes_values_only_as_much_as_their_ses_explain(front):
-    """The front's designs scored on the optimizer's samples and on the fresh ones differ
-    by independent Monte-Carlo errors: |z| > 3 is rare and z² averages about 1 (the
-    selection favours lucky samples, so a little above 1 is expected)."""
+    """Over four fronts (seeds), the front designs scored on the optimizer's samples and
+    on the fresh ones differ by independent Monte-Carlo errors: |z| > 3 is rare and z²
+    averages about 1 (the selection favours lucky samples, so a little above 1 is
+    expected)."""
     cfg, rec, _ = front
-    old = designopt.evaluate(cfg, {"l1": rec.X[:, 0], "l2": rec.X[:, 1]})
     z = []
-    for j, k in enumerate(rec.objectives):
-        z.append((old[k] - rec.F[:, j]) / np.hypot(old[k + "_se"], rec.F_se[:, j]))
+    for seed in range(4):
+        c = cfg if seed == 0 else designopt.load_config(PLANAR, FRONT | {"seed": seed})
+        r = rec if seed == 0 else designopt.run(c)
+        old = designopt.evaluate(c, {"l1": r.X[:, 0], "l2": r.X[:, 1]})
+        for j, k in enumerate(r.objectives):
+            z.append((old[k] - r.F[:, j]) / np.hypot(old[k + "_se"], r.F_se[:, j]))
     z = np.concatenate(z)
-    assert np.mean(np.abs(z) > 3) <= 0.05
-    assert 0.2 < np.mean(z**2) < 3.0
+    assert len(z) >= 400
+    assert np.mean(np.abs(z) > 3) <= 0.03
+    assert 0.3 < np.mean(z**2) < 2.5
 
 
 def test_ambiguous_pairs_are_those_within_two_ses(front):
