@@ -73,7 +73,7 @@ def run_cases(cfg: Any, ents: list[tuple[str, str, dict[str, Any]]], key: jax.Ar
         hv_true = pareto.hypervolume(truth, ref)
         out[case] = {"attrs": {"true_hypervolume": hv_true, "reference": ref.tolist()}}
         for label, name, settings in ents:
-            if not getattr(optim.resolve(name).cls, "multi_objective", False):
+            if not optim.is_multi_objective(name):
                 continue
             with Stopwatch() as sw:
                 r = optim.run(

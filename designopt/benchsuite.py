@@ -113,7 +113,7 @@ def check(cfg: BenchConfig, path: str) -> None:
     from designopt import benchmo
 
     multi = {
-        lab: getattr(optim.resolve(n).cls, "multi_objective", False) for lab, n, _ in entries(cfg)
+        lab: optim.is_multi_objective(n) for lab, n, _ in entries(cfg)
     }
     have = {False: bool(cases(cfg)), True: bool(benchmo.cases(cfg))}
     for i, (label, _, _) in enumerate(entries(cfg)):
@@ -121,11 +121,11 @@ def check(cfg: BenchConfig, path: str) -> None:
             kind = "multi" if multi[label] else "single"
             raise ConfigError(f"{path}: key 'bench.variants.{i}': {label!r} is {kind}-objective "
                               f"and bench.functions has no {kind}-objective function")  # fmt: skip
-    ref = b.hypervolume_reference
-    for c, _, _, m in benchmo.cases(cfg):
-        from designopt.problems.multi import MULTI_FUNCTIONS
+    from designopt.problems.multi import MULTI_FUNCTIONS
 
-        m = m or MULTI_FUNCTIONS[c.split("_")[0]].n_objectives
+    ref = b.hypervolume_reference
+    for c, fname, _, m in benchmo.cases(cfg):
+        m = m or MULTI_FUNCTIONS[fname].n_objectives
         if ref is not None and len(ref) != m:
             raise ConfigError(f"{path}: key 'bench.hypervolume_reference': {len(ref)} values "
                               f"for {m} objectives (case {c})")  # fmt: skip
@@ -176,7 +176,7 @@ def run_suite(cfg: BenchConfig, progress: Callable[[int], None] | None = None,
         problem = benchmark(fname, b.dim, shift)
         results[case] = {}
         for label, name, settings in ents:
-            if getattr(optim.resolve(name).cls, "multi_objective", False):
+            if optim.is_multi_objective(name):
                 continue  # the multi-objective cases below
             with Stopwatch() as sw:
                 r = optim.run(
@@ -270,7 +270,7 @@ def _command(cfg: BenchConfig, text: str, path: Path, quiet: bool, parallel: Any
 
     b = cfg.bench
     n_ent = len(b.variants)
-    mo = [getattr(optim.resolve(n).cls, "multi_objective", False) for _, n, _ in entries(cfg)]
+    mo = [optim.is_multi_objective(n) for _, n, _ in entries(cfg)]
     n_single = len(cases(cfg))
     n_multi = len(case_names(cfg)) - n_single
     total = (n_single * mo.count(False) + n_multi * mo.count(True)) * b.n_iters

@@ -299,6 +299,12 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("designopt: interrupted (SIGINT); nothing written", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # the reader went away (`designopt show A | head`): stop quietly
+        import os
+
+        with contextlib.suppress(OSError):
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141  # 128 + SIGPIPE, as a shell reports a process killed by it
 
 
 def _peer_lost(e: BaseException, ses) -> None:

@@ -33,22 +33,16 @@ streams split from the root key (adding one there would change every other strea
 Z = 2.0  # ambiguity: orders within Z standard errors
 
 
-def is_multi(name: str) -> bool:
-    """Whether the registry's optimizer ``name`` optimises a front."""
-    from designopt import optim
-
-    return bool(getattr(optim.resolve(name).cls, "multi_objective", False))
-
-
 def check(cfg: Any, where: str) -> None:
     """A front's config: known indices, a multi-objective optimizer, a reference point of
     the right length; a multi-objective optimizer without a front is refused too."""
+    from designopt import optim
     from designopt.studies import get
 
     front = cfg.study.pareto
     name = cfg.optimizer.name
     if front is None:
-        if is_multi(name):
+        if optim.is_multi_objective(name):
             raise ConfigError(f"{where}: key 'optimizer.name': '{name}' optimises a Pareto "
                               "front; name its indices in study.objective.pareto "
                               "(docs/pareto.md)")  # fmt: skip
@@ -66,7 +60,7 @@ def check(cfg: Any, where: str) -> None:
         if k not in known:
             raise ConfigError(f"{where}: key 'study.objective.pareto.{k}': unknown index; "
                               f"this study's indices: {list(known)}")  # fmt: skip
-    if not is_multi(name):
+    if not optim.is_multi_objective(name):
         raise ConfigError(f"{where}: key 'optimizer.name': '{name}' is single-objective; a "
                           "front (study.objective.pareto) needs a multi-objective "
                           "optimizer: nsga2")  # fmt: skip

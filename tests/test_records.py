@@ -114,6 +114,10 @@ def test_a_checkpoint_is_a_record(tmp_path):
     assert isinstance(back, results.CheckpointRecord) and back.done == 3
     c = back.checkpoint()
     assert c.done == 3 and np.array_equal(c.state["x"], np.ones((2, 3)))
+    assert back.summary() == ["interrupted after 3 iterations; best so far 1.00000"]
+    hv = {"checkpoint": dict(ck.groups["checkpoint"], history=np.array([[0.1, 0.4], [0.2, 0.3]]))}
+    front = results.from_tree({"attrs": {"kind": "front", "complete": False}, **hv})
+    assert front.summary() == ["interrupted after 3 iterations; largest hypervolume so far 0.4"]
 
 
 def test_load_refuses_what_is_not_an_archive(tmp_path):

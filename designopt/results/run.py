@@ -223,5 +223,8 @@ class CheckpointRecord(Record):
         return Checkpoint(state, np.asarray(c["history"]), np.asarray(c["history_x"]), self.done)
 
     def summary(self) -> list[str]:
-        best = float(np.min(np.asarray(self.groups["checkpoint"]["history"])[..., -1]))
-        return [f"interrupted after {self.done} iterations; best so far {best:.5f}"]
+        last = np.asarray(self.groups["checkpoint"]["history"])[..., -1]
+        if self.kind == "front":  # the history is each run's hypervolume: larger is better
+            return [f"interrupted after {self.done} iterations; largest hypervolume so far "
+                    f"{float(np.max(last)):.5g}"]  # fmt: skip
+        return [f"interrupted after {self.done} iterations; best so far {float(np.min(last)):.5f}"]
