@@ -220,10 +220,15 @@ def sweep(cfg: Any, text: str | None = None, where: str = "config", out: Path | 
     writes nothing."""
     from designopt import sweep as sw
 
+    if cfg.study.pareto is not None:
+        raise ConfigError(f"{where}: key 'sweep': a sweep of Pareto fronts "
+                          "(study.objective.pareto) is not supported; run each front with "
+                          "`designopt run`")  # fmt: skip
     groups, cfgs, members = sw.groups(cfg, where)
     ests = []
     for k, c in cfgs.items():
         check_optimizer(c, where)
+        front.check(c, where)  # a multi-objective optimizer needs a front
         dtype_of(c)
         ests.append(estimate(c, members=len(groups[k])))
     est = max(ests, key=lambda e: e.memory)

@@ -165,3 +165,15 @@ def test_a_linear_objective_names_design_variables(tmp_path, capsys):
     assert main(["run", str(p), "--out", str(tmp_path / "a.h5"), "--quiet"]) == 2
     err = capsys.readouterr().err
     assert "key 'study.objective.pareto.length.min.l3': not a design variable" in err
+
+
+def test_a_sweep_of_fronts_is_refused_in_one_line(tmp_path, capsys):
+    p = _cfg_file(tmp_path, **{"sweep": {"vary": {"optimizer.eta_c": [5.0, 15.0]}}})
+    assert main(["sweep", str(p), "--out", str(tmp_path / "o" / "s.h5"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "key 'sweep': a sweep of Pareto fronts" in err
+    p = _cfg_file(tmp_path, **{"sweep": {"vary": {"optimizer.eta_c": [5.0]}},
+                               "study.objective": {"gci": -1.0}})  # fmt: skip
+    assert main(["sweep", str(p), "--out", str(tmp_path / "o" / "s.h5"), "--quiet"]) == 2
+    assert "'nsga2' optimises a Pareto front" in capsys.readouterr().err
+    assert not (tmp_path / "o" / "s.h5").exists()
