@@ -105,6 +105,9 @@ def run(cfg: Any, text: str | None = None, where: str = "config", out: Path | No
         raise ConfigError(f"{where}: key 'sweep': this config declares a sweep; "
                           "run it with `designopt sweep`")  # fmt: skip
     if study_of(cfg).replay is not None:
+        if cfg.study.pareto is not None:
+            raise ConfigError(f"{where}: key 'study.objective.pareto': study "
+                              f"'{cfg.study.name}' replays a trajectory; it has no front")  # fmt: skip
         return _replay(cfg, text, where, out, dry_run)
     check_optimizer(cfg, where)
     pareto = cfg.study.pareto

@@ -177,3 +177,14 @@ def test_a_sweep_of_fronts_is_refused_in_one_line(tmp_path, capsys):
     assert main(["sweep", str(p), "--out", str(tmp_path / "o" / "s.h5"), "--quiet"]) == 2
     assert "'nsga2' optimises a Pareto front" in capsys.readouterr().err
     assert not (tmp_path / "o" / "s.h5").exists()
+
+
+def test_a_replay_study_has_no_front(tmp_path, capsys):
+    raw = yaml.safe_load((ROOT / "configs" / "rcm_teleop.yaml").read_text())
+    raw["study"]["trajectory"] = str(ROOT / "configs" / raw["study"]["trajectory"])
+    raw["study"]["objective"] = {"pareto": {"a": "min", "b": "max"}}
+    p = tmp_path / "t.yaml"
+    p.write_text(yaml.safe_dump(raw))
+    assert main(["run", str(p), "--out", str(tmp_path / "t.h5"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "key 'study.objective.pareto'" in err and "no front" in err
