@@ -54,11 +54,11 @@ def _scorer(fn: Callable, constraints: Callable | None = None) -> Callable:
         if constraints is None:
             _SCORERS[key] = jax.jit(fn)
         else:
-            from designopt.problems.base import violation_of
+            from designopt.problems.base import scored
 
             def with_violation(params, X, k):
-                f, sub = fn(params, X, k)
-                return f, sub | {"violation": violation_of(constraints, params, X)}
+                f, sub, v = scored(fn, constraints, params, X, k)
+                return f, sub | {"violation": v}
 
             _SCORERS[key] = jax.jit(with_violation)
     return _SCORERS[key]

@@ -30,7 +30,7 @@ import numpy as np
 from designopt.optim import registry
 from designopt.optim.protocol import Front, Optimizer, Task, clean
 from designopt.pareto import hypervolume_jax
-from designopt.problems.base import Problem, violation_of
+from designopt.problems.base import Problem, scored
 
 CONVERGENCE_TOL = 1e-6
 
@@ -94,8 +94,8 @@ def _over_runs(f, batched: bool):
 
 def _task(fn, cons, pparams, lower, upper) -> Task:
     def evaluate(X, key):
-        f = clean(fn(pparams, X, key)[0]).astype(X.dtype)
-        return f, violation_of(cons, pparams, X)
+        f, _, v = scored(fn, cons, pparams, X, key)
+        return clean(f).astype(X.dtype), v
 
     return Task(evaluate, lower, upper)
 

@@ -9,7 +9,10 @@ swarm, a sweep, and ``jax.grad``.
 Constraints (optional): ``constraints(params, X) -> G (M, n_c)``; a design is feasible
 when every g ≤ 0. Optimizers see the total violation v = Σ max(g, 0) (``total_violation``)
 beside f and rank candidates by Deb's feasibility rules (docs/optimizers.md). No
-constraint function means zero constraints: v = 0 everywhere.
+constraint function means zero constraints: v = 0 everywhere. Bounds on the indices fn
+computes (e.g. a task's reach ≥ 0.99) read fn's aux instead of computing them again: a
+constraint function marked by :func:`reads_indices` is called as ``g(params, X, aux)``;
+:func:`scored` is the one place that evaluates f, aux and v together.
 
 Sample sharding (optional, docs/scaling.md): ``shard_samples(mesh) -> Problem`` gives the
 same problem whose fn (and constraints) spread their Monte-Carlo sample chunks over the
@@ -47,7 +50,9 @@ class Problem:
     fn: ProblemFn
     params: Any = None
     info: dict[str, Any] = field(default_factory=dict)
-    constraints: ConstraintFn | None = None  # G = constraints(params, X) (M, n_c), g ≤ 0
+    constraints: Callable | None = (
+        None  # G = g(params, X) (M, n_c), g ≤ 0; reads_indices: g(params, X, aux)
+    )
     shard_samples: Callable[[Any], Problem] | None = None  # mesh → the sample-sharded problem
     n_objectives: int = 1
     """m: f is (M,) when 1, (M, m) for a multi-objective problem (all minimised)."""
@@ -87,14 +92,40 @@ class Problem:
         X = jnp.asarray(X)
         if X.ndim != 2 or X.shape[1] != self.dim:
             raise ValueError(f"X must have shape (M, {self.dim}), got {tuple(X.shape)}")
+        if getattr(self.constraints, "reads_indices", False):
+            return scored(self.fn, self.constraints, self.params, X, jax.random.key(0))[2]
         return violation_of(self.constraints, self.params, X)
 
 
-def violation_of(constraints: ConstraintFn | None, params: Any, X: Array) -> Array:
+def reads_indices(fn: Callable[[Any, Array, dict[str, Array]], Array]) -> Callable:
+    """Mark a constraint function g(params, X, aux) -> G (M, n_c) that bounds indices of
+    the problem's own aux (one evaluation serves f and the constraints)."""
+    fn.reads_indices = True  # type: ignore[attr-defined]
+    return fn
+
+
+def constraint_values(constraints: Callable, params: Any, X: Array,
+                      aux: dict[str, Array] | None) -> Array:  # fmt: skip
+    """G (M, n_c) of ``constraints``; ``aux`` is needed by a :func:`reads_indices` one."""
+    if getattr(constraints, "reads_indices", False):
+        if aux is None:
+            raise ValueError("these constraints bound indices: evaluate fn first (scored)")
+        g = jnp.asarray(constraints(params, X, aux))
+    else:
+        g = jnp.asarray(constraints(params, X))
+    return g[:, None] if g.ndim == 1 else g
+
+
+def scored(fn: ProblemFn, constraints: Callable | None, params: Any, X: Array,
+           key: jax.Array) -> tuple[Array, dict[str, Array], Array]:  # fmt: skip
+    """(f, aux, v): one evaluation of fn and the total violation of the constraints."""
+    f, aux = fn(params, X, key)
+    return f, aux, violation_of(constraints, params, X, aux)
+
+
+def violation_of(constraints: Callable | None, params: Any, X: Array,
+                 aux: dict[str, Array] | None = None) -> Array:  # fmt: skip
     """Pure form of ``Problem.violation`` (for jitted code: ``constraints`` is static)."""
     if constraints is None:
         return jnp.zeros(X.shape[:1], X.dtype)
-    g = jnp.asarray(constraints(params, X))
-    if g.ndim == 1:
-        g = g[:, None]
-    return total_violation(g).astype(X.dtype)
+    return total_violation(constraint_values(constraints, params, X, aux)).astype(X.dtype)

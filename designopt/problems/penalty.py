@@ -17,7 +17,7 @@ from typing import Any
 
 import jax.numpy as jnp
 
-from designopt.problems.base import Array, Problem
+from designopt.problems.base import Array, Problem, constraint_values
 
 
 def penalty_sum(g: Array) -> Array:
@@ -41,7 +41,7 @@ def quadratic(problem: Problem, weight: float) -> Problem:
 
     def penalised(params: Any, X: Array, key: Any) -> tuple[Array, dict[str, Array]]:
         f, aux = fn(params["inner"], X, key)
-        pen = params["weight"] * penalty_sum(cons(params["inner"], X))
+        pen = params["weight"] * penalty_sum(constraint_values(cons, params["inner"], X, aux))
         return f + pen.astype(f.dtype), aux | {"penalty": pen}
 
     params = {"inner": problem.params, "weight": jnp.asarray(weight)}

@@ -9,7 +9,7 @@ from typing import Any
 
 from designopt.studies.base import Cost, Study
 from designopt.studies.serial.commands import COMMANDS
-from designopt.studies.serial.settings import INDEX_NAMES, SerialSettings
+from designopt.studies.serial.settings import INDEX_NAMES, TASK_INDEX_NAMES, SerialSettings
 
 
 def _problem(settings: SerialSettings, keys, dtype):
@@ -35,7 +35,8 @@ def _units(s: SerialSettings) -> dict[str, str]:
     gci, gcsei dimensionless; the volume ∫|det Jv| dq in L^rows (an area for a planar
     Jacobian); the manipulability sqrt(det J Jᵀ) in L^(rows in L) for an all-revolute
     chain with no more rows than joints (angular rows count as L when ``length_scale``
-    scales them), else "mixed" (prismatic columns or more rows than joints mix units)."""
+    scales them), else "mixed" (prismatic columns or more rows than joints mix units).
+    The task indices reach, gci_q05 and joint_margin are dimensionless shares."""
     ang = s.angle_names()
     out = {k: "deg" if k in ang else "L" for k in s.variables}
     rows = s.indices.rows()
@@ -46,6 +47,9 @@ def _units(s: SerialSettings) -> dict[str, str]:
     else:
         man = "mixed"
     vol = "L" if len(rows) == 1 else f"L^{len(rows)}"
+    if s.indices.measure == "task":
+        return out | {"reach": "-", "gci": "-", "gci_q05": "-", "manipulability": man,
+                      "joint_margin": "-"}  # fmt: skip
     return out | {"gci": "-", "gcsei": "-", "manipulability": man, "volume": vol}
 
 
@@ -58,11 +62,19 @@ def _aliases(s: SerialSettings) -> dict[str, str]:
 
 def _cost(s) -> Cost:
     """Monte-Carlo cost per design (pre-flight): the index samples, ``chunk`` in flight,
-    and the normalisation probes when the objective normalises."""
+    and the normalisation probes when the objective normalises. Under ``measure: task``
+    a sample is one IK seed of one target (seeds × targets configurations)."""
     ind, n_norm = s.indices, s.objective.get("n_norm")
+    if ind.measure == "task":
+        from designopt.studies.serial import taskindex
+
+        seeds = s.task.ik.n_nearest + s.task.ik.n_random
+        n, c = taskindex.n_targets(s) * seeds, taskindex.chunk(s) * seeds
+    else:
+        n, c = ind.n_samples, min(ind.chunk, ind.n_samples)
     return Cost(
-        ind.n_samples,
-        min(ind.chunk, ind.n_samples),
+        n,
+        c,
         int(n_norm or 1),
         "study.indices.n_samples",
         "study.indices.chunk",
@@ -108,6 +120,7 @@ STUDY = Study(
     meta={
         "variables": "any names used in study.chain (DH a, d, alpha, theta, or a URDF "
         "chain's set values)",
-        "indices": ", ".join(INDEX_NAMES) + " (volume for square position Jacobians)",
+        "indices": ", ".join(INDEX_NAMES) + " (volume for square position Jacobians); "
+        "under measure: task " + ", ".join(TASK_INDEX_NAMES),
     },
 )

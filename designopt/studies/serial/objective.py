@@ -11,6 +11,11 @@ Each comes with its delta-method standard error (``designopt.montecarlo``), or, 
 objective is f = Σ w_i index_i (or of the indices normalised over a Halton sample of the
 design box, as in study A); ``f_se`` is the bound Σ |w_i| se_i (the estimates share
 samples), or under rqmc the replicate spread of f itself.
+
+Under ``measure: task`` the indices are those of a task workspace instead (reach, gci,
+gci_q05, manipulability, joint_margin at the IK solutions of the task's targets;
+``taskindex``), and f's SE is exact for its mean-type terms. ``constraints`` may bound
+any index (``{index: reach, ge: 0.99}``) beside the linear ones on the variables.
 """
 
 from __future__ import annotations
@@ -25,9 +30,10 @@ import numpy as np
 from designopt import montecarlo as mc
 from designopt import normalise
 from designopt.kinematics.conditioning import inv_cond
-from designopt.problems.base import Problem
+from designopt.problems.base import Problem, reads_indices
+from designopt.studies.serial import taskindex
 from designopt.studies.serial.mechanism import Mechanism, build
-from designopt.studies.serial.settings import SerialSettings
+from designopt.studies.serial.settings import IndexConstraint, SerialSettings
 
 
 def measures(
@@ -56,6 +62,80 @@ def chunk_sums(mech: Mechanism, s: SerialSettings, full: jnp.ndarray, q: jnp.nda
             mc.power_sums(adet, jnp.ones_like(adet)))  # fmt: skip
 
 
+def design_full(params: Mapping[str, Any], X: jax.Array, dtype: Any) -> jax.Array:
+    """(M, P) kernel parameters: the variables X (M, V) then the fixed values, deg → rad."""
+    X = X.astype(dtype)
+    fixed = jnp.broadcast_to(params["fixed"].astype(dtype), (X.shape[0], params["fixed"].shape[0]))
+    return jnp.concatenate([X, fixed], axis=1) * params["scale"].astype(dtype)
+
+
+def build_task_fn(mech: Mechanism, s: SerialSettings, dtype: Any):
+    """The swarm function under ``measure: task``: the task indices with their SEs and
+    f = Σ w·index. f's SE is the spread of the per-target sum of its mean-type terms
+    (exact: they share the targets) plus |w|·SE for ``gci_q05`` (a bound)."""
+    weights = s.weights()
+    names, w = list(weights), list(weights.values())
+
+    def fn(params, X, key):
+        per = taskindex.per_target(mech, s, params, design_full(params, X, dtype), dtype)
+        est = taskindex.estimates(per)
+        out = {}
+        for k, (v, se) in est.items():
+            out[k], out[k + "_se"] = v, se
+        b = params["bounds"]
+        f = normalise.weighted_sum([est[k][0] for k in names], b, w)
+        lin = [i for i, k in enumerate(names) if k in taskindex.MEANS]
+        f_se = jnp.zeros_like(f)
+        if lin:
+            c = normalise.weighted_sum([taskindex.values(per, names[i]) for i in lin],
+                                       b[jnp.asarray(lin)], [w[i] for i in lin])  # fmt: skip
+            f_se = jnp.std(c, -1, ddof=1) / np.sqrt(c.shape[-1])
+        for i, k in enumerate(names):
+            if k not in taskindex.MEANS:
+                f_se = f_se + abs(w[i]) * out[k + "_se"] / jnp.abs(b[i, 1] - b[i, 0])
+        return f, out | {"f_se": f_se}
+
+    return fn
+
+
+def constraints_fn(s: SerialSettings, names: tuple[str, ...], params: dict[str, Any],
+                   dtype: Any) -> tuple[Any, list[dict[str, Any]]]:  # fmt: skip
+    """(g(params, X[, aux]) -> G (M, n_c), feasible when ≤ 0, or None; the constraints as
+    archived). Linear ones G = A x − b (``lin_A``, ``lin_b`` in params); index bounds
+    ge − index or index − le read the indices fn computed (``reads_indices``)."""
+    lin, idx = s.linear_constraints(), s.index_constraints()
+    if not (lin or idx):
+        return None, []
+    if lin:
+        A = np.zeros((len(lin), len(names)))
+        rhs = np.zeros(len(lin))
+        for i, c in enumerate(lin):
+            sign = 1.0 if c.le is not None else -1.0  # ≥ ge becomes −Σ ≤ −ge
+            for k, v in c.terms.items():
+                A[i, names.index(k)] = sign * v
+            rhs[i] = sign * (c.le if c.le is not None else c.ge)
+        params["lin_A"] = jnp.asarray(A, dtype)
+        params["lin_b"] = jnp.asarray(rhs, dtype)
+
+    def linear(p, X):
+        """G = A x − b (M, n_c): the linear constraints, feasible when ≤ 0."""
+        return X @ p["lin_A"].astype(X.dtype).T - p["lin_b"].astype(X.dtype)
+
+    def bound(c: IndexConstraint, aux: Mapping[str, jax.Array]) -> jax.Array:
+        return c.ge - aux[c.index] if c.ge is not None else aux[c.index] - c.le
+
+    archived = [c.model_dump(exclude_none=True) for c in s.constraints]
+    if not idx:
+        return linear, archived
+
+    @reads_indices
+    def with_indices(p, X, aux):
+        cols = [bound(c, aux)[:, None].astype(X.dtype) for c in idx]
+        return jnp.concatenate(([linear(p, X)] if lin else []) + cols, -1)
+
+    return with_indices, archived
+
+
 def build_fn(mech: Mechanism, s: SerialSettings, dtype: Any, mesh: Any = None):
     """The pure swarm function fn(params, X, key) -> (f, indices with *_se); with a
     ``mesh``, its sample chunks are spread over the mesh's ``samples`` axis."""
@@ -68,10 +148,7 @@ def build_fn(mech: Mechanism, s: SerialSettings, dtype: Any, mesh: Any = None):
     pl = mc.plan(ind.n_samples, ind.chunk, ind.sampler, ind.replicates)
 
     def indices(params, X):
-        X = X.astype(dtype)
-        M = X.shape[0]
-        fixed = jnp.broadcast_to(params["fixed"].astype(dtype), (M, params["fixed"].shape[0]))
-        full = jnp.concatenate([X, fixed], axis=1) * params["scale"].astype(dtype)
+        full = design_full(params, X, dtype)
         lo_, hi_ = params["q_lower"].astype(dtype), params["q_upper"].astype(dtype)
 
         def sums(k):
@@ -79,7 +156,7 @@ def build_fn(mech: Mechanism, s: SerialSettings, dtype: Any, mesh: Any = None):
             q = lo_ + (hi_ - lo_) * u
             return mc.to_replicate(chunk_sums(mech, s, full, q), k, pl)
 
-        init = tuple(mc.zero_sums((M,), pl, dtype) for _ in range(3))
+        init = tuple(mc.zero_sums((X.shape[0],), pl, dtype) for _ in range(3))
         ps_k, ps_m, ps_v = mc.scan_chunks(sums, init, pl.n_chunks, mesh)
         out = {}
         for k, est in (("gci", mc.mean(ps_k)), ("gcsei", mc.std(ps_k)),
@@ -111,7 +188,11 @@ def problem(s: SerialSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Pro
     mech = build(s)
     names, lower, upper = s.box()
     weights = s.weights()
-    fn = build_fn(mech, s, dtype)
+    task = s.indices.measure == "task"
+    if task and dtype != jnp.float64:
+        raise ValueError("indices.measure: 'task' solves inverse kinematics to "
+                         f"{s.task.ik.tol_pos:g} of the reach: set precision: float64")  # type: ignore[union-attr]  # fmt: skip
+    fn = build_task_fn(mech, s, dtype) if task else build_fn(mech, s, dtype)
     params = {
         "fixed": jnp.asarray(mech.fixed, dtype),
         "scale": jnp.asarray(mech.scale, dtype),
@@ -120,6 +201,8 @@ def problem(s: SerialSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Pro
         "sample_key": keys["samples"],
         "bounds": normalise.unit_bounds(len(weights), dtype),
     }
+    if task:  # once per run, shared by the swarm (common random numbers)
+        params |= taskindex.targets(s, keys["samples"], dtype)
     norm_bounds = None
     b = np.asarray([[0.0, 1.0]] * len(weights))  # params["bounds"]: unit rows unless normalised
     if s.objective.get("normalize", False):
@@ -128,7 +211,10 @@ def problem(s: SerialSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Pro
         params["bounds"] = jnp.asarray(b, dtype)
         norm_bounds = {k: b[i].tolist() for i, k in enumerate(weights)}
     ind = s.indices
-    n_used = mc.plan(ind.n_samples, ind.chunk, ind.sampler, ind.replicates).n_used
+    if task:
+        n_used = taskindex.n_targets(s)
+    else:
+        n_used = mc.plan(ind.n_samples, ind.chunk, ind.sampler, ind.replicates).n_used
     info = {
         "study": "serial",
         "n_samples_used": n_used,
@@ -139,24 +225,14 @@ def problem(s: SerialSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Pro
         "norm_bounds": norm_bounds,
         "dtype": dtype.name,
     }
-    cons = None
-    if s.constraints:
-        A = np.zeros((len(s.constraints), len(names)))
-        rhs = np.zeros(len(s.constraints))
-        for i, c in enumerate(s.constraints):
-            sign = 1.0 if c.le is not None else -1.0  # ≥ ge becomes −Σ ≤ −ge
-            for k, v in c.terms.items():
-                A[i, names.index(k)] = sign * v
-            rhs[i] = sign * (c.le if c.le is not None else c.ge)
-        params["lin_A"] = jnp.asarray(A, dtype)
-        params["lin_b"] = jnp.asarray(rhs, dtype)
-        info["constraints"] = [c.model_dump(exclude_none=True) for c in s.constraints]
-
-        def cons(p, X):
-            """G = A x − b (M, n_c): the linear constraints, feasible when ≤ 0."""
-            return X @ p["lin_A"].astype(X.dtype).T - p["lin_b"].astype(X.dtype)
-
+    cons, archived = constraints_fn(s, names, params, dtype)
+    if archived:
+        info["constraints"] = archived
+    if task:
+        info["task"] = {"mode": taskindex.mode(s), "n_targets": n_used}
     typed = {"n_samples_used": n_used, "norm_bounds": b}
+    if task:  # the targets' indices need every target at once: no sample sharding
+        return Problem(names, lower, upper, fn, params, info, cons, **typed)
 
     def shard_samples(mesh: Any) -> Problem:
         sharded = build_fn(mech, s, dtype, mesh)

@@ -24,9 +24,12 @@ from pydantic import (
 
 from designopt.errors import ConfigError
 from designopt.studies.base import Section, StudySettings, check_replicates
+from designopt.task import Task
 
 ROWS = ("vx", "vy", "vz", "wx", "wy", "wz")
 INDEX_NAMES = ("gci", "gcsei", "manipulability", "volume")
+TASK_INDEX_NAMES = ("reach", "gci", "gci_q05", "manipulability", "joint_margin")
+"""The indices under ``measure: task`` (docs/task.md)."""
 
 
 class Joint(Section):
@@ -164,10 +167,10 @@ class SerialIndices(Section):
     )
     norm: Literal["2", "fro"] = "2"
     normalized: bool = False  # fro only: report k_F/m (m = min(rows, joints)) so that k >= 1
-    measure: Literal["joint", "cartesian"] = "joint"
+    measure: Literal["joint", "cartesian", "task"] = "joint"
     sampler: Literal["uniform", "halton", "rqmc"] = "uniform"
     n_samples: int = Field(20_000, gt=1)
-    chunk: int = Field(16_384, gt=0)
+    chunk: int = Field(16_384, gt=0)  # samples per chunk (task: targets, 1024 unless given)
     length_scale: float = Field(1.0, gt=0)  # multiplies the angular rows (full Jacobian)
     replicates: int | None = Field(None, ge=1, le=1024)  # rqmc: 16 unless given (docs/indices.md)
 
@@ -206,6 +209,64 @@ class LinearConstraint(Section):
         return self
 
 
+class IndexConstraint(Section):
+    """A bound on an index of the study, e.g. ``{index: reach, ge: 0.99}``: feasible when
+    the index is ≥ ge (or ≤ le). Deb's rules or the penalty see g = ge − index (index − le)."""
+
+    index: str
+    le: float | None = Field(None, allow_inf_nan=False)
+    ge: float | None = Field(None, allow_inf_nan=False)
+
+    @model_validator(mode="after")
+    def _one_side(self) -> IndexConstraint:
+        if (self.le is None) == (self.ge is None):
+            raise ValueError("give exactly one of 'le' and 'ge'")
+        return self
+
+
+def _constraint_kind(v: Any) -> str:
+    if isinstance(v, IndexConstraint) or (isinstance(v, dict) and "index" in v):
+        return "index"
+    return "linear"
+
+
+AnyConstraint = Annotated[
+    Union[Annotated[LinearConstraint, Tag("linear")],  # noqa: UP007
+          Annotated[IndexConstraint, Tag("index")]],
+    Discriminator(_constraint_kind),
+]  # fmt: skip
+
+
+class TaskIK(Section):
+    """The IK behind ``measure: task`` (``designopt.kinematics.ik.IKOptions``): LM steps
+    per round, rounds (unsolved seeds restart), FK-database size, seeds per target
+    (nearest database entries and random draws), tolerances (position × the reach scale,
+    orientation in rad) and the damping floor."""
+
+    iters: int = Field(12, ge=1, le=1000)
+    rounds: int = Field(3, ge=1, le=100)
+    n_db: int = Field(2048, ge=1, le=1_000_000)
+    n_nearest: int = Field(2, ge=0, le=64)
+    n_random: int = Field(2, ge=0, le=64)
+    tol_pos: float = Field(1e-9, gt=0, le=1)
+    tol_rot: float = Field(1e-9, gt=0, le=1)
+    damping: float = Field(1e-8, gt=0, le=1)
+
+    @model_validator(mode="after")
+    def _seeds(self) -> TaskIK:
+        if self.n_nearest + self.n_random < 1:
+            raise ValueError("n_nearest + n_random: give at least one seed per target")
+        if self.n_nearest > self.n_db:
+            raise ValueError(f"n_nearest ({self.n_nearest}) exceeds n_db ({self.n_db})")
+        return self
+
+
+class SerialTask(Task):
+    """``study.task``: the region, the optional tool-axis cone and the IK's settings."""
+
+    ik: TaskIK = TaskIK()
+
+
 class SerialSettings(StudySettings):
     """A user's serial mechanism: chain, design variables, indices, objective."""
 
@@ -215,7 +276,8 @@ class SerialSettings(StudySettings):
     chain: AnyChain
     indices: SerialIndices = SerialIndices()
     objective: dict[str, float | bool | int] = {"gci": -1.0}
-    constraints: list[LinearConstraint] = []
+    constraints: list[AnyConstraint] = []
+    task: SerialTask | None = None
 
     @field_validator("fixed")
     @classmethod
@@ -265,6 +327,8 @@ class SerialSettings(StudySettings):
             )
         if ind.normalized and ind.norm != "fro":
             raise ValueError("indices.normalized: applies to norm 'fro' only")
+        self._check_task()
+        names = TASK_INDEX_NAMES if ind.measure == "task" else INDEX_NAMES
         obj = self.objective
         for k, v in obj.items():
             if k in ("normalize",):
@@ -273,22 +337,27 @@ class SerialSettings(StudySettings):
             elif k == "n_norm":
                 if isinstance(v, bool) or not isinstance(v, int) or v < 2:
                     raise ValueError("objective.n_norm: must be a whole number ≥ 2")
-            elif k not in INDEX_NAMES:
-                raise ValueError(
-                    f"objective.{k}: unknown index; weights may name {list(INDEX_NAMES)}"
-                )
+            elif k not in names:
+                raise ValueError(f"objective.{k}: unknown index; weights may name "
+                                 f"{list(names)}{self._measure_says()}")  # fmt: skip
             elif isinstance(v, bool):
                 raise ValueError(f"objective.{k}: a weight must be a number")
-        if not any(k in INDEX_NAMES for k in obj):
-            raise ValueError(f"objective: give at least one weight for {list(INDEX_NAMES)}")
+        if not any(k in names for k in obj):
+            raise ValueError(f"objective: give at least one weight for {list(names)}")
         for i, c in enumerate(self.constraints):
+            if isinstance(c, IndexConstraint):
+                if c.index not in self.index_names():
+                    raise ValueError(f"constraints.{i}.index: unknown index '{c.index}'; "
+                                     f"give one of {list(self.index_names())}"
+                                     f"{self._measure_says()}")  # fmt: skip
+                continue
             bad = sorted(set(c.terms) - set(self.variables))
             if bad:
                 raise ValueError(
                     f"constraints.{i}.terms: {bad} are not design variables "
                     f"(variables: {sorted(self.variables)})"
                 )
-        if "volume" in obj and not self.has_volume():
+        if "volume" in obj and ind.measure != "task" and not self.has_volume():
             raise ValueError(
                 "objective.volume: the workspace volume ∫ sqrt(det Jv Jvᵀ) dq needs a square "
                 f"position Jacobian; indices.jacobian gives rows {[ROWS[r] for r in rows]} "
@@ -296,15 +365,43 @@ class SerialSettings(StudySettings):
             )
         return self
 
+    def _check_task(self) -> None:
+        ind = self.indices
+        if ind.measure == "task":
+            if self.task is None:
+                raise ValueError("indices.measure: 'task' needs a study.task section (the "
+                                 "region to reach; docs/task.md)")  # fmt: skip
+            if ind.sampler != "uniform":
+                raise ValueError(f"indices.sampler: measure 'task' draws its targets "
+                                 f"uniformly in the task region; '{ind.sampler}' is for the "
+                                 "joint and cartesian measures (give sampler: uniform)")  # fmt: skip
+        elif self.task is not None:
+            raise ValueError(f"task: a task region is scored under indices.measure: task; "
+                             f"this config's measure is '{ind.measure}' (set measure: task "
+                             "or remove study.task)")  # fmt: skip
+
+    def _measure_says(self) -> str:
+        m = self.indices.measure
+        return " under measure: task" if m == "task" else f" under measure: {m}"
+
     def has_volume(self) -> bool:
         rows = self.indices.rows()
         return len(rows) == len(self.chain.joints) and all(r < 3 for r in rows)
 
     def index_names(self) -> tuple[str, ...]:
+        if self.indices.measure == "task":
+            return TASK_INDEX_NAMES
         return tuple(k for k in INDEX_NAMES if k != "volume" or self.has_volume())
 
     def weights(self) -> dict[str, float]:
-        return {k: float(v) for k, v in self.objective.items() if k in INDEX_NAMES}
+        names = self.index_names()
+        return {k: float(v) for k, v in self.objective.items() if k in names}
+
+    def linear_constraints(self) -> list[LinearConstraint]:
+        return [c for c in self.constraints if isinstance(c, LinearConstraint)]
+
+    def index_constraints(self) -> list[IndexConstraint]:
+        return [c for c in self.constraints if isinstance(c, IndexConstraint)]
 
     def angle_names(self) -> set[str]:
         if isinstance(self.chain, UrdfChain):

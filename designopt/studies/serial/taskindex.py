@@ -1,0 +1,144 @@
+"""The serial study's indices under ``measure: task`` (docs/task.md): every task sample is
+a target, solved by the batched IK of every design (``designopt.kinematics.ik``), and
+the indices are means (or a quantile) over the targets at the solutions:
+
+- ``reach``: the share of targets solved within tolerance and joint limits;
+- ``gci``: the mean 1/k of the configured Jacobian block, an unreached target counting 0;
+- ``gci_q05``: the 5 % quantile of the same per-target values (the worst-case dexterity);
+- ``manipulability``: the mean sqrt(det J Jᵀ), 0 where unreached;
+- ``joint_margin``: the mean over targets of min_i min(q_i − lo_i, hi_i − q_i)/((hi_i − lo_i)/2)
+  (1 at mid-range, 0 on a limit), 0 where unreached.
+
+The targets are drawn once per run from the ``samples`` stream (``designopt.task``) and
+travel in ``params``: every design of the swarm is scored on the same targets (common
+random numbers), and one compiled program serves every design and every target set of
+that size. Means carry the i.i.d. standard error sd/√N; the quantile carries the
+order-statistic one (half the distance between the order statistics N·p ± √(N·p(1−p)),
+the distribution-free ±1-SE band of the sample quantile).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from designopt.kinematics import ik
+from designopt.kinematics.conditioning import inv_cond
+from designopt.studies.serial.mechanism import Mechanism
+from designopt.studies.serial.settings import SerialSettings
+
+Q = 0.05  # gci_q05
+MEANS = ("reach", "gci", "manipulability", "joint_margin")
+"""The indices that are means over the targets (their per-target values add up)."""
+
+
+def options(s: SerialSettings) -> ik.IKOptions:
+    """The IK settings of ``study.task.ik`` as solver options."""
+    o = s.task.ik  # type: ignore[union-attr]
+    return ik.IKOptions(iters=o.iters, rounds=o.rounds, n_db=o.n_db, n_nearest=o.n_nearest,
+                        n_random=o.n_random, tol_pos=o.tol_pos, tol_rot=o.tol_rot,
+                        damping=o.damping)  # fmt: skip
+
+
+def mode(s: SerialSettings) -> ik.Mode:
+    """``axis`` with a tool-axis cone (the roll about the tool axis is free), else
+    ``position``."""
+    return "position" if s.task.tool_axis is None else "axis"  # type: ignore[union-attr]
+
+
+def n_targets(s: SerialSettings) -> int:
+    """N: the points of a points file, else ``indices.n_samples``."""
+    from designopt.task import Points
+
+    reg = s.task.region  # type: ignore[union-attr]
+    return len(reg.xyz()) if isinstance(reg, Points) else s.indices.n_samples
+
+
+def chunk(s: SerialSettings) -> int:
+    """Targets per chunk: ``indices.chunk`` when given, else 1024 (a target costs seeds ×
+    iterations × rounds configurations; 1024 keeps a 50-design swarm under ~1 GB)."""
+    ind = s.indices
+    return min(ind.chunk if "chunk" in ind.model_fields_set else 1024, n_targets(s))
+
+
+def targets(s: SerialSettings, key: jax.Array, dtype: Any) -> dict[str, jax.Array]:
+    """The task's targets as ``params`` entries: ``target_p`` (N, 3) and, with a tool
+    axis, ``target_R`` (N, 3, 3) (its last column is the sampled tool axis)."""
+    from designopt import task as tk
+
+    p, R = tk.targets(s.task, key, n_targets(s), dtype)  # type: ignore[arg-type]
+    return {"target_p": p} | ({} if R is None else {"target_R": R})
+
+
+def per_target(mech: Mechanism, s: SerialSettings, params: dict[str, Any], full: jax.Array,
+               dtype: Any) -> dict[str, jax.Array]:  # fmt: skip
+    """Per design and target (M, N): success, 1/k, manipulability, joint margin (all 0
+    where unreached) and the joints q (M, N, n), for designs ``full`` (M, P) in kernel
+    units. Targets go through the IK in chunks (``lax.map``); the last chunk is padded
+    with copies of the last target and cut off again."""
+    ind, md, opts = s.indices, mode(s), options(s)
+    rows = ind.rows()
+    lo, hi = params["q_lower"].astype(dtype), params["q_upper"].astype(dtype)
+    p = params["target_p"].astype(dtype)
+    R = params["target_R"].astype(dtype) if "target_R" in params else None
+    N = p.shape[0]
+    C = chunk(s)
+    n_chunks = -(-N // C)
+    pad = n_chunks * C - N
+
+    def padded(a):
+        return jnp.concatenate([a, jnp.repeat(a[-1:], pad, 0)]) if pad else a
+
+    pc = padded(p).reshape(n_chunks, C, 3)
+    Rc = None if R is None else padded(R).reshape(n_chunks, C, 3, 3)
+    key = jax.random.fold_in(params["sample_key"], 1)  # the IK's seeds: not the targets'
+    sc = jnp.asarray([1.0 if r < 3 else ind.length_scale for r in rows], dtype)
+    half = (hi - lo) / 2
+
+    def one_chunk(args):
+        pt, Rt = args
+        res = ik.solve(mech.model, full, pt, Rt, lo, hi, key, md, opts)
+        J = jax.vmap(lambda x, q: mech.model.jacobian(x, q, rows=rows))(full, res.q)
+        inv_k, man = inv_cond(J * sc[:, None], ind.norm, ind.normalized, with_volume=True)
+        ok = res.success
+        margin = jnp.min(jnp.minimum(res.q - lo, hi - res.q) / half, -1)
+        z = jnp.zeros_like(inv_k)
+        return {"success": ok.astype(dtype), "inv_k": jnp.where(ok, inv_k, z),
+                "manipulability": jnp.where(ok, man, z),
+                "joint_margin": jnp.where(ok, jnp.clip(margin, 0.0, 1.0), z),
+                "q": res.q, "pos_err": res.pos_err, "rot_err": res.rot_err}  # fmt: skip
+
+    out = jax.lax.map(one_chunk, (pc, Rc))  # each (n_chunks, M, C, ...)
+    return {k: jnp.moveaxis(v, 0, 1).reshape(v.shape[1], n_chunks * C, *v.shape[3:])[:, :N]
+            for k, v in out.items()}  # fmt: skip
+
+
+def quantile(v: jax.Array, q: float = Q) -> tuple[jax.Array, jax.Array]:
+    """(the q-quantile of v (M, N) along N (linear interpolation), its order-statistic SE:
+    half the spread of the order statistics at ranks N·q ± √(N·q(1−q)))."""
+    N = v.shape[-1]
+    srt = jnp.sort(v, -1)
+    val = jnp.quantile(v, q, axis=-1)
+    d = float(np.sqrt(N * q * (1 - q)))
+    lo_r = int(np.clip(np.floor(N * q - d), 0, N - 1))
+    hi_r = int(np.clip(np.ceil(N * q + d), 0, N - 1))
+    return val, (srt[..., hi_r] - srt[..., lo_r]) / 2
+
+
+def values(per: dict[str, jax.Array], name: str) -> jax.Array:
+    """The per-target values (M, N) whose mean is the index ``name`` (a MEANS entry)."""
+    return per["success"] if name == "reach" else per["inv_k" if name == "gci" else name]
+
+
+def estimates(per: dict[str, jax.Array]) -> dict[str, tuple[jax.Array, jax.Array]]:
+    """(value, SE) (M,) of every task index from the per-target values (M, N)."""
+    N = per["success"].shape[-1]
+    out = {}
+    for k in MEANS:
+        v = values(per, k)
+        out[k] = (jnp.mean(v, -1), jnp.std(v, -1, ddof=1) / np.sqrt(N))
+    out["gci_q05"] = quantile(per["inv_k"])
+    return out
