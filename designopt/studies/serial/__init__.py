@@ -63,13 +63,14 @@ def _aliases(s: SerialSettings) -> dict[str, str]:
 def _cost(s) -> Cost:
     """Monte-Carlo cost per design (pre-flight): the index samples, ``chunk`` in flight,
     and the normalisation probes when the objective normalises. Under ``measure: task``
-    a sample is one IK seed of one target (seeds × targets configurations)."""
+    a sample is a target (``front.n_samples`` counts targets too) and a chunk holds its
+    IK seeds' configurations."""
     ind, n_norm = s.indices, s.objective.get("n_norm")
     if ind.measure == "task":
         from designopt.studies.serial import taskindex
 
         seeds = s.task.ik.n_nearest + s.task.ik.n_random
-        n, c = taskindex.n_targets(s) * seeds, taskindex.chunk(s) * seeds
+        n, c = taskindex.n_targets(s), taskindex.chunk(s) * seeds
     else:
         n, c = ind.n_samples, min(ind.chunk, ind.n_samples)
     return Cost(
