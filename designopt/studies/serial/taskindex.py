@@ -12,7 +12,8 @@ the indices are means (or a quantile) over the targets at the solutions:
 The targets are drawn once per run from the ``samples`` stream (``designopt.task``) and
 travel in ``params``: every design of the swarm is scored on the same targets (common
 random numbers), and one compiled program serves every design and every target set of
-that size. Means carry the i.i.d. standard error sd/√N; the quantile carries the
+that size. Means carry the i.i.d. standard error sd/√N (reach: the Agresti–Coull one,
+which stays positive when all or no targets are reached); the quantile carries the
 order-statistic one (half the distance between the order statistics N·p ± √(N·p(1−p)),
 the distribution-free ±1-SE band of the sample quantile).
 """
@@ -140,5 +141,10 @@ def estimates(per: dict[str, jax.Array]) -> dict[str, tuple[jax.Array, jax.Array
     for k in MEANS:
         v = values(per, k)
         out[k] = (jnp.mean(v, -1), jnp.std(v, -1, ddof=1) / np.sqrt(N))
+    # reach is a binomial share: sd/√N is 0 when every target (or none) is reached,
+    # which claims too much; the Agresti–Coull SE √(p̃(1 − p̃)/(N + 4)), p̃ = (x + 2)/(N + 4),
+    # stays positive there and equals the usual one to O(1/N) elsewhere
+    pt = (jnp.sum(per["success"], -1) + 2.0) / (N + 4.0)
+    out["reach"] = (out["reach"][0], jnp.sqrt(pt * (1.0 - pt) / (N + 4.0)))
     out["gci_q05"] = quantile(per["inv_k"])
     return out
