@@ -22,7 +22,7 @@ import numpy as np
 from pydantic import Discriminator, Field, Tag, ValidationInfo, field_validator, model_validator
 
 from designopt import finite
-from designopt.studies.base import Section
+from designopt.section import Section
 
 Vec3 = tuple[float, float, float]
 

@@ -19,6 +19,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, field_validator, model_validator
 
 from designopt.problems.base import Problem
+from designopt.section import Section  # noqa: F401 (re-exported: studies' settings use it)
 
 STREAMS = ("optimizer", "samples", "normalisation", "figures")
 """The named PRNG streams split once from the root key ``key(seed)``."""
@@ -121,12 +122,6 @@ class Command:
     run: Callable[[Any, Any], int]
     description: str = ""
     writes: bool = False
-
-
-class Section(BaseModel):
-    """A nested section of a study's settings: unknown keys are errors."""
-
-    model_config = ConfigDict(extra="forbid")
 
 
 def lo_hi(name: str, v: tuple[float, float]) -> tuple[float, float]:
