@@ -148,3 +148,47 @@ def estimates(per: dict[str, jax.Array]) -> dict[str, tuple[jax.Array, jax.Array
     out["reach"] = (out["reach"][0], jnp.sqrt(pt * (1.0 - pt) / (N + 4.0)))
     out["gci_q05"] = quantile(per["inv_k"])
     return out
+
+
+_SOLVERS: dict[tuple[str, str], tuple[Mechanism, Any]] = {}
+"""The compiled per-target programs of :func:`solution`, by settings and dtype (the last
+few kept)."""
+
+
+def solution(s: SerialSettings, x: Any, keys: Any,
+             dtype: Any = jnp.float64) -> dict[str, np.ndarray]:  # fmt: skip
+    """The per-target solution of one design on a run's targets, as NumPy: ``target_p``
+    (N, 3) (``target_R`` (N, 3, 3) with a tool axis), ``success`` (N,) bool, ``inv_k``,
+    ``manipulability``, ``joint_margin`` (0 where unreached), ``q`` (N, n), ``pos_err``,
+    ``rot_err``. ``x`` holds the design variables in the config's units (a record's
+    ``x``: a mapping or a sequence in ``s.variables`` order), ``keys`` the run's named
+    streams (``record.keys()``): the targets and the IK's seeds are those of the run, so
+    the means of these values are the run's final indices (figures and the report's
+    cloud read it). One jitted call (``per_target`` for one design)."""
+    from designopt.studies.serial.mechanism import build
+
+    if jnp.dtype(dtype) == jnp.float64 and not jax.config.jax_enable_x64:
+        raise ValueError("the task's inverse kinematics needs float64: call "
+                         "jax.config.update('jax_enable_x64', True) first")  # fmt: skip
+    ck = (s.model_dump_json(), jnp.dtype(dtype).name)
+    if ck not in _SOLVERS:  # figures and the report's cloud share one compiled program
+        mech = build(s)
+        while len(_SOLVERS) >= 4:
+            _SOLVERS.pop(next(iter(_SOLVERS)))
+
+        def run(p, X):
+            return {k: v[0] for k, v in per_target(mech, s, p, X, dtype).items()}
+
+        _SOLVERS[ck] = (mech, jax.jit(run))
+    mech, run = _SOLVERS[ck]
+    # the params objective.problem gives per_target, made the same way: targets drawn
+    # outside the jitted program (inside, XLA may fuse their arithmetic differently, and
+    # a target an ulp away can send the IK to another of its solutions)
+    p = {"q_lower": jnp.asarray(mech.lower, dtype), "q_upper": jnp.asarray(mech.upper, dtype),
+         "sample_key": keys["samples"]} | targets(s, keys["samples"], dtype)  # fmt: skip
+    xv = np.asarray([x[k] for k in s.variables] if hasattr(x, "keys") else x, np.float64)
+    full = jnp.concatenate([jnp.asarray(xv, dtype), jnp.asarray(mech.fixed, dtype)])
+    full = (full * jnp.asarray(mech.scale, dtype))[None]
+    out = {k: np.asarray(v) for k, v in run(p, full).items()}
+    out["success"] = out["success"] > 0.5
+    return out | {k: np.asarray(p[k]) for k in ("target_p", "target_R") if k in p}
