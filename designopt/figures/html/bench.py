@@ -164,18 +164,35 @@ def _cloud(cloud: Mapping[str, Any], ids: _Ids) -> Section:
     lab, unit = _s(cloud.get("label", "value")), _s(cloud.get("unit", style.DIMENSIONLESS))
     xu = _s(cloud.get("xyz_unit", "mm"))
     n = len(xyz)
+    flag = np.zeros(n, bool) if cloud.get("flag") is None else np.asarray(cloud["flag"], bool)
+    flag = flag.ravel()
+    if len(flag) != n:
+        raise ValueError(f"cloud: {n} points but {len(flag)} flags")
+    fl_lab = _s(cloud.get("flag_label", "flagged"))
     keep = np.sort(np.random.default_rng(0).choice(n, MAX_CLOUD, replace=False)) if n > MAX_CLOUD else np.arange(n)  # fmt: skip
-    fin = np.isfinite(val[keep])
-    tr = {"type": "scatter3d", "mode": "markers", "x": xyz[keep, 0], "y": xyz[keep, 1],
-          "z": xyz[keep, 2], "name": esc(lab),
-          "marker": {"size": 2, "color": np.where(fin, val[keep], np.nan), "colorscale": "Viridis",
+    where = f"x %{{x:.4~g}}, y %{{y:.4~g}}, z %{{z:.4~g}} {esc(xu)}<br>"
+    k = keep[~flag[keep]]
+    fin = np.isfinite(val[k])
+    tr = {"type": "scatter3d", "mode": "markers", "x": xyz[k, 0], "y": xyz[k, 1],
+          "z": xyz[k, 2], "name": esc(lab),
+          "marker": {"size": 2, "color": np.where(fin, val[k], np.nan), "colorscale": "Viridis",
                      "opacity": 0.85, "colorbar": {"title": {"text": esc(style.label(lab, unit))}}},
-          "hovertemplate": f"x %{{x:.4~g}}, y %{{y:.4~g}}, z %{{z:.4~g}} {esc(xu)}<br>{esc(lab)} = %{{marker.color:.4~g}} {esc(unit)}<extra></extra>"}  # fmt: skip
+          "hovertemplate": f"{where}{esc(lab)} = %{{marker.color:.4~g}} {esc(unit)}<extra></extra>"}  # fmt: skip
+    data = [tr]
+    kf = keep[flag[keep]]
+    if kf.size:  # e.g. a task's unreached targets: grey crosses, no colour
+        data.append({"type": "scatter3d", "mode": "markers", "x": xyz[kf, 0], "y": xyz[kf, 1],
+                     "z": xyz[kf, 2], "name": esc(fl_lab),
+                     "marker": {"size": 3, "symbol": "cross", "color": "#6b6b6b"},
+                     "hovertemplate": f"{where}{esc(fl_lab)}<extra></extra>"})  # fmt: skip
     scene = {a: {"title": {"text": esc(style.label(a[0], xu))}} for a in ("xaxis", "yaxis", "zaxis")}  # fmt: skip
-    title = f"{lab} over the workspace: {n} points" + (
-        f" ({len(keep)} shown)" if len(keep) < n else ""
-    )
+    title = _s(cloud.get("title", f"{lab} over the workspace"))
+    title += f": {n} points" + (f" ({len(keep)} shown)" if len(keep) < n else "")
+    if flag.any():
+        title += f"; {fl_lab}: {int(flag.sum())} (grey crosses)"
     lay = _layout(esc(title), scene=scene | {"aspectmode": "data"}, height=620)
+    if kf.size:  # two traces: the legend top left, clear of the colour bar
+        lay["legend"] |= {"x": 0.0, "y": 1.0, "xanchor": "left", "yanchor": "top"}
     sec = Section("cloud", "Workspace")
-    sec.items.append(Plot(ids("cloud"), {"data": [tr], "layout": lay}, wide=True))
+    sec.items.append(Plot(ids("cloud"), {"data": data, "layout": lay}, wide=True))
     return sec

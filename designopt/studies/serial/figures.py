@@ -6,7 +6,11 @@ The map's joints are q2, q3 for chains of three or more joints (q1 turns the who
 about the base axis and leaves 1/k unchanged), else q1, q2. The other joints are held at
 :func:`held`: each at its mid-range or a quarter point (mid ± range/4), whichever gives the
 final design the most dexterous slice, joint by joint, so a slice never sits on a
-singularity such as the PUMA 560's wrist at q5 = 0. The figure states where they are."""
+singularity such as the PUMA 560's wrist at q5 = 0. The figure states where they are.
+
+Under ``indices.measure: task`` the joint-space map gives way to the task figure
+(:func:`draw_task`): the task's targets coloured by 1/k at the final design's IK solution,
+unreached targets as grey crosses; the report's cloud (:func:`cloud`) shows the same."""
 
 from __future__ import annotations
 
@@ -21,9 +25,13 @@ from matplotlib.ticker import MaxNLocator
 from designopt import montecarlo as mc
 from designopt.figures import MAP_RESOLUTION, convergence, save, style
 from designopt.results import RunRecord
+from designopt.studies.serial import taskindex
 from designopt.studies.serial.mechanism import Mechanism, build
 from designopt.studies.serial.objective import measures
 from designopt.studies.serial.settings import ROWS, SerialSettings
+
+RATES = ("reach",)
+"""Success rates (``reach``, under ``measure: task``): clipped to [0, 1], Wilson band."""
 
 
 def STUDY_UNITS(s: SerialSettings) -> dict[str, str]:  # noqa: N802
@@ -100,7 +108,8 @@ def held(mech: Mechanism, s: SerialSettings, X: np.ndarray, pair: tuple[int, int
 
 
 def draw_run(rec: RunRecord, folder: Path, resolution: int = MAP_RESOLUTION) -> list[Path]:
-    """Convergence, 1/k map (``resolution``² points) and workspace of a run record."""
+    """Convergence, 1/k map (``resolution``² points) and workspace of a run record; under
+    ``measure: task`` the task figure (:func:`draw_task`) instead of the map."""
     s: SerialSettings = rec.config.study
     mech = build(s)
     br = rec.best_run
@@ -109,19 +118,24 @@ def draw_run(rec: RunRecord, folder: Path, resolution: int = MAP_RESOLUTION) -> 
         "final": np.asarray(list(rec.x.values()), np.float64),
     }
     out = []
+    task = s.indices.measure == "task"
+    rates = {"reach": float(taskindex.n_targets(s))} if task else None  # trials: the targets
     out += convergence(br, ["f", *s.index_names()], folder, "Best run: objective and indices",
-                       units=STUDY_UNITS(s))  # fmt: skip
+                       units=STUDY_UNITS(s), rates=rates)  # fmt: skip
+    if task:  # 1/k over a joint slice says little about a task
+        X = _full(mech, designs["final"])
+        z, P = _kernel(mech, s)(X, _uniform_q(mech, rec, 4000).astype(X.dtype))
+        return out + draw_task(rec, folder) + _workspace(np.asarray(P[0]), np.asarray(z[0]),
+                                                         s, folder)  # fmt: skip
 
     rows_txt = ", ".join(ROWS[r] for r in s.indices.rows())
-    units = STUDY_UNITS(s)
     lo, hi = mech.lower, mech.upper
     X = _full(mech, np.stack(list(designs.values())))
     pair = map_joints(mech.n)
     n = resolution if mech.n >= 2 else 0  # the map needs two joints
     hq = held(mech, s, X[-1:], pair) if n else 0.5 * (lo + hi)
     ga, gb, qg = _grid(lo, hi, pair, hq, n)
-    rng = np.random.default_rng(np.asarray(jax.random.key_data(rec.keys()["figures"]), np.uint32))
-    qc = lo + (hi - lo) * rng.uniform(size=(4000, mech.n))  # NumPy: no threefry compile
+    qc = _uniform_q(mech, rec, 4000)
     z, P = _kernel(mech, s)(X, np.concatenate([qg, qc]).astype(X.dtype))  # one XLA program
     z, P = np.asarray(z), np.asarray(P)
     m2 = ga.size * gb.size
@@ -148,10 +162,14 @@ def draw_run(rec: RunRecord, folder: Path, resolution: int = MAP_RESOLUTION) -> 
                      fontsize=10)  # fmt: skip
         out += save(fig, folder, "dexterity_map")
 
-    p, c = P[-1, m2:], z[-1, m2:]  # the final design's cloud
+    return out + _workspace(P[-1, m2:], z[-1, m2:], s, folder)  # the final design's cloud
+
+
+def _workspace(p: np.ndarray, c: np.ndarray, s: SerialSettings, folder: Path) -> list[Path]:
+    """The final design's tip positions p (C, 3) coloured by 1/k c (C,)."""
     planar = np.ptp(p[:, 2]) <= 1e-9 * max(np.ptp(p[:, :2]), 1e-300)
     fig = style.figure(figsize=(5.4, 4.8))
-    L = units.get("__length__", "L")
+    L = STUDY_UNITS(s).get("__length__", "L")
     if planar:
         ax = fig.add_subplot(1, 1, 1)
         sc = ax.scatter(p[:, 0], p[:, 1], s=2, c=c, cmap="viridis", rasterized=True)
@@ -167,20 +185,149 @@ def draw_run(rec: RunRecord, folder: Path, resolution: int = MAP_RESOLUTION) -> 
     fig.colorbar(sc, ax=ax, label=style.label("1/k", style.DIMENSIONLESS), shrink=0.7, pad=0.1)
     ax.set_title("final design: tip positions of 4000 uniform joint samples\n"
                  "(L: the chain's length unit)", fontsize=9)  # fmt: skip
-    out += save(fig, folder, "workspace")
-    return out
+    return save(fig, folder, "workspace")
+
+
+def _uniform_q(mech: Mechanism, rec: RunRecord, n: int) -> np.ndarray:
+    """n joint vectors uniform in the limits from the run's ``figures`` stream (NumPy: no
+    threefry compile)."""
+    rng = np.random.default_rng(np.asarray(jax.random.key_data(rec.keys()["figures"]), np.uint32))
+    return mech.lower + (mech.upper - mech.lower) * rng.uniform(size=(n, mech.n))
+
+
+def task_solution(rec: RunRecord) -> dict[str, np.ndarray]:
+    """The final design's per-target solution on the run's targets
+    (``taskindex.solution``): targets, success, 1/k, joints."""
+    return taskindex.solution(rec.config.study, rec.x, rec.keys())
+
+
+def plane(p: np.ndarray, rtol: float = 1e-9) -> tuple[np.ndarray, tuple[str, str]] | None:
+    """The plane holding every point of p (N, 3) as (E (3, 2): orthonormal in-plane axes,
+    their names), or None when the points span three dimensions (thicker than ``rtol`` ×
+    their extent). A plane normal to a coordinate axis keeps the other two (x, y; x, z;
+    y, z); another plane gets u, v, its principal directions."""
+    c = p - p.mean(0)
+    ext = float(np.max(np.ptp(p, 0))) if len(p) else 0.0
+    _, _, vt = np.linalg.svd(c, full_matrices=True)
+    if len(p) > 2 and np.max(np.abs(c @ vt[2])) > rtol * max(ext, 1e-300):
+        return None
+    n = vt[2]
+    for k in range(3):
+        if abs(abs(n[k]) - 1.0) <= 1e-9:
+            keep = [i for i in range(3) if i != k]
+            return np.eye(3)[:, keep], ("xyz"[keep[0]], "xyz"[keep[1]])
+    return vt[:2].T, ("u", "v")
+
+
+def _vec(v: np.ndarray) -> str:
+    return "(" + ", ".join(f"{a:.3g}" for a in v) + ")"
+
+
+def _task_caption(rec: RunRecord, sol: dict[str, np.ndarray], L: str) -> str:
+    """Title lines: the design, reach ± SE and gci ± SE of the drawn solution (the
+    archive's own when they differ), what is drawn."""
+    import textwrap
+
+    s: SerialSettings = rec.config.study
+    units = STUDY_UNITS(s)
+    per = {k: sol[k][None].astype(np.float64) for k in ("success", "inv_k",
+           "manipulability", "joint_margin")}  # fmt: skip
+    est = jax.jit(taskindex.estimates)(per)
+    est = {k: (float(v[0][0]), float(v[1][0])) for k, v in est.items()}
+    des = ", ".join(f"{k} = {v:.4g} {units.get(k, L)}" for k, v in rec.x.items())
+    line = f"reach {est['reach'][0]:.3f} ± {est['reach'][1]:.2g}, gci {est['gci'][0]:.3f} ± " \
+           f"{est['gci'][1]:.2g} (± SE; unreached targets count 0)"  # fmt: skip
+    arch = rec.indices
+    if any(k in arch and abs(arch[k][0] - est[k][0]) > 1e-9 * max(1.0, abs(est[k][0]))
+           for k in ("reach", "gci")):  # fmt: skip
+        line += f"; archive: reach {arch['reach'][0]:.3f}, gci {arch['gci'][0]:.3f}"
+    rows_txt = ", ".join(ROWS[r] for r in s.indices.rows())
+    N, bad = len(sol["success"]), int(np.sum(~sol["success"]))
+    what = (f"1/k ({s.indices.norm}-norm; rows {rows_txt}) at the IK solution of each of {N} "
+            f"targets; " + (f"unreached (grey crosses): {bad}" if bad else "every target reached"))  # fmt: skip
+    ta = s.task.tool_axis  # type: ignore[union-attr]
+    if ta is not None:
+        what += f"; tool axis within {ta.cone:g}° of {_vec(np.asarray(ta.direction))}"
+    return "\n".join(textwrap.wrap("final design: " + des, 90) + [line]
+                     + textwrap.wrap(what, 90))  # fmt: skip
+
+
+def _task_panel(ax, a: np.ndarray, b: np.ndarray, c: np.ndarray, ok: np.ndarray, size: float):
+    """Reached targets coloured by 1/k (the least drawn last, on top), unreached as grey
+    crosses over them; returns the colour mappable."""
+    o = np.argsort(-c[ok], kind="stable")
+    sc = ax.scatter(a[ok][o], b[ok][o], c=c[ok][o], s=size, cmap="viridis", lw=0,
+                    rasterized=True)  # fmt: skip
+    if (~ok).any():
+        ax.scatter(a[~ok], b[~ok], marker="x", s=2.5 * size + 6, c="0.45", lw=0.8,
+                   rasterized=True, label="unreached")  # fmt: skip
+    return sc
+
+
+def draw_task(rec: RunRecord, folder: Path) -> list[Path]:
+    """The task figure: every target of the run coloured by 1/k at the final design's IK
+    solution, unreached targets as grey crosses; a planar task in its plane, a 3-D one as
+    a top view (x, y) and a side view (x or y, whichever spreads more, against z), the
+    least dexterous target on top along each line of sight."""
+    s: SerialSettings = rec.config.study
+    sol = task_solution(rec)
+    p, ok = sol["target_p"], sol["success"]
+    c = sol["inv_k"]
+    L = STUDY_UNITS(s).get("__length__", "L")
+    N = len(ok)
+    size = float(np.clip(6000.0 / max(N, 1), 2.0, 30.0))
+    pl = plane(p)
+    if pl is not None:
+        E, names = pl
+        uv = p @ E
+        fig, ax = style.subplots(1, 1, figsize=(6.2, 5.6))
+        axes, views = [ax], [(uv[:, 0], uv[:, 1], names)]
+    else:
+        side = 0 if np.ptp(p[:, 0]) >= np.ptp(p[:, 1]) else 1
+        fig, axes = style.subplots(1, 2, figsize=(11.0, 5.2))
+        views = [(p[:, 0], p[:, 1], ("x", "y")), (p[:, side], p[:, 2], ("xy"[side], "z"))]
+        axes = list(axes)
+    scs = []
+    for ax, (a, b, (na, nb)) in zip(axes, views, strict=True):
+        scs.append(_task_panel(ax, a, b, c, ok, size))
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_xlabel(style.label(na, L))
+        ax.set_ylabel(style.label(nb, L))
+        ax.grid(alpha=0.25)
+    if pl is None:
+        axes[0].set_title("top view (x, y); the least 1/k on top", fontsize=9, y=1.0)
+        axes[1].set_title(f"side view ({'xy'[side]}, z); the least 1/k on top", fontsize=9,
+                          y=1.0)  # fmt: skip
+    elif names == ("u", "v"):
+        axes[0].set_title(f"in the targets' plane: u = {_vec(E[:, 0])}, v = {_vec(E[:, 1])}",
+                          fontsize=9, y=1.0)  # fmt: skip
+    style.shared_scale(fig, scs, 0.0 if not ok.any() else None)
+    fig.colorbar(scs[0], ax=axes, label=style.label("1/k", style.DIMENSIONLESS), shrink=0.85)
+    if (~ok).any():
+        axes[-1].legend(loc="lower right", fontsize=8, framealpha=0.85)
+    fig.suptitle(_task_caption(rec, sol, L), fontsize=9)
+    return save(fig, folder, "task")
 
 
 def cloud(rec: RunRecord, n: int = 8000) -> dict[str, Any]:
     """The final design's workspace for the interactive report: tip positions of ``n``
-    uniform joint samples (the run's ``figures`` stream), coloured by 1/k."""
+    uniform joint samples (the run's ``figures`` stream), coloured by 1/k. Under
+    ``measure: task``, the task's targets instead, coloured by 1/k at the final design's
+    IK solution (NaN where unreached), with ``flag`` marking the unreached ones."""
     s: SerialSettings = rec.config.study
+    length = STUDY_UNITS(s).get("__length__", "L")
+    if s.indices.measure == "task":
+        sol = task_solution(rec)
+        ok = sol["success"]
+        return {"xyz": np.asarray(sol["target_p"], np.float64),
+                "value": np.where(ok, sol["inv_k"], np.nan).astype(np.float64),
+                "label": f"1/k ({s.indices.norm}-norm) at the IK solution", "unit": "-",
+                "xyz_unit": length, "flag": ~ok, "flag_label": "unreached",
+                "title": "the task's targets, coloured by 1/k at the final design's IK "
+                         "solution"}  # fmt: skip
     mech = build(s)
-    lo, hi = mech.lower, mech.upper
-    rng = np.random.default_rng(np.asarray(jax.random.key_data(rec.keys()["figures"]), np.uint32))
-    q = lo + (hi - lo) * rng.uniform(size=(n, mech.n))
+    q = _uniform_q(mech, rec, n)
     X = _full(mech, np.asarray(list(rec.x.values()), np.float64))
     z, P = _kernel(mech, s)(X, q.astype(X.dtype))
-    length = STUDY_UNITS(s).get("__length__", "L")
     return {"xyz": np.asarray(P[0], np.float64), "value": np.asarray(z[0], np.float64),
             "label": f"1/k ({s.indices.norm}-norm)", "unit": "-", "xyz_unit": length}  # fmt: skip

@@ -1,0 +1,136 @@
+"""The serial study's task figure and task cloud (docs/figures.md, docs/task.md): a tiny
+task run of the planar 2R arm whose design box cannot reach the whole disk, drawn and
+read back. The figure's points are the run's targets, coloured by 1/k at the final
+design's IK solution, unreached ones as crosses; the report's cloud holds the same, and
+its 1/k equals the 2R closed form at the solved joints, whose forward kinematics hits
+the targets; every target beyond l1 + l2 is flagged; the means are the archive's
+final reach and gci."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import jax
+import matplotlib.pyplot as plt
+import numpy as np
+import pytest
+from figcheck import assert_clean
+from PIL import Image
+
+import designopt
+from designopt import figures
+from designopt.figures import html
+from designopt.studies.serial import figures as serial_figs
+from designopt.studies.serial import taskindex
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    """A short run (about 15 s on 2 cores) whose box (l1 + l2 ≤ 1.4) leaves part of the
+    disk (centre 1.2, radius 0.5) out of reach."""
+    jax.config.update("jax_enable_x64", True)
+    cfg = designopt.load_config(ROOT / "configs/planar2r_task.yaml", {
+        "study.variables": {"l1": [0.4, 0.8], "l2": [0.3, 0.6]}, "study.constraints": [],
+        "study.indices.n_samples": 256, "study.task.ik.n_db": 128,
+        "optimizer.n_particles": 4, "optimizer.n_iters": 2, "optimizer.n_runs": 1})  # fmt: skip
+    out = tmp_path_factory.mktemp("task") / "task.h5"
+    designopt.run(cfg, out=out)
+    return out, designopt.load(out)
+
+
+@pytest.fixture
+def record():
+    figures.RECORD = []
+    yield figures.RECORD
+    figures.RECORD = None
+    plt.close("all")
+
+
+def _inv_k_2r(l1: float, l2: float, q2: np.ndarray) -> np.ndarray:
+    """σmin/σmax of the planar 2R position Jacobian: σ1σ2 = |det J| = l1 l2 |sin q2| and
+    σ1² + σ2² = ‖J‖_F² = l1² + 2 l2² + 2 l1 l2 cos q2, so 1/k = |det J|/σmax²."""
+    d = l1 * l2 * np.abs(np.sin(q2))
+    f2 = l1**2 + 2 * l2**2 + 2 * l1 * l2 * np.cos(q2)
+    smax2 = (f2 + np.sqrt(np.maximum(f2**2 - 4 * d**2, 0.0))) / 2
+    return d / smax2
+
+
+def test_cloud_is_the_final_design_at_its_ik_solutions(run):
+    _, rec = run
+    l1, l2 = rec.x["l1"], rec.x["l2"]
+    c = serial_figs.cloud(rec)
+    sol = taskindex.solution(rec.config.study, rec.x, rec.keys())
+    p, ok, flag = c["xyz"], ~c["flag"], c["flag"]
+    N = len(p)
+    assert N == 256 and p.shape == (N, 3) and np.all(p[:, 2] == 0)
+    np.testing.assert_array_equal(p, sol["target_p"])
+    r = np.hypot(p[:, 0], p[:, 1])
+    assert flag[r > l1 + l2 + 1e-9].all() and (r > l1 + l2).sum() > 20  # out of reach
+    assert ok.sum() > N / 2
+    q = sol["q"]
+    fk = np.stack([l1 * np.cos(q[:, 0]) + l2 * np.cos(q.sum(1)),
+                   l1 * np.sin(q[:, 0]) + l2 * np.sin(q.sum(1))], -1)  # fmt: skip
+    assert np.max(np.abs(fk[ok] - p[ok, :2])) < 1e-8  # reached: the joints hit the target
+    np.testing.assert_allclose(c["value"][ok], _inv_k_2r(l1, l2, q[ok, 1]), rtol=1e-9, atol=1e-12)
+    assert np.isnan(c["value"][flag]).all()
+    assert 1 - flag.mean() == rec.indices["reach"][0]  # the archive's final indices
+    assert np.nan_to_num(c["value"]).mean() == pytest.approx(rec.indices["gci"][0], abs=1e-12)
+    assert c["xyz_unit"] == "L" and c["unit"] == "-"
+    # the report draws the reached targets coloured, the unreached ones as crosses
+    (sec,) = [s for s in html.sections(rec.to_tree(), cloud=c) if s.id == "cloud"]
+    tr, cross = sec.plots()[0].fig["data"]
+    np.testing.assert_array_equal(np.c_[tr["x"], tr["y"], tr["z"]], p[ok])
+    np.testing.assert_array_equal(tr["marker"]["color"], c["value"][ok])
+    np.testing.assert_array_equal(np.c_[cross["x"], cross["y"], cross["z"]], p[flag])
+    assert cross["marker"]["symbol"] == "cross" and cross["name"] == "unreached"
+
+
+def test_task_figure_shows_targets_by_inv_k_and_unreached(run, record, tmp_path):
+    out, rec = run
+    paths = serial_figs.draw_run(rec, tmp_path / "figs")
+    names = sorted(p.name for p in paths)
+    assert names == sorted(f"{n}.{e}" for n in ("convergence", "task", "workspace")
+                           for e in ("png", "pdf"))  # fmt: skip  # no joint-space map
+    assert_clean(record)
+    png = tmp_path / "figs" / "task.png"
+    im = np.asarray(Image.open(png).convert("RGB"))
+    assert png.stat().st_size > 20_000 and im.shape[0] > 400 and im.shape[1] > 400
+    assert len(np.unique(im.reshape(-1, 3), axis=0)) > 100  # a colour map, not a blank
+    (fig,) = [f for n, f in record if n == "task"]
+    (ax,) = [a for a in fig.axes if not hasattr(a, "_colorbar")]
+    dots, crosses = ax.collections
+    sol = taskindex.solution(rec.config.study, rec.x, rec.keys())
+    ok = sol["success"]
+    p = sol["target_p"]
+    got = dots.get_offsets()
+    order = np.lexsort(got.T)
+    want = np.lexsort(p[ok, :2].T)
+    np.testing.assert_array_equal(got[order], p[ok][want, :2])  # x, y: the disk's plane
+    np.testing.assert_array_equal(dots.get_array()[order], sol["inv_k"][ok][want])
+    assert np.all(np.diff(dots.get_array()) <= 0)  # the least dexterous drawn last, on top
+    np.testing.assert_array_equal(np.sort(crosses.get_offsets(), 0), np.sort(p[~ok, :2], 0))
+    assert ax.get_xlabel() == "x [L]" and ax.get_ylabel() == "y [L]"
+    title = " ".join(fig._suptitle.get_text().split())  # lines wrapped at 90 characters
+    (reach, rse), (gci, gse) = rec.indices["reach"], rec.indices["gci"]
+    assert f"reach {reach:.3f} ± {rse:.2g}" in title and f"gci {gci:.3f} ± {gse:.2g}" in title
+    assert f"unreached (grey crosses): {(~ok).sum()}" in title and "archive" not in title
+    assert not (tmp_path / "figs" / "dexterity_map.png").exists()
+
+
+def test_plane_finds_the_targets_plane():
+    rng = np.random.default_rng(0)
+    u = rng.uniform(-1, 1, (200, 3))
+    box_xz = u * [0.2, 0.0, 0.3] + [1, 2, 3]
+    E, names = serial_figs.plane(box_xz)
+    assert names == ("x", "z")
+    np.testing.assert_array_equal(E, np.eye(3)[:, [0, 2]])
+    n = np.array([1.0, 2.0, 2.0]) / 3  # a tilted disk: u, v span it, orthonormal
+    E0 = np.linalg.svd(np.eye(3) - np.outer(n, n))[0][:, :2]
+    disk = u[:, :2] @ E0.T + [0.5, 0, 0]
+    E, names = serial_figs.plane(disk)
+    assert names == ("u", "v")
+    np.testing.assert_allclose(E.T @ E, np.eye(2), atol=1e-12)
+    np.testing.assert_allclose(E.T @ n, 0, atol=1e-12)
+    assert serial_figs.plane(u) is None  # a solid region: two projections instead
