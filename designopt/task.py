@@ -71,9 +71,10 @@ class Cylinder(Section):
 
 
 class Cone(Section):
-    """The solid cone of half-angle ``half_angle`` (degrees, in (0, 90]) about ``axis``
-    from ``apex`` (e.g. the remote centre of motion at the port), cut by the planes at
-    axial depths ``depth`` = [d0, d1] (0 ≤ d0 < d1): a frustum, or the whole cone to d1."""
+    """The solid cone of half-angle ``half_angle`` (degrees, in (0, 90): at 90° its radius
+    is infinite) about ``axis`` from ``apex`` (e.g. the remote centre of motion at the
+    port), cut by the planes at axial depths ``depth`` = [d0, d1] (0 ≤ d0 < d1): a
+    frustum, or the whole cone to d1."""
 
     shape: Literal["cone"]
     apex: Vec3
@@ -89,8 +90,9 @@ class Cone(Section):
     @field_validator("half_angle")
     @classmethod
     def _angle(cls, v: float) -> float:
-        if not 0 < v <= 90:
-            raise ValueError(f"must be in (0, 90] degrees, got {v}")
+        if not 0 < v < 90:  # tan 90° = ∞: the region between the cut planes is unbounded
+            raise ValueError(f"must be in (0, 90) degrees (at 90 the cone's radius is "
+                             f"infinite), got {v}")  # fmt: skip
         return v
 
     @field_validator("depth")
@@ -99,12 +101,6 @@ class Cone(Section):
         if not 0 <= v[0] < v[1]:
             raise ValueError(f"needs 0 ≤ d0 < d1, got {list(v)}")
         return v
-
-    @model_validator(mode="after")
-    def _finite_radius(self) -> Cone:
-        if self.half_angle == 90:
-            raise ValueError("half_angle: 90 degrees makes an unbounded region; give < 90")
-        return self
 
 
 class Points(Section):
