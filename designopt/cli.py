@@ -247,8 +247,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     common(b, figures=False, dry=False)
     b.set_defaults(func=cmd_bench)
+    from designopt import ikcmd
     from designopt.studies import STUDIES
 
+    ikcmd.add_parser(sub)  # one `ik` for every study with Study.ik
     for study in STUDIES.values():
         for c in study.commands:
             q = sub.add_parser(c.name, help=c.help, description=c.description or None)

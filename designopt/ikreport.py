@@ -1,7 +1,8 @@
 """What an inverse-kinematics archive says: its summary (``designopt show``, ``designopt
 ik``) and its joints as CSV (``--csv``), for any chain whose solver writes the ``ik/``
 group: ``q`` (N, n), ``success`` (N,), ``pos_err``, ``rot_err`` and optionally
-``iterations`` (docs/archive.md). Joint names and units come from the group's attrs
+``iterations`` (a Newton solver's) and ``inv_k`` (1/k of the position block at the
+solution, the generic solver's) (docs/archive.md). Joint names and units come from the group's attrs
 (``joint_names``, ``units``); without them the joints are ``q1 … qn``."""
 
 from __future__ import annotations
@@ -28,14 +29,19 @@ def joint_names(ik: Mapping[str, Any]) -> list[str]:
 
 
 def summary_lines(ik: Mapping[str, Any]) -> list[str]:
-    """Success count and rate, the worst errors of the solved poses, the first failed
-    poses by row (rows counted from 1, as in the poses file)."""
+    """Success count and rate, what was matched and the design, the worst errors (and
+    1/k, iterations) of the solved poses, the first failed poses by row (rows counted
+    from 1, as in the poses file)."""
     ok = np.asarray(ik["success"], bool)
     pe, re = np.asarray(ik["pos_err"], np.float64), np.asarray(ik["rot_err"], np.float64)
     units = ik.get("attrs", {}).get("units", "")
     n, n_ok = len(ok), int(ok.sum())
     lines = [f"{n} poses: {n_ok} solved ({100 * n_ok / max(n, 1):.2f} %), {n - n_ok} failed "
              "(unreachable or not converged)"]  # fmt: skip
+    at = ik.get("attrs", {})
+    if at.get("targets") or at.get("design"):
+        des = ", ".join(f"{k} = {float(v):.6g}" for k, v in dict(at.get("design") or {}).items())
+        lines.append(f"matched: {at.get('targets', 'pose')}" + (f"; design: {des}" if des else ""))
     if n_ok:
         i, j = int(np.argmax(np.where(ok, pe, -np.inf))), int(np.argmax(np.where(ok, re, -np.inf)))
         lines.append(f"worst errors of the solved: position {pe[i]:.3g} (row {i + 1}), "
@@ -43,6 +49,11 @@ def summary_lines(ik: Mapping[str, Any]) -> list[str]:
         if "iterations" in ik:
             it = np.asarray(ik["iterations"])[ok]
             lines.append(f"iterations of the solved: median {np.median(it):.0f}, max {it.max()}")
+        if "inv_k" in ik:
+            ik_ok = np.asarray(ik["inv_k"], np.float64)[ok]
+            r = int(np.flatnonzero(ok)[np.argmin(ik_ok)])
+            lines.append(f"1/k (position block) of the solved: median {np.median(ik_ok):.3g}, "
+                         f"least {ik_ok.min():.3g} (row {r + 1})")  # fmt: skip
     bad = np.flatnonzero(~ok)
     if len(bad):
         shown = ", ".join(f"{r + 1} (position error {pe[r]:.3g})" for r in bad[:N_FAILED_SHOWN])
@@ -53,7 +64,7 @@ def summary_lines(ik: Mapping[str, Any]) -> list[str]:
 
 def csv_text(ik: Mapping[str, Any]) -> str:
     """One row per pose: row (from 1), success, the joints, pos_err, rot_err (and
-    iterations); full float precision (``repr``), so the joints read back exactly."""
+    iterations, inv_k); full float precision (``repr``), so the joints read back exactly."""
     names = joint_names(ik)
     q = np.asarray(ik["q"], np.float64)
     cols = {"success": np.asarray(ik["success"], bool).astype(int)}
@@ -61,6 +72,8 @@ def csv_text(ik: Mapping[str, Any]) -> str:
     cols |= {"pos_err": np.asarray(ik["pos_err"]), "rot_err": np.asarray(ik["rot_err"])}
     if "iterations" in ik:
         cols["iterations"] = np.asarray(ik["iterations"]).astype(int)
+    if "inv_k" in ik:
+        cols["inv_k"] = np.asarray(ik["inv_k"], np.float64)
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(["row", *cols])

@@ -1,5 +1,6 @@
-"""``designopt ik`` (designopt/studies/davinci/ikcli.py): poses files in, archive out; bad
-files are one ConfigError naming the row (the CLI prints it and exits 2)."""
+"""``designopt ik`` on the da Vinci arm (its ``Study.ik`` hook, ikcli.py, through the
+generic command designopt/ikcmd.py): poses files in, archive out; bad files are one
+ConfigError naming the row (the CLI prints it and exits 2)."""
 
 import h5py
 import jax.numpy as jnp
@@ -136,7 +137,7 @@ def test_api_refuses_nan_and_inf_with_the_pose_number():
 def test_wrong_study_and_missing_file_are_config_errors(tmp_path):
     with pytest.raises(ConfigError, match="poses file not found"):
         run(CONFIG, "--poses", tmp_path / "none.csv", "--out", tmp_path / "o.h5")
-    with pytest.raises(ConfigError, match="da Vinci arm"):
+    with pytest.raises(ConfigError, match="study 'plas' has no inverse kinematics"):
         run("configs/plas.yaml", "--poses", tmp_path / "none.csv", "--out", tmp_path / "o.h5")
 
 

@@ -1,5 +1,7 @@
-"""The record of an inverse-kinematics command: group ``ik`` with q (N, n), success,
-pos_err, rot_err, optionally iterations and poses (docs/archive.md)."""
+"""The record of an inverse-kinematics command (``designopt ik``, any study with
+``Study.ik``): group ``ik`` with q (N, n), success, pos_err, rot_err, what the study's
+solver adds (iterations, inv_k) and the targets as read (poses, or positions and axes);
+attrs targets (the mode matched), design, joint_names, units (docs/archive.md)."""
 
 from __future__ import annotations
 
@@ -27,6 +29,23 @@ class IKRecord(Record):
     @property
     def success(self) -> np.ndarray:
         return np.asarray(self.ik["success"], bool)
+
+    @property
+    def targets(self) -> str:
+        """What was matched: ``position``, ``axis`` or ``pose`` (``pose`` for archives
+        written before the mode was recorded)."""
+        return str(self.ik.get("attrs", {}).get("targets", "pose"))
+
+    @property
+    def design(self) -> dict[str, float]:
+        """The design solved for ({name: value}; empty for archives without it)."""
+        return {k: float(v) for k, v in dict(self.ik.get("attrs", {}).get("design") or {}).items()}
+
+    @property
+    def joint_names(self) -> list[str]:
+        from designopt.ikreport import joint_names
+
+        return joint_names(self.ik)
 
     def summary(self) -> list[str]:
         from designopt.ikreport import summary_lines

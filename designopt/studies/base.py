@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import jax
 import numpy as np
@@ -20,6 +20,9 @@ from pydantic import BaseModel, ConfigDict, field_validator, model_validator
 
 from designopt.problems.base import Problem
 from designopt.section import Section  # noqa: F401 (re-exported: studies' settings use it)
+
+if TYPE_CHECKING:
+    from designopt.ikcmd import IKHook
 
 STREAMS = ("optimizer", "samples", "normalisation", "figures")
 """The named PRNG streams split once from the root key ``key(seed)``."""
@@ -203,6 +206,7 @@ class Study:
       (kind "run") and prints ``lines``. None: optimise.
     - ``cost(settings) -> Cost``: the pre-flight estimate's inputs.
     - ``commands``: the study's own subcommands (``Command``), added by the CLI.
+    - ``ik``: its inverse kinematics for ``designopt ik`` (``designopt.ikcmd.IKHook``).
     """
 
     name: str
@@ -223,7 +227,12 @@ class Study:
     """``cost(settings)``: Monte-Carlo samples, chunk and normalisation probes per design,
     for the pre-flight memory and time estimate (``designopt.preflight``)."""
     commands: tuple[Command, ...] = ()
-    """Extra subcommands of this study (e.g. the da Vinci ``ik``)."""
+    """Extra subcommands of this study (e.g. the serial ``chain`` and ``export``)."""
+    ik: IKHook | None = None
+    """``designopt ik CONFIG --poses FILE``: the study's inverse kinematics (an
+    ``designopt.ikcmd.IKHook``: the design solved for with ``--design`` overrides, the
+    solver, its target modes and the study's own flags). None: the command refuses the
+    study in one line."""
     cloud: Callable[[Any], dict[str, Any] | None] | None = None
     """``cloud(record)``: the workspace of a run's final design as a point cloud for the
     interactive report, {"xyz": (n, 3), "value": (n,), "label", "unit"} (e.g. coloured

@@ -5,7 +5,7 @@ Applied Sciences 2019).
 batched production IK: damped Newton / LM with database seeds, trajectory mode, the
 closed form used for checks), ``paper`` (the paper's scan + Newton method, Table 2),
 ``objective`` (dexterity and IK success over the surgical cone against l_IJ and β),
-``figures``, ``ikcli`` (the ``designopt ik`` command), ``settings`` (the config section).
+``figures``, ``ikcli`` (its ``designopt ik`` hook, ``Study.ik``), ``settings`` (the config section).
 """
 
 from __future__ import annotations
@@ -62,7 +62,7 @@ STUDY = Study(
     units=lambda s: {k: UNITS[k] for k in s.variables} | INDEX_UNITS,
     example_config="configs/davinci.yaml",
     cost=_cost,
-    commands=(IK,),
+    ik=IK,
     tiny={
         "name": "davinci",
         "indices": {"n_samples": 256, "n_ik": 32, "solver": "closed_form"},
