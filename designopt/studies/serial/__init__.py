@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from designopt.studies.base import Cost, Study
+from designopt.studies.serial import ikhook
 from designopt.studies.serial.commands import COMMANDS
 from designopt.studies.serial.settings import INDEX_NAMES, TASK_INDEX_NAMES, SerialSettings
 
@@ -96,6 +97,7 @@ STUDY = Study(
     example_config="configs/planar2r.yaml",
     cost=_cost,
     commands=COMMANDS,
+    ik=ikhook.HOOK,
     cloud=_cloud,
     tiny={
         "name": "serial",
