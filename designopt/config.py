@@ -7,7 +7,15 @@ from pathlib import Path
 from typing import Annotated, Any, ClassVar, Literal, Union
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model, field_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    create_model,
+    field_validator,
+    model_validator,
+)
 
 from designopt import finite
 from designopt.errors import ConfigError  # noqa: E402  (re-exported)
@@ -157,6 +165,13 @@ class RunConfigBase(_Strict):
         "parallel",
     )
     """Keys that steer how a run is carried out, not what it computes: a resume may change them."""
+
+    @model_validator(mode="after")
+    def _precision(self) -> RunConfigBase:
+        why = self.study.needs_float64()  # type: ignore[attr-defined]
+        if self.precision != "float64" and why:
+            raise ValueError(f"precision: {why}: set precision: float64")
+        return self
 
     def output_path(self) -> str:
         name = self.study.name  # type: ignore[attr-defined]
@@ -329,4 +344,7 @@ def error_text(e: ValidationError, raw: Any = None) -> str:
         msg = (f"unknown study {name!r}" if name is not None else "missing") + (
             f"; known: {sorted(STUDIES)} (`designopt studies` lists them)"
         )
+    head, sep, rest = msg.partition(": ")
+    if not loc and sep and head.isidentifier():  # a whole-config check names its key first
+        loc, msg = [head], rest
     return f"key '{'.'.join(loc) or '(top level)'}': {msg}"

@@ -67,12 +67,18 @@ class StudySettings(BaseModel):
                     raise ValueError(f"objective.pareto.{k}: a linear objective is "
                                      "{min: {variable: weight, ...}} or {max: {...}}")  # fmt: skip
                 w = next(iter(sense.values()))
-                if not isinstance(w, dict) or not w or not all(
-                    isinstance(x, int | float) and not isinstance(x, bool) for x in w.values()
+                if (
+                    not isinstance(w, dict)
+                    or not w
+                    or not all(
+                        isinstance(x, int | float) and not isinstance(x, bool) for x in w.values()
+                    )
                 ):
                     raise ValueError(f"objective.pareto.{k}: weights {{variable: number, ...}}")
             elif sense not in ("min", "max"):
-                raise ValueError(f"objective.pareto.{k}: sense must be 'min' or 'max', got {sense!r}")
+                raise ValueError(
+                    f"objective.pareto.{k}: sense must be 'min' or 'max', got {sense!r}"
+                )
         out = {k: v for k, v in data.items() if k != "objective"}
         return out | {"pareto": dict(front)}
 
@@ -86,6 +92,11 @@ class StudySettings(BaseModel):
             if not lo < hi:
                 raise ValueError(f"{k}: lower bound {lo} is not below upper bound {hi}")
         return v
+
+    def needs_float64(self) -> str | None:
+        """Why these settings cannot run in float32 (checked with ``precision`` when the
+        config is validated, so a dry run refuses it too), or None."""
+        return None
 
     def box(self) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
         """The design box: (names, lower (D,), upper (D,)) in the order of ``variables``."""

@@ -189,9 +189,8 @@ def problem(s: SerialSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Pro
     names, lower, upper = s.box()
     weights = s.weights()
     task = s.indices.measure == "task"
-    if task and dtype != jnp.float64:
-        raise ValueError("indices.measure: 'task' solves inverse kinematics to "
-                         f"{s.task.ik.tol_pos:g} of the reach: set precision: float64")  # type: ignore[union-attr]  # fmt: skip
+    if task and dtype != jnp.float64:  # the config refuses it (needs_float64); the API too
+        raise ValueError(f"{s.needs_float64()}: set precision: float64")
     fn = build_task_fn(mech, s, dtype) if task else build_fn(mech, s, dtype)
     params = {
         "fixed": jnp.asarray(mech.fixed, dtype),

@@ -380,6 +380,12 @@ class SerialSettings(StudySettings):
                              f"this config's measure is '{ind.measure}' (set measure: task "
                              "or remove study.task)")  # fmt: skip
 
+    def needs_float64(self) -> str | None:
+        if self.indices.measure == "task":
+            return (f"indices.measure: 'task' solves inverse kinematics to "
+                    f"{self.task.ik.tol_pos:g} of the reach")  # type: ignore[union-attr]  # fmt: skip
+        return None
+
     def _measure_says(self) -> str:
         m = self.indices.measure
         return " under measure: task" if m == "task" else f" under measure: {m}"
