@@ -26,7 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from designopt import montecarlo as mc
-from designopt.problems.base import Problem
+from designopt.problems.base import Problem, reads_indices
 from designopt.studies.rcm import mechanism as m
 from designopt.studies.rcm.settings import DESIGN_KEYS, RcmSettings
 
@@ -160,22 +160,23 @@ def build_fn(s: RcmSettings, mesh: Any = None):
     return fn
 
 
-def build_constraints(s: RcmSettings, mesh: Any = None):
-    """constraints(params, X) -> G (M, n_c), feasible when ≤ 0: eq. (19) as
+def build_constraints(s: RcmSettings):
+    """constraints(params, X, aux) -> G (M, n_c), feasible when ≤ 0: eq. (19) as
     (sin(apex/2)(c − d_min) − a)/c, and reach_min − reach; None when both are off."""
     cons = s.constraints
     if not cons.eq19 and cons.reach_min is None:
         return None
 
-    def constraints(params, X):
+    @reads_indices
+    def constraints(params, X, aux):
+        """Reach is read from the indices fn computed (not estimated a second time)."""
         p = {k: v.astype(X.dtype) for k, v in params.items() if k != "sample_key"}
         a, c = design_columns(s, params, X)
         cols = []
         if cons.eq19:
             cols.append(-eq19_margin(s, p, a, c) / c)
         if cons.reach_min is not None:
-            reach = estimates(s, params, X, mesh)["reach"].value
-            cols.append(cons.reach_min - reach)
+            cols.append(cons.reach_min - aux["reach"].astype(X.dtype))
         return jnp.stack(cols, -1)
 
     return constraints
@@ -241,7 +242,7 @@ def problem(s: RcmSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Proble
 
     def shard_samples(mesh: Any) -> Problem:
         return Problem(names, lower, upper, build_fn(s, mesh), params, info,
-                       build_constraints(s, mesh), n_samples_used=pl.n_used)  # fmt: skip
+                       build_constraints(s), n_samples_used=pl.n_used)  # fmt: skip
 
     return Problem(names, lower, upper, build_fn(s), params, info, build_constraints(s),
                    shard_samples, n_samples_used=pl.n_used)  # fmt: skip
