@@ -33,6 +33,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from designopt.ikcmd import check_poses  # noqa: F401 (the one pose check; re-exported)
 from designopt.studies.davinci import mechanism as mech
 
 Array = jnp.ndarray
@@ -516,30 +517,3 @@ def closed_form(X: Array, T: Array) -> tuple[Array, Array]:
     lo, hi = jnp.asarray(mech.LOWER, T.dtype), jnp.asarray(mech.UPPER, T.dtype)
     ok, _, _ = _evaluate(X, T, q, lo, hi, Options())
     return q, ok
-
-
-# ------------------------------------------------------------------------ inputs
-
-
-def check_poses(T: np.ndarray, tol: float = 1e-6) -> list[tuple[int, str]]:
-    """(row, problem) for every pose of T (N, 4, 4) that is not a rigid transform:
-    NaN/inf, a rotation block not orthonormal to ``tol`` or with det −1, a bottom row
-    other than (0, 0, 0, 1). Empty list: all fine."""
-    T = np.asarray(T, np.float64)
-    bad: list[tuple[int, str]] = []
-    fin = np.all(np.isfinite(T.reshape(len(T), -1)), -1)
-    R = np.where(fin[:, None, None], T[:, :3, :3], 0.0)
-    dev = np.abs(np.einsum("nji,njk->nik", R, R) - np.eye(3)).max((-1, -2))
-    det = np.linalg.det(R)
-    bottom = np.abs(np.where(fin[:, None], T[:, 3, :], 0.0) - [0, 0, 0, 1]).max(-1)
-    for i in np.flatnonzero(~fin | (dev > tol) | (det < 0) | (bottom > tol)):
-        if not fin[i]:
-            why = "NaN or inf in the pose"
-        elif dev[i] > tol:
-            why = f"rotation not orthonormal (|RᵀR − I| = {dev[i]:.2g} > {tol:g})"
-        elif det[i] < 0:
-            why = "rotation has det −1 (a reflection)"
-        else:
-            why = "bottom row is not (0, 0, 0, 1)"
-        bad.append((int(i), why))
-    return bad
