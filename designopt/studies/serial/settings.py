@@ -194,45 +194,42 @@ class SerialIndices(Section):
         return tuple(sorted(ROWS.index(r) for r in self.jacobian))
 
 
-class LinearConstraint(Section):
+class _Bound(Section):
+    """One side of a constraint: exactly one of ``le`` and ``ge``."""
+
+    le: float | None = Field(None, allow_inf_nan=False)
+    ge: float | None = Field(None, allow_inf_nan=False)
+
+    @model_validator(mode="after")
+    def _one_side(self) -> _Bound:
+        if (self.le is None) == (self.ge is None):
+            raise ValueError("give exactly one of 'le' and 'ge'")
+        return self
+
+
+class LinearConstraint(_Bound):
     """A linear constraint on the design variables: Σ terms[name]·x[name] ≤ le (or ≥ ge),
     e.g. ``{terms: {l1: 1, l2: 1}, le: 1.2}`` bounds the total reach."""
 
     terms: dict[str, float] = Field(min_length=1)
-    le: float | None = Field(None, allow_inf_nan=False)
-    ge: float | None = Field(None, allow_inf_nan=False)
-
-    @model_validator(mode="after")
-    def _one_side(self) -> LinearConstraint:
-        if (self.le is None) == (self.ge is None):
-            raise ValueError("give exactly one of 'le' and 'ge'")
-        return self
 
 
-class IndexConstraint(Section):
+class IndexConstraint(_Bound):
     """A bound on an index of the study, e.g. ``{index: reach, ge: 0.99}``: feasible when
     the index is ≥ ge (or ≤ le). Deb's rules or the penalty see g = ge − index (index − le)."""
 
     index: str
-    le: float | None = Field(None, allow_inf_nan=False)
-    ge: float | None = Field(None, allow_inf_nan=False)
-
-    @model_validator(mode="after")
-    def _one_side(self) -> IndexConstraint:
-        if (self.le is None) == (self.ge is None):
-            raise ValueError("give exactly one of 'le' and 'ge'")
-        return self
 
 
 def _constraint_kind(v: Any) -> str:
     if isinstance(v, IndexConstraint) or (isinstance(v, dict) and "index" in v):
-        return "index"
+        return "index bound"
     return "linear"
 
 
 AnyConstraint = Annotated[
     Union[Annotated[LinearConstraint, Tag("linear")],  # noqa: UP007
-          Annotated[IndexConstraint, Tag("index")]],
+          Annotated[IndexConstraint, Tag("index bound")]],
     Discriminator(_constraint_kind),
 ]  # fmt: skip
 
