@@ -1,5 +1,6 @@
 """Inverse kinematics of any :class:`~designopt.kinematics.kernel.SerialModel` (DH, ET or
-URDF chains): batched damped least squares, vmapped over designs × targets × seeds.
+URDF chains): batched damped least squares over designs × targets, in one jitted program
+of fixed shapes.
 
 Targets come in three kinds (``mode``):
 
@@ -8,35 +9,70 @@ Targets come in three kinds (``mode``):
   rows; the residual z × z* has three components of rank 2);
 - ``pose``: p and the full orientation R (6 rows).
 
-Each step is Sugihara's Levenberg–Marquardt update (Sugihara, "Solvability-unconcerned
-inverse kinematics by the Levenberg–Marquardt method", IEEE T-RO 2011):
-Δq = (JᵀJ + (E + λ̄) I)⁻¹ Jᵀe with E = ½|e|², so the damping vanishes as the error does
-(quadratic convergence near a solution) and grows far from one or near a singularity
-(no blow-up). Position rows are divided by the chain's reach scale L, so that a pose
-mixes metres (or mm) and radians on equal terms. Joint limits are kept by projection
-(clipping) after every step. The orientation residual is ½ Σᵢ rᵢ × rᵢ* over the columns
-of R (Siciliano et al., "Robotics: Modelling, Planning and Control", 2009, eq. 3.85).
+Step. Sugihara's Levenberg–Marquardt update (Sugihara, "Solvability-unconcerned inverse
+kinematics by the Levenberg–Marquardt method", IEEE T-RO 2011):
+Δq = (JᵀJ + λ I)⁻¹ Jᵀe with λ = ``damping_e``·E + ``damping``, E = ½|e|², so the damping
+vanishes as the error does (quadratic convergence) and grows far from a solution or near a
+singularity. With fewer rows than joints the same step is solved in the row space,
+Δq = Jᵀ(JJᵀ + λ I)⁻¹ e (3×3 for ``position``). Position rows are divided by the chain's
+reach scale L, so a pose mixes lengths and radians on equal terms; prismatic joints count
+in units of L. The damping floor is tiny (1e-16) and E weighs 0.1, not Sugihara's 1:
+near a singular solution (a target at the rim of the workspace, e.g. a PUMA 560 with the
+elbow almost straight, where σ_min(J) falls like the square of the distance to the fold)
+a larger damping only crawls. Joint limits: a joint on a limit whose descent direction
+(Jᵀe) points out of the range is fixed for the step (its column dropped), then every
+joint is projected back into its range (a revolute joint whose range spans a full turn
+first wraps by ±2π). The orientation residual is ½ Σᵢ rᵢ × rᵢ* over the columns of R
+(Siciliano et al., "Robotics: Modelling, Planning and Control", 2009, eq. 3.85).
 
-Seeds: the ``n_nearest`` entries of a small FK database (``n_db`` configurations drawn
-uniformly within the limits, built once per design) closest to each target, plus
-``n_random`` uniform draws. Every seed is iterated ``iters`` times per round; after
-each of ``rounds`` rounds, the seeds still unsolved (stalled at a limit or in a local
-minimum) restart from fresh uniform draws (one compiled program, no data-dependent
-exit). A revolute joint whose range spans a full turn wraps by ±2π before it is
-clipped. Of the seeds that converge, the one with the largest
-1/k (2-norm, position block) at its solution is kept (the designer gets the best-conditioned configuration),
-otherwise the one with the smallest error. A target is solved when its position error
-is ≤ ``tol_pos``·L and its orientation error ≤ ``tol_rot`` rad, within the limits;
-unreachable targets are reported as failures, never as successes.
+Seeds, tried one after the other for each target until one converges (or, with
+``n_best`` > 1, until that many have; the solution of highest score is kept, by default
+the 2-norm 1/k of the position Jacobian, so the designer gets the best-conditioned
+configuration among those found): the ``n_nearest``
+entries of an FK database (``n_db`` configurations uniform within the limits, the same
+draws for every design) nearest to the target, then ``n_random × rounds`` database
+entries picked by a hash of (target, attempt), i.e. uniform draws. A seed is dropped
+after ``iters`` steps, or earlier when a block of ``block`` steps did not bring its
+least error below ``stall`` × its least error before. The nearest entries are found
+without a T × n_db distance matrix: the database is sorted by the Z-order (Morton) code
+of its tip positions; each target finds its own code by binary search and ranks the
+``window`` entries around it by position and orientation distance.
+
+Scheduling. Every (design, target) pair is an item of one queue (a ring buffer of
+(item, seed) pairs); a fixed number of slots hold the items in flight. A ``while_loop``
+runs ``block`` steps on every slot (a converged configuration is frozen), then a slot
+whose item converged or ran out of seeds is freed, one whose seed was dropped puts the
+item back at the end of the queue with its next seed, and free slots take the queue's
+next pairs. Once the queue is empty the busy slots move to a batch 8× smaller (twice), so
+the hard tail does not keep a large batch running. Designs share the queue: a design
+with many unreachable targets costs its own work, not every design's.
+
+Arithmetic. The step is evaluated entry by entry (structure of arrays: every entry of e,
+J, R, p is one array over the slots; the chain's structural zeros folded at trace time),
+the 6×6 (or 3×3) solve an unrolled Cholesky. The sines and cosines of the joints are
+loop-carried and computed by a shared range reduction and fdlibm's polynomials; e and J
+pass through a division by a runtime 1: XLA counts sin, cos and products as cheap and
+would otherwise copy the chain into every consumer (measured on a 6R pose step: 4× the
+operations and 12× the sines and cosines).
+
+A target is solved when its position error is ≤ ``tol_pos``·L and its orientation error
+≤ ``tol_rot`` rad, within the limits, checked afresh at the end on the returned joints
+(with XLA's own sin and cos); unreachable targets are reported as failures, never as
+successes.
 """
 
 from __future__ import annotations
 
+import math
+from collections.abc import Callable
 from typing import Literal, NamedTuple
 
 import jax
 import jax.numpy as jnp
 
+from designopt.kinematics import _fold as F
+from designopt.kinematics import kernel as K
+from designopt.kinematics.conditioning import inv_cond
 from designopt.kinematics.kernel import SerialModel
 
 Mode = Literal["position", "axis", "pose"]
@@ -44,17 +80,25 @@ MODES: tuple[str, ...] = ("position", "axis", "pose")
 
 
 class IKOptions(NamedTuple):
-    """Solver settings (``iters``, ``n_db``, ``n_nearest``, ``n_random`` fix array shapes;
-    the tolerances and damping are plain numbers)."""
+    """Solver settings. Seeds per target: ``n_nearest`` + ``n_random`` × ``rounds``, at
+    most ``iters`` steps each, stopping once ``n_best`` of them have converged (the best
+    of those by the score is kept). All but the tolerances and the damping fix array
+    shapes or loop bounds."""
 
-    iters: int = 12  # steps per round
-    rounds: int = 3  # seeds still unsolved after a round restart from a random draw
-    n_db: int = 2048
-    n_nearest: int = 2
-    n_random: int = 2
+    iters: int = 48  # LM steps per seed at most
+    rounds: int = 8  # random seeds: n_random × rounds after the nearest ones
+    n_db: int = 4096  # FK database per design
+    n_nearest: int = 4  # nearest database entries tried first
+    n_random: int = 6
     tol_pos: float = 1e-9  # × the reach scale L
     tol_rot: float = 1e-9  # rad
-    damping: float = 1e-8  # λ̄, added to E = ½|e|² (e in units of L and rad)
+    damping: float = 1e-16  # λ̄: λ = damping_e·E + λ̄ (e in units of L and rad)
+    damping_e: float = 0.1  # the weight of E = ½|e|² in λ
+    stall: float = 0.5  # drop a seed whose least E fell less than this factor in a block
+    window: int = 32  # database entries ranked per target (Z-order neighbours)
+    block: int = 4  # steps between checks (convergence, seed change, refill)
+    slots: int = 0  # items in flight (0: min(M·T, clip(M·T/4, 1024, 4096)))
+    n_best: int = 1  # converged seeds compared per target (1: the first that converges)
 
 
 DEFAULTS = IKOptions()
@@ -62,7 +106,9 @@ DEFAULTS = IKOptions()
 
 class IKResult(NamedTuple):
     """Per target: joints (active), success, position error (model units), orientation
-    error (rad; 0 for ``position``), 1/k at the solution, and the winning seed index."""
+    error (rad; 0 for ``position``), 1/k (2-norm, position block) at the joints, and the
+    seed they come from (0 = the nearest database entry; for a failure, the seed that
+    came closest)."""
 
     q: jax.Array
     success: jax.Array
@@ -72,6 +118,220 @@ class IKResult(NamedTuple):
     seed: jax.Array
 
 
+# ------------------------------------------------------------ entry-wise kinematics
+
+Scalar = F.Scalar
+
+# Cody–Waite split of π/2 and the minimax polynomials of sin and cos on [−π/4, π/4]
+# (Sun Microsystems' fdlibm, k_sin.c and k_cos.c, 1993)
+_PIO2 = (1.57079632673412561417e00, 6.07710050630396597660e-11, 2.02226624871116645580e-21)
+_SIN = (-1.66666666666666324348e-01, 8.33333333332248946124e-03, -1.98412698298579493134e-04,
+        2.75573137070700676789e-06, -2.50507602534068634195e-08, 1.58969099521155010221e-10)  # fmt: skip
+_COS = (4.16666666666666019037e-02, -1.38888888888741095749e-03, 2.48015872894767294178e-05,
+        -2.75573143513906633035e-07, 2.08757232129817482790e-09, -1.13596475577881948265e-11)  # fmt: skip
+
+
+def _sincos(x: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """(sin x, cos x) to a few 1e-16 (absolute) for joint angles |x| ≤ 10³: one shared
+    range reduction and two polynomials, plain vectorisable arithmetic (XLA's sin and
+    cos cost about ten times as much on a CPU)."""
+    k = jnp.round(x * (2 / math.pi))
+    r = ((x - k * _PIO2[0]) - k * _PIO2[1]) - k * _PIO2[2]
+    z = r * r
+    ps, pc = _SIN[5], _COS[5]
+    for a, b in zip(_SIN[4::-1], _COS[4::-1], strict=True):
+        ps, pc = ps * z + a, pc * z + b
+    s = r + r * z * ps
+    c = (1.0 - 0.5 * z) + z * z * pc
+    n = k.astype(jnp.int32) & 3
+    odd = (n & 1) == 1
+    s, c = jnp.where(odd, c, s), jnp.where(odd, s, c)
+    return jnp.where(n >= 2, -s, s), jnp.where((n == 1) | (n == 2), -c, c)
+
+
+def _lincomb(key, cols) -> Scalar:
+    return F.total(F.mul(c, cols[j]) for j, c in enumerate(key) if c != 0.0)
+
+
+class _Chain:
+    """A chain evaluated entry by entry for items that each have their own design and
+    joints: the frame kernel's walk (``kernel._Walk``: its folding and its Jacobian
+    columns) with per-item design columns and the sines and cosines supplied."""
+
+    def __init__(self, model: SerialModel) -> None:
+        self.model = model.per_design()
+        self.n, self.D = model.n_active, len(model.variables)
+        w = self._walk([jnp.ones(1)] * self.D, [jnp.zeros(1)] * self.n, {}, {})
+        self.keys_q = tuple(w.trig_q)  # joint combinations whose sin and cos it needs
+        self.keys_x = tuple(w.trig_x)  # design combinations (angles that are variables)
+        self.rev = revolute(model)
+
+    def _walk(self, xc, qc, trig_q, trig_x) -> K._Walk:
+        dtype = jnp.result_type(*qc)
+        w = K._Walk(self.model, jnp.zeros((1, self.D), dtype), jnp.zeros((1, self.n), dtype))
+        w.xcol, w.qcol = list(xc), list(qc)
+        w.trig_q.update(trig_q)
+        w.trig_x.update(trig_x)
+        for s in self.model.steps:
+            w.step(s)
+        return w
+
+    def trig_q(self, qc, exact: bool = False, one=None) -> dict:
+        """cos and sin of every joint combination (:func:`_sincos`, or XLA's); with
+        ``one`` each passes through a division (computed once, not in every consumer)."""
+        out = {}
+        for key in self.keys_q:
+            a = _lincomb(key, qc)
+            s, c = (jnp.sin(a), jnp.cos(a)) if exact else _sincos(a)
+            out[key] = (c, s) if one is None else (c / one, s / one)
+        return out
+
+    def trig_x(self, xc) -> dict:
+        out = {}
+        for key in self.keys_x:
+            a = F.total(F.mul(s, xc[k]) for k, s in key)
+            out[key] = (jnp.cos(a), jnp.sin(a))
+        return out
+
+    def fk(self, xc, qc, trig_q, trig_x, rows: tuple[int, ...] | None = None):
+        """(R 3×3, p 3, J rows×n or None) entry by entry: Python floats (structural
+        values) or (B,) arrays."""
+        B = qc[0].shape[0]
+        w = self._walk(xc, qc, trig_q, trig_x)
+        R = [[_flat(x, B) for x in row] for row in w.rot_entries()]
+        p = [_flat(w.contract(e), B) for e in w.pos_lins()]
+        J = None
+        if rows is not None:
+            E = w.jacobian_entries(rows, tuple(range(self.n)), None)
+            J = [[_flat(w.contract(e), B) for e in row] for row in E]
+        return R, p, J
+
+
+def _flat(x: Scalar, B: int) -> Scalar:
+    """A kernel entry as a (B,) array (Python constants stay constants)."""
+    if F.is_const(x):
+        return x
+    return jnp.reshape(x, (-1,)) if jnp.size(x) == B else jnp.broadcast_to(jnp.ravel(x), (B,))
+
+
+def _cross(a, b):
+    return [F.mul_sub(a[1], b[2], a[2], b[1]), F.mul_sub(a[2], b[0], a[0], b[2]),
+            F.mul_sub(a[0], b[1], a[1], b[0])]  # fmt: skip
+
+
+def _dot(a, b) -> Scalar:
+    return F.total(F.mul(x, y) for x, y in zip(a, b, strict=True))
+
+
+def _residual(R, p, J, pt, Rt, mode: Mode, invL):
+    """(e, J, c): the residual and its Jacobian (position rows in units of L; e falls
+    by J dq for a step dq) and the cosine test of the orientation (z·z* for ``axis``,
+    tr(RᵀR*) − 1 for ``pose``: > 0 tells a small angle from one near π, where the
+    sine-sized residual is small too). The orientation rows are the residual's
+    derivative at the solution: ω for ``pose``; for ``axis`` ω less its roll about the
+    tool axis, (I − z zᵀ) ω (with ω itself a step would also hold the roll, which the
+    residual leaves free: a 2R or 5R arm could not follow; measured on 6R arms, these
+    rows also converge more often than ω or the exact derivative −z* × (ω × z), whose
+    gain vanishes at 90°)."""
+    e = [F.mul(F.sub(pt[i], p[i]), invL) for i in range(3)]
+    c = None
+    if mode == "axis":
+        z, zt = [R[i][2] for i in range(3)], [Rt[i][2] for i in range(3)]
+        e += _cross(z, zt)
+        c = _dot(z, zt)
+        if J is not None:  # ω_j less its roll about the tool axis: (I − z zᵀ) ω_j
+            cols = []
+            for j in range(len(J[0])):
+                w = [J[3][j], J[4][j], J[5][j]]
+                wz = _dot(w, z)
+                cols.append([F.sub(w[r], F.mul(wz, z[r])) for r in range(3)])
+            J = [*J[:3], *([col[r] for col in cols] for r in range(3))]
+    elif mode == "pose":
+        acc: list[Scalar] = [0.0, 0.0, 0.0]
+        for j in range(3):
+            cj = _cross([R[i][j] for i in range(3)], [Rt[i][j] for i in range(3)])
+            acc = [F.add(acc[i], cj[i]) for i in range(3)]
+        e += [F.mul(0.5, a) for a in acc]
+        c = F.sub(F.total(F.mul(R[i][j], Rt[i][j]) for i in range(3) for j in range(3)), 1.0)
+    if J is not None:
+        J = [[F.mul(x, invL) for x in J[r]] if r < 3 else list(J[r]) for r in range(len(J))]
+    return e, J, c
+
+
+def _chol_solve(A: list[list[Scalar]], b: list[Scalar]) -> list[Scalar]:
+    """x = A⁻¹ b for a batch of small symmetric positive-definite systems given entry by
+    entry: Cholesky unrolled at trace time, elementwise over the batch (a batched LAPACK
+    call per tiny matrix is far slower on a CPU). The factor entries divide by the pivots
+    (rather than multiply by reciprocals), which also keeps XLA from recomputing each
+    of them in every later one."""
+    n = len(b)
+    Lc: list[list[Scalar]] = [[0.0] * n for _ in range(n)]
+    d: list[Scalar] = [1.0] * n
+    for j in range(n):
+        s = F.sub(A[j][j], F.total(F.mul(Lc[j][k], Lc[j][k]) for k in range(j)))
+        d[j] = jnp.sqrt(jnp.maximum(s, 1e-32))  # a pivot lost to rounding stays positive
+        for i in range(j + 1, n):
+            s = F.sub(A[i][j], F.total(F.mul(Lc[i][k], Lc[j][k]) for k in range(j)))
+            Lc[i][j] = 0.0 if F.is_const(s) and s == 0.0 else s / d[j]
+    y: list[Scalar] = [0.0] * n
+    for i in range(n):
+        y[i] = F.sub(b[i], F.total(F.mul(Lc[i][k], y[k]) for k in range(i))) / d[i]
+    x: list[Scalar] = [0.0] * n
+    for i in reversed(range(n)):
+        x[i] = F.sub(y[i], F.total(F.mul(Lc[k][i], x[k]) for k in range(i + 1, n))) / d[i]
+    return x
+
+
+def _lm_step(e, J, rev: tuple[bool, ...], L, lam, qc, lower, upper) -> list[Scalar]:
+    """Sugihara's step with damping λ, in joint space (k ≥ n rows) or row space (k < n).
+    A joint on a limit that the descent direction Jᵀe pushes further out is fixed."""
+    k, n = len(e), len(J[0])
+    Jc = [[J[r][i] if rev[i] else F.mul(J[r][i], L) for i in range(n)] for r in range(k)]
+    g = [_dot([Jc[r][i] for r in range(k)], e) for i in range(n)]
+    out = [((qc[i] <= lower[i]) & (g[i] < 0)) | ((qc[i] >= upper[i]) & (g[i] > 0))
+           for i in range(n)]  # fmt: skip
+    Jc = [[jnp.where(out[i], 0.0, Jc[r][i]) if not F.is_const(Jc[r][i]) else Jc[r][i]
+           for i in range(n)] for r in range(k)]  # fmt: skip
+    if k < n:
+        A = [[F.add(_dot(Jc[i], Jc[j]), lam if i == j else 0.0) for j in range(k)]
+             for i in range(k)]  # fmt: skip
+        y = _chol_solve(A, e)
+        dq = [F.total(F.mul(Jc[r][i], y[r]) for r in range(k)) for i in range(n)]
+    else:
+        cols = [[Jc[r][i] for r in range(k)] for i in range(n)]
+        A = [[F.add(_dot(cols[i], cols[j]), lam if i == j else 0.0) for j in range(n)]
+             for i in range(n)]  # fmt: skip
+        dq = _chol_solve(A, [jnp.where(out[i], 0.0, g[i]) for i in range(n)])
+    return [d if rev[i] else F.mul(d, L) for i, d in enumerate(dq)]
+
+
+def _project(qc: list, lower, upper, rev: tuple[bool, ...]) -> list:
+    """:func:`project`, joint by joint."""
+    two_pi = 2 * math.pi
+    out = []
+    for i, x in enumerate(qc):
+        lo, hi = lower[i], upper[i]
+        if rev[i]:
+            full = hi - lo >= two_pi
+            x = jnp.where(full & (x > hi) & (x - two_pi >= lo), x - two_pi, x)
+            x = jnp.where(full & (x < lo) & (x + two_pi <= hi), x + two_pi, x)
+        out.append(jnp.clip(x, lo, hi))
+    return out
+
+
+def _one(x: jax.Array) -> jax.Array:
+    """A 1 computed from data: dividing by it is exact and keeps XLA from fusing (and
+    thereby recomputing) the dividend into each of its consumers."""
+    return jnp.where(jnp.isnan(jnp.ravel(x)[0]), 2.0, 1.0).astype(x.dtype)
+
+
+def _keep(x: Scalar, one: jax.Array) -> Scalar:
+    return x if F.is_const(x) else x / one
+
+
+# ----------------------------------------------------------------- public helpers
+
+
 def _rows(mode: Mode) -> tuple[int, ...]:
     return (0, 1, 2) if mode == "position" else (0, 1, 2, 3, 4, 5)
 
@@ -79,17 +339,21 @@ def _rows(mode: Mode) -> tuple[int, ...]:
 def residual(model: SerialModel, X: jax.Array, q: jax.Array, p_t: jax.Array,
              R_t: jax.Array | None, mode: Mode, L: jax.Array):  # fmt: skip
     """(e, J, p, R) of configurations q (B, n) of one design X (D,) against targets
-    p_t (B, 3) and R_t (B, 3, 3) (for ``axis`` only its last column counts)."""
+    p_t (B, 3) and R_t (B, 3, 3) (for ``axis`` only its last column counts), as arrays:
+    the residual and Jacobian the solver steps with (:func:`_residual`)."""
     R, p, J = model.fk_jacobian(X, q, rows=_rows(mode))
     e_p = (p_t - p) / L
     J_p = J[..., :3, :] / L
     if mode == "position":
         return e_p, J_p, p, R
+    J_o = J[..., 3:, :]
     if mode == "axis":
-        e_o = jnp.cross(R[..., :, 2], R_t[..., :, 2])
+        z, zt = R[..., :, 2], R_t[..., :, 2]
+        e_o = jnp.cross(z, zt)
+        J_o = J_o - z[..., :, None] * jnp.einsum("...r,...rj->...j", z, J_o)[..., None, :]
     else:
         e_o = 0.5 * sum(jnp.cross(R[..., :, i], R_t[..., :, i]) for i in range(3))
-    return jnp.concatenate([e_p, e_o], -1), jnp.concatenate([J_p, J[..., 3:, :]], -2), p, R
+    return jnp.concatenate([e_p, e_o], -1), jnp.concatenate([J_p, J_o], -2), p, R
 
 
 def errors(p: jax.Array, R: jax.Array, p_t: jax.Array, R_t: jax.Array | None,
@@ -109,30 +373,6 @@ def errors(p: jax.Array, R: jax.Array, p_t: jax.Array, R_t: jax.Array | None,
     return pos, jnp.arctan2(jnp.linalg.norm(w, axis=-1), tr - 1.0)
 
 
-def spd_solve(A: list[list[jax.Array]], b: list[jax.Array]) -> list[jax.Array]:
-    """x = A⁻¹ b for a batch of small symmetric positive-definite systems given entry by
-    entry (A[i][j] and b[i] arrays over the batch): Cholesky unrolled at trace time, so
-    the whole solve is elementwise arithmetic over the batch (a batched LAPACK call per
-    tiny matrix is far slower on a CPU)."""
-    n = len(b)
-    Lc: list[list[jax.Array]] = [[None] * n for _ in range(n)]  # type: ignore[list-item]
-    inv_d = [None] * n
-    for j in range(n):
-        s = A[j][j] - sum(Lc[j][k] * Lc[j][k] for k in range(j))
-        d = jnp.sqrt(s)
-        inv_d[j] = 1.0 / d
-        Lc[j][j] = d
-        for i in range(j + 1, n):
-            Lc[i][j] = (A[i][j] - sum(Lc[i][k] * Lc[j][k] for k in range(j))) * inv_d[j]
-    y = [None] * n
-    for i in range(n):
-        y[i] = (b[i] - sum(Lc[i][k] * y[k] for k in range(i))) * inv_d[i]
-    x = [None] * n
-    for i in reversed(range(n)):
-        x[i] = (y[i] - sum(Lc[k][i] * x[k] for k in range(i + 1, n))) * inv_d[i]
-    return x  # type: ignore[return-value]
-
-
 def revolute(model: SerialModel) -> tuple[bool, ...]:
     """Per active joint: does it drive a revolute chain joint?"""
     C = model.coupling
@@ -149,115 +389,321 @@ def project(q: jax.Array, lower: jax.Array, upper: jax.Array, wrap: jax.Array) -
     return jnp.clip(q, lower, upper)
 
 
-def iterate(model: SerialModel, X: jax.Array, q: jax.Array, p_t: jax.Array,
-            R_t: jax.Array | None, lower: jax.Array, upper: jax.Array, mode: Mode,
-            L: jax.Array, iters: int, damping: float) -> jax.Array:  # fmt: skip
-    """``iters`` damped least-squares steps from q (B, n), projected onto the limits."""
-    n = q.shape[-1]
-    wrap = jnp.asarray(revolute(model)) & (upper - lower >= 2 * jnp.pi)
-
-    rev = revolute(model)
-
-    def step(_, q):
-        e, J, _, _ = residual(model, X, q, p_t, R_t, mode, L)
-        k = e.shape[-1]
-        ec = [e[:, r] for r in range(k)]
-        # prismatic joints in units of L (so the damping weighs every joint alike)
-        Jc = [[J[:, r, i] if rev[i] else J[:, r, i] * L for i in range(n)] for r in range(k)]
-        lam = 0.5 * sum(x * x for x in ec) + damping
-        A = [[sum(Jc[r][i] * Jc[r][j] for r in range(k)) + (lam if i == j else 0.0)
-              for j in range(n)] for i in range(n)]  # fmt: skip
-        g = [sum(Jc[r][i] * ec[r] for r in range(k)) for i in range(n)]
-        dq = spd_solve(A, g)
-        dq = jnp.stack([d if rev[i] else d * L for i, d in enumerate(dq)], -1)
-        return project(q + dq, lower, upper, wrap)
-
-    return jax.lax.fori_loop(0, iters, step, q)
+# -------------------------------------------------------------------------- seeds
 
 
-def nearest(d: jax.Array, k: int) -> jax.Array:
-    """Indices (T, k) of the k smallest entries of each row of d (T, n), smallest first:
-    k argmin passes, each masking the previous winner (on a CPU, ``lax.top_k`` over
-    rows of a few thousand is ~80× slower than this for k ≤ 4)."""
-    cols = jnp.arange(d.shape[-1])
-    out = []
-    for _ in range(k):
-        i = jnp.argmin(d, -1)
-        out.append(i)
-        d = jnp.where(cols == i[:, None], jnp.inf, d)
-    return jnp.stack(out, -1)
+def _spread3(x: jax.Array) -> jax.Array:
+    """The low 10 bits of x moved to every third bit (uint32)."""
+    x = x.astype(jnp.uint32) & 0x3FF
+    x = (x | (x << 16)) & 0x030000FF
+    x = (x | (x << 8)) & 0x0300F00F
+    x = (x | (x << 4)) & 0x030C30C3
+    return (x | (x << 2)) & 0x09249249
+
+
+def _morton(p: jax.Array, lo: jax.Array, scale: jax.Array) -> jax.Array:
+    """Z-order code of positions p (..., 3) on a 1024³ grid."""
+    g = jnp.clip(jnp.floor((p - lo) * scale), 0, 1023).astype(jnp.int32)
+    return _spread3(g[..., 0]) | (_spread3(g[..., 1]) << 1) | (_spread3(g[..., 2]) << 2)
+
+
+def _features(p: jax.Array, R: jax.Array | None, L: jax.Array, mode: Mode) -> jax.Array:
+    """(..., F) points whose squared distance is |Δp|²/L² (+ (1 − z·z*) for ``axis``,
+    + (3 − tr RᵀR*)/2 for ``pose``)."""
+    f = [p / L]
+    if mode == "axis":
+        f.append(R[..., :, 2] / math.sqrt(2.0))
+    elif mode == "pose":
+        f.append(R.reshape(R.shape[:-2] + (9,)) / 2.0)
+    return jnp.concatenate(f, -1)
+
+
+def _index(q_db: jax.Array, p_db: jax.Array, R_db: jax.Array, L: jax.Array, mode: Mode):
+    """One design's database sorted by the Z-order code of its positions: (lo, scale,
+    codes (N,), features (F, N), joints (N, n)). The sort carries the features and joints
+    along, which also materialises them (a gather from them would otherwise recompute
+    the FK for every gathered element)."""
+    lo = jnp.min(p_db, 0)
+    scale = 1023.0 / jnp.maximum(jnp.max(jnp.max(p_db, 0) - lo), jnp.finfo(p_db.dtype).tiny)
+    f = _features(p_db, R_db, L, mode)
+    ops = jax.lax.sort((_morton(p_db, lo, scale), *f.T, *q_db.T), num_keys=1)
+    nf = f.shape[1]
+    return lo, scale, ops[0], jnp.stack(ops[1 : 1 + nf]), jnp.stack(ops[1 + nf :], -1)
+
+
+_CHUNK = 8192  # targets per nearest-entry search (bounds the T × window intermediates)
+
+
+def _nearest(index, p_t: jax.Array, R_t: jax.Array | None, L: jax.Array, mode: Mode,
+             k: int, window: int) -> jax.Array:  # fmt: skip
+    """(T, k) indices into one design's sorted database (:func:`_index`) of the k
+    entries nearest to each target among the ``window`` entries around its own Z-order
+    code (binary search), by :func:`_features` distance."""
+    lo, scale, code, f_db, _ = index
+    n = code.shape[0]
+    W = min(window, n)
+    T = p_t.shape[0]
+    C = min(T, _CHUNK)
+    pad = -T % C
+    f_t = _features(p_t, R_t, L, mode)
+    code_t = _morton(p_t, lo, scale)
+    f_t = jnp.concatenate([f_t, jnp.repeat(f_t[-1:], pad, 0)]).reshape(-1, C, f_t.shape[1])
+    code_t = jnp.concatenate([code_t, jnp.repeat(code_t[-1:], pad)]).reshape(-1, C)
+
+    def chunk(args):
+        ct, ft = args
+        i = jnp.searchsorted(code, ct)
+        cand = jnp.clip(i - W // 2, 0, n - W)[:, None] + jnp.arange(W)  # (C, W)
+        d = sum((f_db[j][cand] - ft[:, j, None]) ** 2 for j in range(f_db.shape[0]))
+        picks = []
+        for _ in range(min(k, W)):
+            j = jnp.argmin(d, 1)
+            picks.append(j)
+            d = jnp.where(jnp.arange(W) == j[:, None], jnp.inf, d)
+        return jnp.take_along_axis(cand, jnp.stack(picks, 1), 1).astype(jnp.int32)
+
+    return jax.lax.map(chunk, (code_t, f_t)).reshape(-1, min(k, W))[:T]
 
 
 def database(model: SerialModel, X: jax.Array, key: jax.Array, lower: jax.Array,
              upper: jax.Array, n: int) -> tuple[jax.Array, jax.Array, jax.Array]:  # fmt: skip
     """(q (n, nA), p (n, 3), R (n, 3, 3)): FK of n configurations uniform in the limits
-    (the same draws for every design: common random numbers)."""
+    for one design X (D,) (the same draws for every design: common random numbers)."""
     u = jax.random.uniform(key, (n, lower.shape[0]), dtype=lower.dtype)
     q = lower + u * (upper - lower)
-    R, p = model.fk(X, q)
-    return q, p, R
+    R, p = _fk_arrays(_Chain(model), jnp.asarray(X)[None], q)
+    return q, p[0], R[0]
 
 
-def solve_design(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | None,
-                 lower: jax.Array, upper: jax.Array, key: jax.Array, mode: Mode = "position",
-                 opts: IKOptions = DEFAULTS) -> IKResult:  # fmt: skip
-    """IK of T targets (p_t (T, 3), R_t (T, 3, 3) or None) for one design X (D,).
-    Vmap over designs for a swarm (:func:`solve`)."""
+def _fk_arrays(ch: _Chain, X: jax.Array, q: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """(R (M, N, 3, 3), p (M, N, 3)) of joints q (N, n) for every design X (M, D)."""
+    M, N = X.shape[0], q.shape[0]
+    one = _one(q)
+    qc = [jnp.tile(q[:, i] / one, M) for i in range(ch.n)]
+    xc = [jnp.repeat(X[:, k], N) for k in range(ch.D)]
+    R, p, _ = ch.fk(xc, qc, ch.trig_q(qc, one=one), ch.trig_x(xc))
+    R = [[jnp.broadcast_to(jnp.asarray(x, q.dtype), (M * N,)) / one for x in row] for row in R]
+    p = [jnp.broadcast_to(jnp.asarray(x, q.dtype), (M * N,)) / one for x in p]
+    Ra = jnp.stack([jnp.stack(row, -1) for row in R], -2).reshape(M, N, 3, 3)
+    return Ra, jnp.stack(p, -1).reshape(M, N, 3)
+
+
+# ------------------------------------------------------------------------- solver
+
+
+def _phases(B: int) -> tuple[int, ...]:
+    """Slot counts of the successive phases: B, B/8, B/64, … (not below 32)."""
+    out = [B]
+    while out[-1] // 8 >= 32:
+        out.append(out[-1] // 8)
+    return tuple(out)
+
+
+def _check(mode: Mode, R_t, opts: IKOptions) -> None:
     if mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
     if mode != "position" and R_t is None:
         raise ValueError(f"mode {mode!r} needs target orientations R_t")
-    T, n = p_t.shape[0], lower.shape[0]
-    # every configuration has its own joints: the per-design walk (no bases shared over a
-    # swarm) is about 4× faster here than the swarm-shared one
-    model = model.per_design()
-    k_db, k_rand = jax.random.split(key)
-    q_db, p_db, R_db = database(model, X, k_db, lower, upper, opts.n_db)
-    L = jnp.maximum(jnp.max(jnp.linalg.norm(p_db - jnp.mean(p_db, 0), axis=-1)), 1e-12)
-    d = jnp.sum((p_t[:, None, :] - p_db[None]) ** 2, -1) / L**2  # (T, n_db)
-    if mode == "axis":
-        d = d + (1.0 - jnp.einsum("ti,ki->tk", R_t[:, :, 2], R_db[:, :, 2]))
-    elif mode == "pose":
-        d = d + (3.0 - jnp.einsum("tij,kij->tk", R_t, R_db)) / 2
-    seeds = [q_db[nearest(d, opts.n_nearest)]] if opts.n_nearest else []
-    if opts.n_random:
-        u = jax.random.uniform(k_rand, (T, opts.n_random, n), dtype=lower.dtype)
-        seeds.append(lower + u * (upper - lower))
-    q0 = jnp.concatenate(seeds, 1)  # (T, S, n)
-    S = q0.shape[1]
-    pt = jnp.repeat(p_t, S, axis=0)
-    Rt = None if R_t is None else jnp.repeat(R_t, S, axis=0)
-
-    def converged(q):
-        R, p = model.fk(X, q)
-        pe, re = errors(p, R, pt, Rt, mode)
-        return (pe <= opts.tol_pos * L) & (re <= opts.tol_rot), pe, re
-
-    def round_(r, q):
-        # from the second round on, restart the seeds still unsolved (stalled at a limit
-        # or in a local minimum) from fresh uniform draws
-        u = jax.random.uniform(jax.random.fold_in(k_rand, r), q.shape, dtype=q.dtype)
-        q = jnp.where((r == 0) | converged(q)[0][:, None], q, lower + u * (upper - lower))
-        return iterate(model, X, q, pt, Rt, lower, upper, mode, L, opts.iters, opts.damping)
-
-    q = jax.lax.fori_loop(0, opts.rounds, round_, q0.reshape(T * S, n))
-    ok, pe, re = converged(q)
-    ik = model.inv_cond(X, q, rows=(0, 1, 2), norm="2")  # the position block's 1/k
-    pe, re, ik, ok, q = (a.reshape(T, S, *a.shape[1:]) for a in (pe, re, ik, ok, q))
-    # converged seeds rank by 1/k (largest first), the others by their error after them
-    score = jnp.where(ok, 2.0 + ik, -(pe / L + re))
-    best = jnp.argmax(score, axis=1)
-
-    def take(a):
-        return jnp.take_along_axis(a, best.reshape((T,) + (1,) * (a.ndim - 1)), 1)[:, 0]
-
-    return IKResult(take(q), take(ok), take(pe), take(re), take(ik), best)
+    if min(opts.iters, opts.block, opts.n_db, opts.window, opts.n_best) < 1:
+        raise ValueError("IKOptions: iters, block, n_db, window and n_best must be ≥ 1")
 
 
 def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | None,
           lower: jax.Array, upper: jax.Array, key: jax.Array, mode: Mode = "position",
-          opts: IKOptions = DEFAULTS) -> IKResult:  # fmt: skip
-    """IK of the same T targets for M designs X (M, D): every field gains a leading M
-    axis. The seeds' random draws are shared by the designs (common random numbers)."""
-    fn = jax.vmap(lambda x: solve_design(model, x, p_t, R_t, lower, upper, key, mode, opts))
-    return fn(X)
+          opts: IKOptions = DEFAULTS,
+          score: Callable[[jax.Array], jax.Array] | None = None) -> IKResult:  # fmt: skip
+    """IK of the same T targets (p_t (T, 3), R_t (T, 3, 3) or None) for M designs
+    X (M, D): every field has leading axes (M, T). The database draws and the seeds'
+    hashes are shared by the designs (common random numbers); the designs' targets share
+    one queue of slots. With ``opts.n_best`` > 1 a target's solver goes on after a seed
+    converged, until ``n_best`` have (or its seeds run out), and keeps the solution of
+    highest ``score(q)`` (q (M, T, n) → (M, T); default the 2-norm 1/k of the position
+    Jacobian, :attr:`IKResult.inv_k`)."""
+    _check(mode, R_t, opts)
+    X = jnp.asarray(X)
+    M, T, n = X.shape[0], p_t.shape[0], lower.shape[0]
+    I = M * T  # noqa: E741  (items: design-major)
+    dtype = p_t.dtype
+    ch = _Chain(model)
+    rev = ch.rev
+    k_db, k_hash = jax.random.split(key)
+
+    # the databases: one set of joints, FK per design, each sorted by Z order
+    u = jax.random.uniform(k_db, (opts.n_db, n), dtype=dtype)
+    q_db = lower + u * (upper - lower)
+    R_db, p_db = _fk_arrays(ch, X, q_db)
+    L = jnp.maximum(jnp.max(jnp.linalg.norm(p_db - jnp.mean(p_db, 1, keepdims=True), axis=-1),
+                            -1), 1e-12)  # fmt: skip
+    one = _one(L)
+    index = jax.vmap(lambda p, R, Lm: _index(q_db, p, R, Lm, mode))(p_db, R_db, L)
+    q_sorted = index[4]  # (M, n_db, n)
+    n_near = min(opts.n_nearest, opts.n_db, opts.window)
+    if n_near:
+        near = jax.lax.map(lambda a: _nearest(a[:5], p_t, R_t, a[5], mode, n_near, opts.window),
+                           (*index, L))  # (M, T, k)  # fmt: skip
+    else:
+        near = jnp.zeros((M, T, 1), jnp.int32)
+    attempts = max(n_near + opts.n_random * opts.rounds, 1)
+    salt = jax.random.bits(k_hash, (), jnp.uint32)
+    xT = X.T  # (D, M)
+    ptT = p_t.T  # (3, T)
+    RtT = None if R_t is None else R_t.reshape(T, 9).T  # (9, T): row 3i + j holds R[i, j]
+    cols = () if mode == "position" else (2,) if mode == "axis" else (0, 1, 2)
+    tol_p2, tol_r2 = (0.5 * opts.tol_pos) ** 2, (0.5 * opts.tol_rot) ** 2
+    rows = _rows(mode)
+    iters = -(-opts.iters // opts.block) * opts.block
+
+    def split(i):
+        ic = jnp.minimum(i, I - 1)
+        return ic // T, ic % T
+
+    def seed(i, a):
+        """Joints (n, B) of seed a of items i: a nearest entry, then hashed ones."""
+        m, t = split(i)
+        a_near = near[m, t, jnp.minimum(a, near.shape[2] - 1)]
+        h = (t.astype(jnp.uint32) * jnp.uint32(2654435761)
+             ^ (a.astype(jnp.uint32) + salt) * jnp.uint32(2246822519))  # fmt: skip
+        h = h ^ (h >> 15)
+        a_rand = (h % jnp.uint32(opts.n_db)).astype(jnp.int32)
+        return q_sorted[m, jnp.where(a < n_near, a_near, a_rand)].T
+
+    def block(i, qc):
+        """``opts.block`` steps from qc (frozen where converged) for items i. Returns
+        (qc, converged, the least E = ½|e|² met)."""
+        m, t = split(i)
+        xc = [xT[k, m] for k in range(ch.D)]
+        tx = ch.trig_x(xc)
+        Lm = L[m]
+        pt = [ptT[j, t] for j in range(3)]
+        Rt = None
+        if RtT is not None:
+            Rt = [[RtT[3 * r + c, t] if c in cols else 0.0 for c in range(3)] for r in range(3)]
+
+        def body(_, c):
+            qc, tq, conv, Em = c
+            R, p, J = ch.fk(xc, qc, tq, tx, rows)
+            e, J, cz = _residual(R, p, J, pt, Rt, mode, 1.0 / Lm)
+            e = [_keep(x, one) for x in e]
+            J = [[_keep(x, one) for x in r] for r in J]
+            ok = _dot(e[:3], e[:3]) <= tol_p2
+            if mode != "position":
+                ok = ok & (_dot(e[3:], e[3:]) <= tol_r2) & (cz > 0)
+            E = 0.5 * _dot(e, e)
+            dq = _lm_step(e, J, rev, Lm, opts.damping_e * E + opts.damping, qc, lower, upper)
+            new = _project([x + d for x, d in zip(qc, dq, strict=True)], lower, upper, rev)
+            qc = [jnp.where(ok, a, b) for a, b in zip(qc, new, strict=True)]
+            return qc, ch.trig_q(qc), ok, jnp.minimum(Em, E)
+
+        z = jnp.zeros_like(qc[0])
+        c0 = (qc, ch.trig_q(qc), z > 0, z + jnp.inf)
+        qc, _, ok, Em = jax.lax.fori_loop(0, opts.block, body, c0)
+        return qc, ok, Em
+
+    nb = opts.n_best
+
+    def round_(s):
+        i, a, it, Eb, q, head, tail, qi, qa, q_out, a_out, E_out, nc = s
+        active = i < I
+        ic = jnp.minimum(i, I - 1)
+        qc, ok, Em = block(i, [q[j] for j in range(n)])
+        q = jnp.stack(qc)
+        it = it + opts.block
+        # a seed is dropped when it used its steps or its least error stopped falling
+        stalled = ~(Em < opts.stall * Eb)
+        Eb = jnp.minimum(Eb, Em)
+        give_up = ~ok & ((it >= iters) | stalled)
+        last = a + 1 >= attempts
+        # converged joints go to the item's next solution slot (of n_best); a dropped
+        # seed's joints go to slot 0 when the item has none and they beat its best so far
+        n_conv = nc[ic]
+        better = Em < E_out[ic]
+        idx = jnp.where(active & ok, n_conv * I + i,
+                        jnp.where(active & give_up & better, i, nb * I))  # fmt: skip
+        q_out = q_out.at[:, idx].set(q, mode="drop")
+        a_out = a_out.at[idx].set(a, mode="drop")
+        E_out = E_out.at[jnp.where(idx < nb * I, i, I)].set(jnp.where(ok, -1.0, Em), mode="drop")
+        nc = nc.at[jnp.where(active & ok, i, I)].add(1, mode="drop")
+        more = ok & (n_conv + 1 < nb)  # converged, but n_best asks for another solution
+        retry = active & (give_up | more) & ~last
+        free = active & (ok | give_up)
+        # an item whose seed was dropped goes to the back of the queue with its next seed
+        at = jnp.where(retry, (tail + jnp.cumsum(retry, dtype=jnp.int32) - 1) % I, I)
+        qi, qa = qi.at[at].set(i, mode="drop"), qa.at[at].set(a + 1, mode="drop")
+        tail = tail + jnp.sum(retry, dtype=jnp.int32)
+        # free slots take the queue's next (item, seed)
+        pos = head + jnp.cumsum(free, dtype=jnp.int32) - 1
+        take = free & (pos < tail)
+        i = jnp.where(take, qi[pos % I], jnp.where(free, I, i))
+        a = jnp.where(take, qa[pos % I], a)
+        head = jnp.minimum(head + jnp.sum(free, dtype=jnp.int32), tail)
+        it = jnp.where(free, 0, it)
+        Eb = jnp.where(free, jnp.inf, Eb)
+        q = jnp.where(take[None], seed(i, a), q)
+        return i, a, it, Eb, q, head, tail, qi, qa, q_out, a_out, E_out, nc
+
+    B0 = opts.slots if opts.slots > 0 else max(1024, min(4096, I // 4))
+    sizes = _phases(min(I, B0))
+    i = jnp.arange(sizes[0], dtype=jnp.int32)
+    a = jnp.zeros_like(i)
+    s = (i, a, a, jnp.full(i.shape, jnp.inf, dtype), seed(i, a),
+         jnp.asarray(sizes[0], jnp.int32), jnp.asarray(I, jnp.int32),
+         jnp.arange(I, dtype=jnp.int32), jnp.zeros((I,), jnp.int32),
+         jnp.zeros((n, nb * I), dtype), jnp.zeros((nb * I,), jnp.int32),
+         jnp.full((I,), jnp.inf, dtype), jnp.zeros((I,), jnp.int32))  # fmt: skip
+    for ph in range(len(sizes)):
+        B_next = sizes[ph + 1] if ph + 1 < len(sizes) else 0
+
+        def cond(s, B_next=B_next):
+            busy = jnp.sum(s[0] < I)
+            return ((s[5] < s[6]) | (busy > B_next)) if B_next else busy > 0
+
+        s = jax.lax.while_loop(cond, round_, s)
+        if B_next:  # the busy slots (at most B_next) move to a smaller batch
+            keep = jnp.argsort(s[0] >= I, stable=True)[:B_next]
+            s = (*(x[keep] for x in s[:4]), s[4][:, keep], *s[5:])
+    q_out, a_out, n_conv = s[9], s[10], s[12].reshape(M, T)
+
+    # the returned joints, checked afresh with XLA's sin and cos; of several converged
+    # solutions, the one of highest score
+    xc = [jnp.repeat(X[:, k], T) for k in range(ch.D)]
+    tx = ch.trig_x(xc)
+
+    def arr(x):
+        return jnp.broadcast_to(jnp.asarray(x, dtype), (I,))
+
+    best = None
+    for c in range(nb):
+        qc = [q_out[j, c * I : (c + 1) * I] for j in range(n)]
+        R, p, J = ch.fk(xc, qc, ch.trig_q(qc, exact=True, one=one), tx, (0, 1, 2))
+        Ra = jnp.stack([jnp.stack([arr(x) for x in row], -1) for row in R], -2)
+        pa = jnp.stack([arr(x) for x in p], -1).reshape(M, T, 3)
+        Ja = jnp.stack([jnp.stack([arr(x) for x in row], -1) for row in J], -2)
+        pe, re = errors(pa, Ra.reshape(M, T, 3, 3), p_t[None],
+                        None if R_t is None else R_t[None], mode)  # fmt: skip
+        q = jnp.stack(qc, -1).reshape(M, T, n)
+        inside = jnp.all((q >= lower) & (q <= upper), -1)
+        ok = (pe <= opts.tol_pos * L[:, None]) & (re <= opts.tol_rot) & inside
+        ik_ = inv_cond(Ja.reshape(M, T, 3, n), "2")
+        r = IKResult(q, ok, pe, re, ik_, a_out[c * I : (c + 1) * I].reshape(M, T))
+        if best is None:
+            best = r
+            if nb > 1:
+                sc_best = jnp.where(ok, score(q) if score else ik_, -jnp.inf)
+            continue
+        sc = jnp.where(ok & (c < n_conv), score(q) if score else ik_, -jnp.inf)
+        take = sc > sc_best
+        sc_best = jnp.where(take, sc, sc_best)
+        best = IKResult(*(jnp.where(take.reshape(take.shape + (1,) * (x.ndim - 2)), y, x)
+                          for x, y in zip(best, r, strict=True)))  # fmt: skip
+    assert best is not None
+    return best
+
+
+def solve_design(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | None,
+                 lower: jax.Array, upper: jax.Array, key: jax.Array, mode: Mode = "position",
+                 opts: IKOptions = DEFAULTS,
+                 score: Callable[[jax.Array], jax.Array] | None = None) -> IKResult:  # fmt: skip
+    """IK of T targets (p_t (T, 3), R_t (T, 3, 3) or None) for one design X (D,)
+    (:func:`solve` with M = 1; ``score`` maps q (1, T, n) to (1, T))."""
+    r = solve(model, jnp.asarray(X)[None], p_t, R_t, lower, upper, key, mode, opts, score)
+    return IKResult(*(x[0] for x in r))
