@@ -64,14 +64,14 @@ def _aliases(s: SerialSettings) -> dict[str, str]:
 def _cost(s) -> Cost:
     """Monte-Carlo cost per design (pre-flight): the index samples, ``chunk`` in flight,
     and the normalisation probes when the objective normalises. Under ``measure: task``
-    a sample is a target (``front.n_samples`` counts targets too) and a chunk holds its
-    IK seeds' configurations."""
+    a sample is a target (``front.n_samples`` counts targets too) and a chunk holds the
+    IK solutions compared per target (and its place in the queue)."""
     ind, n_norm = s.indices, s.objective.get("n_norm")
     if ind.measure == "task":
         from designopt.studies.serial import taskindex
 
-        seeds = s.task.ik.n_nearest + s.task.ik.n_random
-        n, c = taskindex.n_targets(s), taskindex.chunk(s) * seeds
+        kept = s.task.ik.n_best + 1  # the solutions compared, and the queue
+        n, c = taskindex.n_targets(s), taskindex.chunk(s) * kept
     else:
         n, c = ind.n_samples, min(ind.chunk, ind.n_samples)
     return Cost(

@@ -235,19 +235,27 @@ AnyConstraint = Annotated[
 
 
 class TaskIK(Section):
-    """The IK behind ``measure: task`` (``designopt.kinematics.ik.IKOptions``): LM steps
-    per round, rounds (unsolved seeds restart), FK-database size, seeds per target
-    (nearest database entries and random draws), tolerances (position × the reach scale,
-    orientation in rad) and the damping floor."""
+    """The IK behind ``measure: task`` (``designopt.kinematics.ik.IKOptions``, whose
+    defaults these are): LM steps per seed, rounds of random seeds, FK-database size,
+    seeds per target (nearest database entries, then random draws), converged seeds
+    compared (``n_best``: the best by the study's 1/k is kept), tolerances (position ×
+    the reach scale, orientation in rad), the damping (λ = damping_e·E + damping), and
+    the scheduling (stall factor, Z-order window, steps per block, slots in flight)."""
 
-    iters: int = Field(12, ge=1, le=1000)
-    rounds: int = Field(3, ge=1, le=100)
-    n_db: int = Field(2048, ge=1, le=1_000_000)
-    n_nearest: int = Field(2, ge=0, le=64)
-    n_random: int = Field(2, ge=0, le=64)
+    iters: int = Field(48, ge=1, le=1000)
+    rounds: int = Field(8, ge=1, le=100)
+    n_db: int = Field(4096, ge=1, le=1_000_000)
+    n_nearest: int = Field(4, ge=0, le=64)
+    n_random: int = Field(6, ge=0, le=64)
+    n_best: int = Field(2, ge=1, le=64)
     tol_pos: float = Field(1e-9, gt=0, le=1)
     tol_rot: float = Field(1e-9, gt=0, le=1)
-    damping: float = Field(1e-8, gt=0, le=1)
+    damping: float = Field(1e-16, gt=0, le=1)
+    damping_e: float = Field(0.1, ge=0, le=100)
+    stall: float = Field(0.5, gt=0, le=1)
+    window: int = Field(32, ge=1, le=4096)
+    block: int = Field(4, ge=1, le=64)
+    slots: int = Field(0, ge=0, le=1_000_000)
 
     @model_validator(mode="after")
     def _seeds(self) -> TaskIK:

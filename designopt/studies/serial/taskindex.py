@@ -37,11 +37,10 @@ MEANS = ("reach", "gci", "manipulability", "joint_margin")
 
 
 def options(s: SerialSettings) -> ik.IKOptions:
-    """The IK settings of ``study.task.ik`` as solver options."""
+    """The IK settings of ``study.task.ik`` as solver options (every field: the schema's
+    defaults are the solver's, but for ``n_best`` = 2 where the solver's is 1)."""
     o = s.task.ik  # type: ignore[union-attr]
-    return ik.IKOptions(iters=o.iters, rounds=o.rounds, n_db=o.n_db, n_nearest=o.n_nearest,
-                        n_random=o.n_random, tol_pos=o.tol_pos, tol_rot=o.tol_rot,
-                        damping=o.damping)  # fmt: skip
+    return ik.IKOptions(**{k: getattr(o, k) for k in ik.IKOptions._fields})
 
 
 def mode(s: SerialSettings) -> ik.Mode:
@@ -101,8 +100,14 @@ def per_target(mech: Mechanism, s: SerialSettings, params: dict[str, Any], full:
 
     def one_chunk(args):
         pt, Rt = args
-        res = ik.solve(mech.model, full, pt, Rt, lo, hi, key, md, opts)
-        J = jax.vmap(lambda x, q: mech.model.jacobian(x, q, rows=rows))(full, res.q)
+        def jac(q):  # the study's Jacobian block (M, C, rows, n) at joints q (M, C, n)
+            return jax.vmap(lambda x, q: mech.model.jacobian(x, q, rows=rows))(full, q)
+
+        def score(q):  # of several converged seeds, keep the best-conditioned
+            return inv_cond(jac(q) * sc[:, None], ind.norm, ind.normalized)
+
+        res = ik.solve(mech.model, full, pt, Rt, lo, hi, key, md, opts, score)
+        J = jac(res.q)
         inv_k, man = inv_cond(J * sc[:, None], ind.norm, ind.normalized, with_volume=True)
         ok = res.success
         margin = jnp.min(jnp.minimum(res.q - lo, hi - res.q) / half, -1)
