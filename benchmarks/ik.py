@@ -4,7 +4,7 @@ generic solver for any chain (``designopt.kinematics.ik``, also on a PUMA 560) a
 (where installed) Robotics Toolbox ik_LM / ik_NR, on the same poses and tolerances.
 
     .venv/bin/python benchmarks/ik.py [--n 100000] [--paths 100] [--steps 10000]
-        [--paper 200] [--peers 200]
+        [--paper 200] [--peers 200] [--generic 16384] [--repeat 5] [--only generic]
 
 Poses: FK of random joint sets within the joint ranges (f64). Cold: every pose from the
 seed database. Trajectory: ``--paths`` smooth joint paths sampled at 1 kHz for ``--steps``
@@ -55,10 +55,10 @@ def row(name, n, run, ok, pe, re, extra=""):
           f"{qp[0]:.1e} {qp[1]:.1e} {qp[2]:.1e}  {qr[0]:.1e} {qr[1]:.1e} {qr[2]:.1e} {extra}")  # fmt: skip
 
 
-def header():
+def header(unit: str = "mm"):
     print(
         f"{'solver':<34} {'poses':>8} {'solves/s':>12} {'success%':>9}  "
-        f"{'pos err mm: p50 p99 max':<25}  {'rot err rad: p50 p99 max':<25}"
+        f"{'pos err ' + unit + ': p50 p99 max':<25}  {'rot err rad: p50 p99 max':<25}"
     )
 
 
@@ -108,31 +108,101 @@ def peers(T: np.ndarray) -> None:
               "(prismatic q3 between revolute joints) is not ported: not compared")  # fmt: skip
 
 
-def generic(n: int) -> None:
-    """The generic solver (``designopt.kinematics.ik``: any SerialModel, no chain-specific
-    seeding) on the same da Vinci poses and on a PUMA 560 (position and full pose)."""
+PUMA_A = [0, 0.4318, 0.0203, 0, 0, 0]
+PUMA_D = [0, 0, 0.15005, 0.4318, 0, 0]
+PUMA_ALPHA = [np.pi / 2, 0, -np.pi / 2, np.pi / 2, -np.pi / 2, 0]
+PUMA_LO = np.radians([-160, -110, -135, -266, -100, -266.0])
+
+
+def _rates(fn, args, n: int, repeat: int):
+    """(result, compile s, solves/s per repeat): the first call's extra time is the
+    compile; then ``repeat`` timed calls."""
+    t0 = time.perf_counter()
+    out = jax.block_until_ready(fn(*args))
+    first = time.perf_counter() - t0
+    runs = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        jax.block_until_ready(fn(*args))
+        runs.append(time.perf_counter() - t0)
+    return out, max(first - min(runs), 0.0), n / np.asarray(runs)
+
+
+def _rtb_puma(q_true: np.ndarray, n: int) -> None:
+    """Robotics Toolbox ik_LM / ik_NR (C++, one pose per call) on the same PUMA 560
+    (its DH table and limits), position (mask) and full pose, the same tolerances."""
+    import roboticstoolbox as rtb
+
     from designopt.kinematics import ik as gik
     from designopt.kinematics.kernel import dh_model
 
-    pi = np.pi
+    links = [rtb.RevoluteDH(a=a, d=d, alpha=al, qlim=[lo, -lo])
+             for a, d, al, lo in zip(PUMA_A, PUMA_D, PUMA_ALPHA, PUMA_LO, strict=True)]  # fmt: skip
+    ets = rtb.DHRobot(links).ets()
+    puma = dh_model("standard", "RRRRRR", PUMA_ALPHA, PUMA_A, PUMA_D, [0] * 6)
+    R, p = puma.fk(jnp.zeros(0), jnp.asarray(q_true[:n]))
+    # the generic solver's tolerance: 1e-9 × its reach scale L (the largest distance of
+    # FK positions at random joints from their mean; here of all the benchmark's poses)
+    _, p_all = puma.fk(jnp.zeros(0), jnp.asarray(q_true))
+    L = float(np.max(np.linalg.norm(p_all - np.mean(p_all, 0), axis=-1)))
+    Ts = [ets.fkine(q).A for q in q_true[:n]]
+    dfk = max(np.abs(T[:3, 3] - np.asarray(pi)).max() for T, pi in zip(Ts, p, strict=True))
+    print(f"  Robotics Toolbox PUMA: its FK = ours to {dfk:.1e} m")
+    for mode, mask in (("position", [1, 1, 1, 0, 0, 0]), ("pose", None)):
+        for meth in ("ik_LM", "ik_NR"):
+            f = getattr(ets, meth)
+            t0 = time.perf_counter()
+            sols = [f(T, tol=1e-24, mask=mask, joint_limits=True, ilimit=30, slimit=100)
+                    for T in Ts]  # fmt: skip
+            run = time.perf_counter() - t0
+            qs = np.array([s[0] for s in sols])
+            Rq, pq = puma.fk(jnp.zeros(0), jnp.asarray(qs))
+            pe, re = gik.errors(pq, Rq, p, R, mode)
+            inside = np.all((qs >= PUMA_LO - 1e-12) & (qs <= -PUMA_LO + 1e-12), -1)
+            ok = (np.asarray(pe) <= 1e-9 * L) & (np.asarray(re) <= TOL) & inside
+            row(f"roboticstoolbox {meth} (PUMA 560, {mode})", n, run, ok, pe, re)
+
+
+def generic(n: int, repeat: int, n_peers: int) -> None:
+    """The generic solver (``designopt.kinematics.ik``: any SerialModel, no chain-specific
+    seeding, its default options) on the da Vinci poses and on a PUMA 560 (position,
+    position + tool axis, full pose), float64; the rate is the median of ``repeat`` calls
+    with the spread, compile apart. Robotics Toolbox on the same PUMA poses, if installed."""
+    from designopt.kinematics import ik as gik
+    from designopt.kinematics.kernel import dh_model
+
     rng = np.random.default_rng(1)
     q = rng.uniform(m.LOWER, m.UPPER, (n, 6))
     R, p = m.ARM.fk(X, jnp.asarray(q))
     lo, hi = jnp.asarray(m.LOWER), jnp.asarray(m.UPPER)
-    cases = [("da Vinci arm", m.ARM, X, lo, hi, p, R, "pose")]
-    puma = dh_model("standard", "RRRRRR", [pi / 2, 0, -pi / 2, pi / 2, -pi / 2, 0],
-                    [0, 0.4318, 0.0203, 0, 0, 0], [0, 0, 0.15005, 0.4318, 0, 0], [0] * 6)  # fmt: skip
-    plo = jnp.radians(jnp.array([-160, -110, -135, -266, -100, -266.0]))
-    qp = rng.uniform(plo, -plo, (n, 6))
+    cases = [("da Vinci arm", m.ARM, X, lo, hi, p, R, "pose", "mm")]
+    puma = dh_model("standard", "RRRRRR", PUMA_ALPHA, PUMA_A, PUMA_D, [0] * 6)
+    plo = jnp.asarray(PUMA_LO)
+    qp = rng.uniform(PUMA_LO, -PUMA_LO, (n, 6))
     Rp, pp = puma.fk(jnp.zeros(0), jnp.asarray(qp))
-    cases += [("PUMA 560", puma, jnp.zeros(0), plo, -plo, pp, Rp, mode)
-              for mode in ("position", "pose")]  # fmt: skip
-    for name, model, x, lo_, hi_, pt, Rt, mode in cases:
+    cases += [("PUMA 560", puma, jnp.zeros(0), plo, -plo, pp, Rp, mode, "m") for mode in gik.MODES]
+    print(f"generic solver, defaults {gik.DEFAULTS}")
+    print(f"{'generic LM':<34} {'poses':>8} {'solves/s median (min-max)':>28} {'success%':>9}"
+          f"  compile")  # fmt: skip
+    for name, model, x, lo_, hi_, pt, Rt, mode, unit in cases:
         fn = jax.jit(lambda pt, Rt, model=model, x=x, lo_=lo_, hi_=hi_, mode=mode:
                      gik.solve_design(model, x, pt, Rt, lo_, hi_, jax.random.key(0), mode))  # fmt: skip
-        r, c, run = timed(fn, pt, Rt)
-        row(f"generic LM ({name}, {mode})", n, run, r.success, r.pos_err, r.rot_err,
-            f"compile {c:.1f} s; own tolerance 1e-9·reach")  # fmt: skip
+        r, c, rates = _rates(fn, (pt, Rt), n, repeat)
+        ok = np.asarray(r.success)
+        print(f"{name + ', ' + mode:<34} {n:>8} {np.median(rates):>11.3g} "
+              f"({rates.min():.3g}-{rates.max():.3g})   {100 * ok.mean():>9.3f}  {c:.1f} s "
+              f"(max err of the solved: {np.asarray(r.pos_err)[ok].max():.1e} {unit}, "
+              f"{np.asarray(r.rot_err)[ok].max():.1e} rad)")  # fmt: skip
+    try:
+        import roboticstoolbox  # noqa: F401
+    except ImportError:
+        print("roboticstoolbox: not installed (pip install roboticstoolbox-python); skipped")
+        return
+    header("m")
+    try:
+        _rtb_puma(qp, min(n_peers, n))
+    except Exception as e:  # an API change in a peer must not hide our numbers
+        print(f"roboticstoolbox: comparison failed ({type(e).__name__}: {e})")
 
 
 def main() -> None:
@@ -142,11 +212,18 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=10_000)
     ap.add_argument("--paper", type=int, default=200, help="poses for the paper's method")
     ap.add_argument("--peers", type=int, default=200, help="poses for Robotics Toolbox")
-    ap.add_argument("--generic", type=int, default=4096,
+    ap.add_argument("--generic", type=int, default=16384,
                     help="poses for the generic solver (designopt.kinematics.ik)")  # fmt: skip
+    ap.add_argument("--repeat", type=int, default=5, help="timed calls of the generic solver")
+    ap.add_argument("--only", choices=("all", "generic"), default="all",
+                    help="generic: only the generic solver and its peers")  # fmt: skip
     a = ap.parse_args()
     print(f"== da Vinci arm IK (Applied Sciences 2019) == backend={jax.default_backend()} "
           f"cores={os.cpu_count()} load={os.getloadavg()[0]:.1f} f64")  # fmt: skip
+    if a.only == "generic":
+        generic(a.generic, a.repeat, a.peers)
+        print(f"load at the end: {os.getloadavg()[0]:.1f}")
+        return
     rng = np.random.default_rng(0)
     q = rng.uniform(m.LOWER, m.UPPER, (a.n, 6))
     T = jax.block_until_ready(m.pose(X, jnp.asarray(q)))
@@ -207,8 +284,9 @@ def main() -> None:
     err = np.abs(paper.to_deg(np.asarray(r2.q)) - paper.TABLE2_DEG).max()
     print(f"  Table 2: max |output − input| = {err:.1e} (deg / mm), step h "
           f"{np.asarray(r2.step_deg).tolist()}")  # fmt: skip
-    generic(a.generic)
+    generic(a.generic, a.repeat, a.peers)
     peers(np.asarray(T[: a.peers]))
+    print(f"load at the end: {os.getloadavg()[0]:.1f}")
 
 
 if __name__ == "__main__":
