@@ -112,9 +112,7 @@ def check(cfg: BenchConfig, path: str) -> None:
         labels.append(label)
     from designopt import benchmo
 
-    multi = {
-        lab: optim.is_multi_objective(n) for lab, n, _ in entries(cfg)
-    }
+    multi = {lab: optim.is_multi_objective(n) for lab, n, _ in entries(cfg)}
     have = {False: bool(cases(cfg)), True: bool(benchmo.cases(cfg))}
     for i, (label, _, _) in enumerate(entries(cfg)):
         if not have[multi[label]]:

@@ -384,4 +384,3 @@ def cond(J: ArrayLike, norm: Norm = "fro", normalized: bool = False) -> Array:
     +inf for a numerically singular matrix."""
     r = inv_cond(J, norm, normalized)
     return jnp.where(r > 0, 1.0 / jnp.where(r > 0, r, 1.0), jnp.inf)
-

@@ -100,6 +100,7 @@ def per_target(mech: Mechanism, s: SerialSettings, params: dict[str, Any], full:
 
     def one_chunk(args):
         pt, Rt = args
+
         def jac(q):  # the study's Jacobian block (M, C, rows, n) at joints q (M, C, n)
             return jax.vmap(lambda x, q: mech.model.jacobian(x, q, rows=rows))(full, q)
 
