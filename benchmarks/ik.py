@@ -181,7 +181,8 @@ def generic(n: int, repeat: int, n_peers: int) -> None:
     qp = rng.uniform(PUMA_LO, -PUMA_LO, (n, 6))
     Rp, pp = puma.fk(jnp.zeros(0), jnp.asarray(qp))
     cases += [("PUMA 560", puma, jnp.zeros(0), plo, -plo, pp, Rp, mode, "m") for mode in gik.MODES]
-    print(f"generic solver, defaults {gik.DEFAULTS}")
+    print(f"generic solver, defaults {gik.DEFAULTS}; solved: errors within 1e-9 × the "
+          "chain's reach scale L (da Vinci: L ≈ 340 mm) and 1e-9 rad, joints within limits")  # fmt: skip
     print(f"{'generic LM':<34} {'poses':>8} {'solves/s median (min-max)':>28} {'success%':>9}"
           f"  compile")  # fmt: skip
     for name, model, x, lo_, hi_, pt, Rt, mode, unit in cases:

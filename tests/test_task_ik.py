@@ -311,3 +311,14 @@ def test_tool_axes_fill_their_cone():
     assert np.all(cos >= math.cos(math.radians(20)) - 1e-12)
     assert abs(cos.mean() - (1 + math.cos(math.radians(20))) / 2) < 1e-3  # uniform on the cap
     np.testing.assert_allclose(np.linalg.norm(z, axis=-1), 1.0, atol=1e-12)
+
+
+def test_the_task_schema_defaults_are_the_solvers():
+    """``study.task.ik`` names every solver option, with the solver's defaults but for
+    ``n_best`` (the task compares 2 converged seeds, the solver alone keeps the first)."""
+    from designopt.studies.serial.settings import TaskIK
+
+    schema = {k: f.default for k, f in TaskIK.model_fields.items()}
+    assert set(schema) == set(ik.IKOptions._fields)
+    assert schema | {"n_best": 1} == ik.DEFAULTS._asdict()
+    assert schema["n_best"] == 2
