@@ -74,12 +74,14 @@ def targets(s: SerialSettings, key: jax.Array, dtype: Any) -> dict[str, jax.Arra
 
 
 def per_target(mech: Mechanism, s: SerialSettings, params: dict[str, Any], full: jax.Array,
-               dtype: Any) -> dict[str, jax.Array]:  # fmt: skip
+               dtype: Any, opts: ik.IKOptions | None = None) -> dict[str, jax.Array]:  # fmt: skip
     """Per design and target (M, N): success, 1/k, manipulability, joint margin (all 0
     where unreached) and the joints q (M, N, n), for designs ``full`` (M, P) in kernel
     units. Targets go through the IK in chunks (``lax.map``); the last chunk is padded
-    with copies of the last target and cut off again."""
-    ind, md, opts = s.indices, mode(s), options(s)
+    with copies of the last target and cut off again. ``opts``: the solver's options
+    (default :func:`options`)."""
+    ind, md = s.indices, mode(s)
+    opts = options(s) if opts is None else opts
     rows = ind.rows()
     lo, hi = params["q_lower"].astype(dtype), params["q_upper"].astype(dtype)
     p = params["target_p"].astype(dtype)
@@ -182,8 +184,13 @@ def solution(s: SerialSettings, x: Any, keys: Any,
         while len(_SOLVERS) >= 4:
             _SOLVERS.pop(next(iter(_SOLVERS)))
 
+        # one design: few slots in flight, so one phase of the solver's schedule and about
+        # half its compile time; a target's seeds and steps do not depend on the slots
+        o = options(s)
+        o = o if "slots" in s.task.ik.model_fields_set else o._replace(slots=128)  # type: ignore[union-attr]
+
         def run(p, X):
-            return {k: v[0] for k, v in per_target(mech, s, p, X, dtype).items()}
+            return {k: v[0] for k, v in per_target(mech, s, p, X, dtype, o).items()}
 
         _SOLVERS[ck] = (mech, jax.jit(run))
     mech, run = _SOLVERS[ck]
