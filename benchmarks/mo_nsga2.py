@@ -18,6 +18,7 @@ Targets (issue 26): median HV ≥ pymoo's on all four; our wall ≤ 1/5 of pymoo
 
     python benchmarks/mo_nsga2.py [--runs 11] [--pop 100] [--gens 250] [--repeat 3]
                                   [--problems zdt1,zdt2,zdt3,dtlz2] [--float32]
+                                  [--survival pruning|crowding]
 """
 
 from __future__ import annotations
@@ -72,7 +73,7 @@ def ours(name: str, args, dtype) -> tuple[list[float], float, float, list[float]
 
     def go(seed: int):
         return optim.run("nsga2", P, jax.random.key(seed), args.pop, args.gens - 1, args.runs,
-                         dtype=dtype, ref_point=ref)  # fmt: skip
+                         dtype=dtype, ref_point=ref, survival=args.survival)  # fmt: skip
 
     t0 = time.perf_counter()
     go(10_000)  # compiles
@@ -123,12 +124,15 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3, help="timed repeats of our 11 runs")
     ap.add_argument("--problems", default="zdt1,zdt2,zdt3,dtlz2")
     ap.add_argument("--float32", action="store_true", help="our runs in float32")
+    ap.add_argument("--survival", choices=("crowding", "pruning"), default="pruning",
+                    help="our NSGA-II's survival (option survival; pymoo's is crowding)")  # fmt: skip
     args = ap.parse_args()
     dtype = jnp.float32 if args.float32 else jnp.float64
     header("NSGA-II: designopt vs pymoo")
     print(f"CPU: {_cpu()}; load average at start: {_load()}")
     print(f"{args.runs} runs × population {args.pop} × {args.gens} generations "
-          f"({args.pop * args.gens} evaluations per run); ours in {jnp.dtype(dtype).name}")  # fmt: skip
+          f"({args.pop * args.gens} evaluations per run); ours in {jnp.dtype(dtype).name}, "
+          f"survival {args.survival}")  # fmt: skip
     rows = []
     for name in args.problems.split(","):
         P = multi_benchmark(name)

@@ -108,6 +108,73 @@ def crowding_distance(F: Array, rank: Array) -> Array:
     return jnp.where(counts[rank] <= 2, jnp.inf, cd)
 
 
+def prune_last_front(F: Array, rank: Array, n: int, tie: Array) -> tuple[Array, Array]:
+    """Survival with the last front pruned one point at a time (Kukkonen & Deb, "Improved
+    pruning of non-dominated solutions based on crowding distance for bi-objective
+    optimization problems", 2006): the fronts before the one that crosses n are kept whole;
+    from that front the point of least crowding distance (ties: least ``tie``) is removed
+    and its neighbours' distances are recomputed, until n points remain. The neighbours
+    are kept as one doubly linked list per objective, so a removal costs O(m) updates and
+    one arg-min, not a new sort. Returns (mask of the n kept, crowding distance: within
+    the pruned front among its survivors, elsewhere :func:`crowding_distance`)."""
+    N, m = F.shape
+    F = jnp.where(jnp.isfinite(F), F, jnp.finfo(F.dtype).max)
+    counts = jnp.zeros(N + 1, jnp.int32).at[rank].add(1)
+    last = jnp.argmax(jnp.cumsum(counts) >= n)  # the front that crosses n
+    before, L = rank < last, rank == last
+    need = n - jnp.sum(before, dtype=jnp.int32)
+    n_last = jnp.sum(L, dtype=jnp.int32)
+    pos = jnp.arange(N)
+    prev, nxt, rng_ = [], [], []
+    for k in range(m):
+        o = jnp.lexsort((F[:, k], ~L))  # the last front first, ascending in f_k
+        inside = pos < n_last
+        p_o = jnp.where(inside & (pos > 0), jnp.roll(o, 1), -1)
+        n_o = jnp.where(inside & (pos < n_last - 1), jnp.roll(o, -1), -1)
+        prev.append(jnp.full(N, -1, jnp.int32).at[o].set(p_o.astype(jnp.int32)))
+        nxt.append(jnp.full(N, -1, jnp.int32).at[o].set(n_o.astype(jnp.int32)))
+        fk = jnp.where(L, F[:, k], jnp.nan)
+        rng_.append(jnp.nanmax(fk) - jnp.nanmin(fk))
+
+    def dist(i, prev, nxt):  # crowding distance of points i among the alive of the front
+        total = jnp.zeros(i.shape, F.dtype)
+        for k in range(m):
+            p, q = prev[k][i], nxt[k][i]
+            gap = (F[jnp.maximum(q, 0), k] - F[jnp.maximum(p, 0), k]) / jnp.where(
+                rng_[k] > 0, rng_[k], 1.0
+            )
+            term = jnp.where((p < 0) | (q < 0), jnp.inf, gap)
+            total = total + jnp.where(rng_[k] > 0, term, 0.0)
+        return jnp.where(n_last <= 2, jnp.inf, total / m)
+
+    d = jnp.where(L, dist(pos, prev, nxt), jnp.inf)
+
+    def cond(c):
+        return c[0] > need
+
+    def body(c):
+        alive_n, alive, d, prev, nxt = c
+        dm = jnp.where(alive, d, jnp.inf)
+        lowest = alive & (dm == jnp.min(dm))
+        j = jnp.argmin(jnp.where(lowest, tie, jnp.inf))
+        prev, nxt = list(prev), list(nxt)
+        hit = []
+        for k in range(m):
+            p, q = prev[k][j], nxt[k][j]
+            nxt[k] = nxt[k].at[jnp.where(p >= 0, p, N)].set(q, mode="drop")
+            prev[k] = prev[k].at[jnp.where(q >= 0, q, N)].set(p, mode="drop")
+            hit += [p, q]
+        alive = alive.at[j].set(False)
+        h = jnp.stack(hit)
+        d = d.at[jnp.where(h >= 0, h, N)].set(dist(jnp.maximum(h, 0), prev, nxt), mode="drop")
+        return alive_n - 1, alive, d.at[j].set(jnp.inf), tuple(prev), tuple(nxt)
+
+    c = (n_last, L, d, tuple(prev), tuple(nxt))
+    _, alive, d, _, _ = jax.lax.while_loop(cond, body, c)
+    crowd = jnp.where(L, d, crowding_distance(F, rank))
+    return before | alive, crowd
+
+
 def _hv2_jax(x: Array, y: Array, r0: Array, r1: Array) -> Array:
     o = jnp.argsort(x)
     xs, ys = x[o], y[o]

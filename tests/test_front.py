@@ -143,16 +143,25 @@ def test_gci_against_total_length_follows_the_known_ratios():
     """GCI (max) against the total length l1 + l2 (min), a linear objective. The GCI
     depends on l2/l1 only and peaks at 1/√2; below the length 0.2·(1 + √2) that ratio
     cannot be had with l2 ≥ 0.2, so the front is l2 at its lower bound with l1 from 0.2
-    (ratio 1) to 0.2·√2 (ratio 1/√2); every longer arm is dominated."""
+    (ratio 1) to 0.2·√2 (ratio 1/√2); every longer arm is dominated. But for the peak:
+    the GCI is flat there (it falls with the square of the ratio's distance from 1/√2),
+    so a longer arm whose ratio is closer to the (sampled) peak than any short arm's
+    ties for the top GCI and is not dominated in a finite population; one or two such
+    points appear in about half the seeds, with either survival rule."""
     over = FRONT | {"study.objective": {"pareto": {"gci": "max",
                                                   "length": {"min": {"l1": 1, "l2": 1}}}}}  # fmt: skip
     rec = designopt.run(designopt.load_config(PLANAR, over))
     X = rec.X
-    np.testing.assert_allclose(X[:, 1], 0.2, atol=0.01)  # l2 at its bound
     ratio = X[:, 1] / X[:, 0]
+    g = rec.F[:, list(rec.objectives).index("gci")]
+    off = np.abs(X[:, 1] - 0.2) > 0.01
+    assert off.sum() <= 2 and np.all(g[off] >= g.max() - 1e-4), (X[off], g.max() - g[off])
+    np.testing.assert_allclose(ratio[off], 1 / np.sqrt(2), atol=2e-3)  # only at the peak
+    on = ~off
+    np.testing.assert_allclose(X[on, 1], 0.2, atol=0.01)  # l2 at its bound
     assert ratio.min() == pytest.approx(1 / np.sqrt(2), abs=0.03)
     assert ratio.max() == pytest.approx(1.0, abs=0.03)
-    assert X[:, 0].max() <= 0.2 * np.sqrt(2) + 0.02
+    assert X[on, 0].max() <= 0.2 * np.sqrt(2) + 0.02
     j = list(rec.objectives).index("length")
     np.testing.assert_allclose(rec.F[:, j], X.sum(1), rtol=1e-12)  # exact, no samples
     assert np.all(rec.F_se[:, j] == 0)

@@ -106,6 +106,46 @@ def test_crowding_distance_against_pymoo():
     )
 
 
+def _prune_np(F, rank, n, tie):
+    """Brute-force pruning: remove the least-crowded point of the last front (crowding
+    recomputed from scratch on its survivors by numpy, ties by ``tie``) until n remain."""
+    counts = np.bincount(rank, minlength=len(F) + 1)
+    last = int(np.argmax(np.cumsum(counts) >= n))
+    keep = rank < last
+    alive = list(np.flatnonzero(rank == last))
+    while keep.sum() + len(alive) > n:
+        d = pa.crowding_distance_np(F[alive], np.zeros(len(alive), int))
+        low = np.flatnonzero(d == d.min())
+        alive.pop(int(low[np.argmin(tie[np.asarray(alive)[low]])]))
+    keep[alive] = True
+    return keep
+
+
+@pytest.mark.parametrize("m", [2, 3])
+def test_pruning_the_last_front_matches_brute_force(m):
+    """``prune_last_front`` (linked lists, O(m) per removal) keeps the same points as
+    recomputing every crowding distance after each removal, on random sets with several
+    fronts, fronts of one point, duplicated values and a front with a constant objective."""
+    rng = np.random.default_rng(m)
+    fn = jax.jit(lambda F, r, t: pa.prune_last_front(F, r, 40, t))
+    for case in range(12):
+        F = rng.uniform(size=(100, m))
+        if case % 3 == 1:
+            F = np.round(F * 6) / 6  # ties in every objective
+        if case % 3 == 2:
+            F[:, 0] = 0.5  # a constant objective
+        F[:, -1] += case / 12 * F[:, 0]
+        rank = pa.front_ranks_np(F)
+        tie = rng.uniform(size=100)
+        kept, crowd = fn(jnp.asarray(F), jnp.asarray(rank, jnp.int32), jnp.asarray(tie))
+        want = _prune_np(F, rank, 40, tie)
+        np.testing.assert_array_equal(np.asarray(kept), want)
+        last = rank == rank[want].max()
+        got = np.asarray(crowd)[want & last]
+        ref = pa.crowding_distance_np(F[want & last], np.zeros((want & last).sum(), int))
+        np.testing.assert_allclose(got, ref, rtol=1e-12)
+
+
 def test_igd_plus_by_hand_and_against_pymoo():
     Z = np.array([[0.0, 1.0], [1.0, 0.0]])
     # a point at (0.5, 0.5): distance to each z is ‖max(a − z, 0)‖ = 0.5

@@ -13,8 +13,16 @@ operators and constants so that the two can be compared at the same budget:
 - polynomial mutation (Deb's bounded form): per child with probability ``p_mut`` 0.9, per
   variable with min(0.5, ``n_mut_var``/D) (default 1/D), distribution index ``eta_m`` 20;
 - survival of the P best of parents ∪ offspring by Deb's constrained domination
-  (``designopt.pareto.front_ranks``), the last front cut by crowding distance (ties at
-  random); the first generation is ranked the same way.
+  (``designopt.pareto.front_ranks``); the last front is pruned one point at a time, the
+  least crowded first, its neighbours' crowding distances updated after each removal
+  (Kukkonen & Deb, "Improved pruning of non-dominated solutions based on crowding
+  distance for bi-objective optimization problems", 2006; option ``survival: pruning``,
+  the default), or, as pymoo does, cut at once by the crowding distances of the whole
+  front (``survival: crowding``); ties at random. The first generation is ranked the
+  same way. Pruning spreads the front more evenly: at 100 × 250 × 11 runs its median
+  hypervolume is above pymoo's on ZDT1-3 (by 7e-4 to 1.3e-3, Mann-Whitney p ≤ 3e-4)
+  and DTLZ2 (+4.9e-3, p = 0.12), where the one-shot cut is 5e-5 to 1.5e-4 below
+  (p ≥ 0.17; ``benchmarks/mo_nsga2.py``).
 
 Duplicates: pymoo discards a child identical to a member or to an earlier child (about
 4 % of the children at these rates: copies made without crossover or mutation) and mates
@@ -36,7 +44,7 @@ import jax.numpy as jnp
 
 from designopt.optim import draws as rng
 from designopt.optim.protocol import Front, Optimizer, Task, apply_bounds
-from designopt.pareto import crowding_distance, front_ranks
+from designopt.pareto import crowding_distance, front_ranks, prune_last_front
 
 Array = jnp.ndarray
 
@@ -128,24 +136,36 @@ def first_unique(X: Array, C: Array, n: int) -> Array:
     return jnp.argsort(dup, stable=True)[:n]
 
 
-def survive(X: Array, F: Array, V: Array, n: int, tie: Array) -> State:
-    """The n best of (X, F, V) by constrained non-dominated rank, then crowding distance
-    (larger first), then ``tie`` (random); ranks and crowding as computed on the whole
-    set (the crowding of the last front before it is cut, as pymoo stores it)."""
+def survive(X: Array, F: Array, V: Array, n: int, tie: Array, survival: str = "pruning") -> State:
+    """The n best of (X, F, V) by constrained non-dominated rank, then (``crowding``)
+    crowding distance (larger first), then ``tie`` (random); ranks and crowding as
+    computed on the whole set (the crowding of the last front before it is cut, as pymoo
+    stores it). ``pruning``: the last front is cut one point at a time, each removal
+    updating its neighbours' crowding (``designopt.pareto.prune_last_front``)."""
     rank = front_ranks(F, V, n_stop=n)
-    crowd = crowding_distance(F, rank)
-    keep = jnp.lexsort((tie, -crowd, rank))[:n]
+    if survival == "pruning":
+        kept, crowd = prune_last_front(F, rank, n, tie)
+        keep = jnp.lexsort((tie, -crowd, rank, ~kept))[:n]
+    else:
+        crowd = crowding_distance(F, rank)
+        keep = jnp.lexsort((tie, -crowd, rank))[:n]
     return State(X[keep], F[keep], V[keep], rank[keep], crowd[keep])
 
 
 @dataclass(frozen=True)
 class NSGA2(Optimizer):
-    """NSGA-II with population P = ``n`` (the runner's n_particles). Option ``draws``."""
+    """NSGA-II with population P = ``n`` (the runner's n_particles). Options ``draws`` and
+    ``survival`` (``pruning``, the default: Kukkonen and Deb's one-at-a-time pruning of
+    the last front; ``crowding``: pymoo's one-shot cut by crowding distance)."""
 
     draws: str = rng.DEFAULT
+    survival: str = "pruning"
 
     Params: ClassVar[type] = Params
-    options: ClassVar[dict[str, tuple[str, ...]]] = {"draws": rng.DRAWS}
+    options: ClassVar[dict[str, tuple[str, ...]]] = {
+        "draws": rng.DRAWS,
+        "survival": ("pruning", "crowding"),
+    }
     min_population: ClassVar[int] = 4
     multi_objective: ClassVar[bool] = True
 
@@ -158,7 +178,8 @@ class NSGA2(Optimizer):
         P, D = self.n, lo.shape[0]
         x = lo + (hi - lo) * self._u(key, _INIT, (P, D), dt)
         f, v = task.evaluate(x, jax.random.fold_in(key, _EVAL))
-        return survive(x, f.astype(dt), v.astype(dt), P, self._u(key, _TIE, (P,), dt))
+        return survive(x, f.astype(dt), v.astype(dt), P, self._u(key, _TIE, (P,), dt),
+                       self.survival)  # fmt: skip
 
     def step(self, key: jax.Array, s: State, p: Params, task: Task) -> State:
         lo, hi = task.lower, task.upper
@@ -216,6 +237,7 @@ class NSGA2(Optimizer):
             jnp.concatenate([s.v, vo.astype(dt)]),
             P,
             u(_TIE, (2 * P,)),
+            self.survival,
         )
 
     def front(self, s: State) -> Front:
