@@ -44,13 +44,20 @@ def _final(stats: dict[str, Any], histories: dict[str, dict[str, np.ndarray]], n
             floors.append(case)
         x = np.arange(len(names))
         q25, q50, q75 = (np.array([np.percentile(f, q) for f in fin]) for q in (25, 50, 75))
-        ax.bar(x, q50, color="tab:blue", alpha=0.5, label="median")
+        hv = bool(stats[case].get("higher_is_better"))
+        if hv:  # hypervolumes differ in the third decimal: a dash, and an axis zoomed to them
+            ax.plot(x, q50, "_", ms=18, mew=2, color="tab:blue", label="median")
+        else:
+            ax.bar(x, q50, color="tab:blue", alpha=0.5, label="median")
         ax.errorbar(x, q50, yerr=[q50 - q25, q75 - q50], fmt="none", ecolor="k", capsize=3,
                     lw=1, label="IQR")  # fmt: skip
         for i, f in enumerate(fin):
             jit = np.random.default_rng(i).uniform(-0.25, 0.25, f.size)
             ax.plot(i + jit, f, ".", ms=2, color="0.25", alpha=0.6)
-        style.auto_log(ax, fin)
+        if hv:
+            ax.margins(x=0.15, y=0.15)
+        else:
+            style.auto_log(ax, fin)
         ax.set_xticks(x, names, rotation=45, fontsize=7)
         ax.set_xlabel("optimizer (category)", fontsize=8)
         ax.set_title(case.replace("_", " "), fontsize=9)
@@ -62,7 +69,12 @@ def _final(stats: dict[str, Any], histories: dict[str, dict[str, np.ndarray]], n
     note = (
         f"; values ≤ 0 drawn at 1/10 of the least positive ({', '.join(floors)})" if floors else ""
     )
-    fig.suptitle(f"Final values over {n_runs} runs: median (bar), IQR (whisker), runs (dots); "
+    dash = (
+        " or dash: hypervolume axes zoomed, not from 0"
+        if any(stats[c].get("higher_is_better") for c in cases)
+        else ""
+    )
+    fig.suptitle(f"Final values over {n_runs} runs: median (bar{dash}), IQR (whisker), runs (dots); "
                  f"IEEE Access 2019, Fig. 10{note}", fontsize=9)  # fmt: skip
     return fig
 
