@@ -32,6 +32,8 @@ distance", 2015): the mean over reference-front points z of min_a ‖max(a − z
 
 from __future__ import annotations
 
+import math
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -79,6 +81,14 @@ def front_ranks(F: Array, v: Array | None = None, n_stop: int | None = None) -> 
     return r
 
 
+def _big(F: Array) -> Array:
+    """The stand-in for a non-finite objective value (NaN and ±inf, a failed design):
+    √(largest float), 1.3e154 in float64 and 1.8e19 in float32. Not the largest float
+    itself: a front's range then reaches it, and a compiled division by that range
+    becomes a product with its reciprocal, a subnormal that the CPU flushes to 0."""
+    return jnp.asarray(math.sqrt(float(jnp.finfo(F.dtype).max)), F.dtype)
+
+
 def crowding_distance(F: Array, rank: Array) -> Array:
     """NSGA-II's crowding distance of every point within its front (``rank``), as pymoo
     0.6 computes it: per objective the gap between the two neighbours divided by the
@@ -86,7 +96,7 @@ def crowding_distance(F: Array, rank: Array) -> Array:
     with zero range in a front adds 0, a front of ≤ 2 points is all +inf. Unranked points
     (rank n) form one more group; their value is unused."""
     n, m = F.shape
-    F = jnp.where(jnp.isfinite(F), F, jnp.finfo(F.dtype).max)
+    F = jnp.where(jnp.isfinite(F), F, _big(F))
     counts = jnp.zeros(n + 1, jnp.int32).at[rank].add(1)
 
     def one(fk):
@@ -118,7 +128,7 @@ def prune_last_front(F: Array, rank: Array, n: int, tie: Array) -> tuple[Array, 
     one arg-min, not a new sort. Returns (mask of the n kept, crowding distance: within
     the pruned front among its survivors, elsewhere :func:`crowding_distance`)."""
     N, m = F.shape
-    F = jnp.where(jnp.isfinite(F), F, jnp.finfo(F.dtype).max)
+    F = jnp.where(jnp.isfinite(F), F, _big(F))
     counts = jnp.zeros(N + 1, jnp.int32).at[rank].add(1)
     last = jnp.argmax(jnp.cumsum(counts) >= n)  # the front that crosses n
     before, L = rank < last, rank == last
@@ -154,7 +164,7 @@ def prune_last_front(F: Array, rank: Array, n: int, tie: Array) -> tuple[Array, 
 
     def body(c):
         alive_n, alive, d, prev, nxt = c
-        dm = jnp.where(alive, d, jnp.inf)
+        dm = jnp.where(alive, jnp.nan_to_num(d, nan=0.0, posinf=jnp.inf), jnp.inf)
         lowest = alive & (dm == jnp.min(dm))
         j = jnp.argmin(jnp.where(lowest, tie, jnp.inf))
         prev, nxt = list(prev), list(nxt)

@@ -146,6 +146,26 @@ def test_pruning_the_last_front_matches_brute_force(m):
         np.testing.assert_allclose(got, ref, rtol=1e-12)
 
 
+def test_pruning_with_a_failed_design_in_the_front():
+    """A non-finite objective (a failed design) stands in as √(largest float): pruning
+    gives the crowding distances the one-shot JAX crowding and numpy give with that value
+    (dividing by a range near the largest float used to flush every gap of that objective
+    to 0), and removes the same point as recomputing from scratch."""
+    F = np.array([[0.0, 1.0], [0.3, 0.6], [0.6, 0.3], [np.inf, 0.0]])
+    big = np.sqrt(np.finfo(np.float64).max)
+    rank = jnp.zeros(4, jnp.int32)
+    tie = jnp.asarray([0.1, 0.2, 0.3, 0.4])
+    _, crowd = pa.prune_last_front(jnp.asarray(F), rank, 4, tie)
+    ref = pa.crowding_distance_np(np.where(np.isfinite(F), F, big), np.zeros(4, int))
+    np.testing.assert_allclose(np.asarray(crowd), ref, rtol=1e-12)
+    np.testing.assert_allclose(np.asarray(pa.crowding_distance(jnp.asarray(F), rank)), ref)
+    assert ref[2] > 0.75  # the gap to the failed design counts
+    kept, _ = jax.jit(lambda F, t: pa.prune_last_front(F, rank, 3, t))(jnp.asarray(F), tie)
+    want = _prune_np(np.where(np.isfinite(F), F, big), np.zeros(4, int), 3, np.asarray(tie))
+    np.testing.assert_array_equal(np.asarray(kept), want)
+    assert not want[1]
+
+
 def test_igd_plus_by_hand_and_against_pymoo():
     Z = np.array([[0.0, 1.0], [1.0, 0.0]])
     # a point at (0.5, 0.5): distance to each z is ‖max(a − z, 0)‖ = 0.5

@@ -176,6 +176,24 @@ def test_n_best_keeps_the_best_conditioned_of_the_converged_seeds():
     _check_successes(PUMA, four, p, R, LO6, -LO6, "position")
 
 
+def test_a_failed_design_does_not_touch_the_others():
+    """A NaN design in the swarm fails alone: the other designs of the same call solve
+    exactly what they solve without it (the solver shares one queue and one runtime 1
+    between the designs; that 1 used to come from design 0's reach scale)."""
+    p, R = _fk_targets(TWO_R, [1.0, 0.6], LO2, HI2, 64, 4)
+    lo, hi = jnp.asarray(LO2), jnp.asarray(HI2)
+    o = ik.IKOptions(n_db=256, slots=32)
+    f = jax.jit(lambda X: ik.solve(TWO_R, X, p, None, lo, hi, jax.random.key(0), "position", o))
+    good = f(jnp.asarray([[1.0, 0.6], [1.0, 0.6]]))
+    for X in ([[np.nan, 0.6], [1.0, 0.6]], [[1.0, 0.6], [np.nan, 0.6]]):
+        r = f(jnp.asarray(X))
+        bad = int(np.isnan(np.asarray(X)[:, 0]).argmax())
+        assert not np.asarray(r.success[bad]).any()
+        np.testing.assert_array_equal(np.asarray(r.success[1 - bad]), np.asarray(good.success[0]))
+        np.testing.assert_array_equal(np.asarray(r.q[1 - bad]), np.asarray(good.q[0]))
+    assert np.asarray(good.success).all()
+
+
 @pytest.mark.parametrize("mode", ik.MODES)
 def test_the_step_jacobian_is_the_residual_derivative_at_a_solution(mode):
     """J (e falls by J dq) against central differences of e where e = 0: the axis rows

@@ -43,7 +43,8 @@ Scheduling. Every (design, target) pair is an item of one queue (a ring buffer o
 runs ``block`` steps on every slot (a converged configuration is frozen), then a slot
 whose item converged or ran out of seeds is freed, one whose seed was dropped puts the
 item back at the end of the queue with its next seed, and free slots take the queue's
-next pairs. Once the queue is empty the busy slots move to a batch 8× smaller (twice), so
+next pairs. Once the queue is empty the busy slots move to a batch 8× smaller (down to 32
+slots or more: 4096 → 512 → 64, 1024 → 128), so
 the hard tail does not keep a large batch running. Designs share the queue: a design
 with many unreachable targets costs its own work, not every design's.
 
@@ -85,7 +86,7 @@ class IKOptions(NamedTuple):
     of those by the score is kept). All but the tolerances and the damping fix array
     shapes or loop bounds."""
 
-    iters: int = 48  # LM steps per seed at most
+    iters: int = 48  # LM steps per seed at most (rounded up to a multiple of block)
     rounds: int = 8  # random seeds: n_random × rounds after the nearest ones
     n_db: int = 4096  # FK database per design
     n_nearest: int = 4  # nearest database entries tried first
@@ -534,7 +535,7 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
     R_db, p_db = _fk_arrays(ch, X, q_db)
     L = jnp.maximum(jnp.max(jnp.linalg.norm(p_db - jnp.mean(p_db, 1, keepdims=True), axis=-1),
                             -1), 1e-12)  # fmt: skip
-    one = _one(L)
+    one = _one(q_db)  # from data every design shares: a NaN design must not touch the others
     index = jax.vmap(lambda p, R, Lm: _index(q_db, p, R, Lm, mode))(p_db, R_db, L)
     q_sorted = index[4]  # (M, n_db, n)
     n_near = min(opts.n_nearest, opts.n_db, opts.window)
@@ -688,9 +689,11 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         if best is None:
             best = r
             if nb > 1:
-                sc_best = jnp.where(ok, score(q) if score else ik_, -jnp.inf)
+                sc_best = jnp.where(ok, jnp.nan_to_num(score(q) if score else ik_, nan=-jnp.inf),
+                                    -jnp.inf)  # fmt: skip
             continue
-        sc = jnp.where(ok & (c < n_conv), score(q) if score else ik_, -jnp.inf)
+        sc = jnp.where(ok & (c < n_conv), jnp.nan_to_num(score(q) if score else ik_, nan=-jnp.inf),
+                       -jnp.inf)  # fmt: skip
         take = sc > sc_best
         sc_best = jnp.where(take, sc, sc_best)
         best = IKResult(*(jnp.where(take.reshape(take.shape + (1,) * (x.ndim - 2)), y, x)
