@@ -340,3 +340,13 @@ def test_the_task_schema_defaults_are_the_solvers():
     assert set(schema) == set(ik.IKOptions._fields)
     assert schema | {"n_best": 1} == ik.DEFAULTS._asdict()
     assert schema["n_best"] == 2
+
+
+def test_the_task_schema_refuses_more_nearest_seeds_than_the_window():
+    from pydantic import ValidationError
+
+    from designopt.studies.serial.settings import TaskIK
+
+    with pytest.raises(ValidationError, match=r"n_nearest \(8\) exceeds window \(4\)"):
+        TaskIK(n_nearest=8, window=4)
+    assert TaskIK(n_nearest=4, window=4).window == 4

@@ -263,6 +263,9 @@ class TaskIK(Section):
             raise ValueError("n_nearest + n_random: give at least one seed per target")
         if self.n_nearest > self.n_db:
             raise ValueError(f"n_nearest ({self.n_nearest}) exceeds n_db ({self.n_db})")
+        if self.n_nearest > self.window:
+            raise ValueError(f"n_nearest ({self.n_nearest}) exceeds window ({self.window}): "
+                             "the nearest seeds are ranked among that many entries")  # fmt: skip
         return self
 
 
