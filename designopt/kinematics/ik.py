@@ -307,7 +307,9 @@ def _lm_step(e, J, rev: tuple[bool, ...], L, lam, qc, lower, upper) -> list[Scal
 
 
 def _project(qc: list, lower, upper, rev: tuple[bool, ...]) -> list:
-    """:func:`project`, joint by joint."""
+    """Joint limits by projection, joint by joint: a revolute joint whose range spans a
+    full turn first moves by ±2π back into it (the same pose), then every joint is
+    clipped."""
     two_pi = 2 * math.pi
     out = []
     for i, x in enumerate(qc):
@@ -341,20 +343,25 @@ def residual(model: SerialModel, X: jax.Array, q: jax.Array, p_t: jax.Array,
              R_t: jax.Array | None, mode: Mode, L: jax.Array):  # fmt: skip
     """(e, J, p, R) of configurations q (B, n) of one design X (D,) against targets
     p_t (B, 3) and R_t (B, 3, 3) (for ``axis`` only its last column counts), as arrays:
-    the residual and Jacobian the solver steps with (:func:`_residual`)."""
-    R, p, J = model.fk_jacobian(X, q, rows=_rows(mode))
-    e_p = (p_t - p) / L
-    J_p = J[..., :3, :] / L
-    if mode == "position":
-        return e_p, J_p, p, R
-    J_o = J[..., 3:, :]
-    if mode == "axis":
-        z, zt = R[..., :, 2], R_t[..., :, 2]
-        e_o = jnp.cross(z, zt)
-        J_o = J_o - z[..., :, None] * jnp.einsum("...r,...rj->...j", z, J_o)[..., None, :]
-    else:
-        e_o = 0.5 * sum(jnp.cross(R[..., :, i], R_t[..., :, i]) for i in range(3))
-    return jnp.concatenate([e_p, e_o], -1), jnp.concatenate([J_p, J_o], -2), p, R
+    the residual and Jacobian the solver steps with, computed by the solver's own
+    entry-wise code (:class:`_Chain`, :func:`_residual`), XLA's sin and cos."""
+    ch = _Chain(model)
+    B, dtype = q.shape[0], q.dtype
+    X = jnp.asarray(X, dtype)
+    xc = [jnp.broadcast_to(X[k], (B,)) for k in range(ch.D)]
+    qc = [q[:, i] for i in range(ch.n)]
+    R, p, J = ch.fk(xc, qc, ch.trig_q(qc, exact=True), ch.trig_x(xc), _rows(mode))
+    pt = [p_t[:, i] for i in range(3)]
+    Rt = None if R_t is None else [[R_t[:, r, c] for c in range(3)] for r in range(3)]
+    e, J, _ = _residual(R, p, J, pt, Rt, mode, 1.0 / L)
+
+    def arr(x):
+        return jnp.broadcast_to(jnp.asarray(x, dtype), (B,))
+
+    def mat(rows):
+        return jnp.stack([jnp.stack([arr(x) for x in row], -1) for row in rows], -2)
+
+    return jnp.stack([arr(x) for x in e], -1), mat(J), jnp.stack([arr(x) for x in p], -1), mat(R)
 
 
 def errors(p: jax.Array, R: jax.Array, p_t: jax.Array, R_t: jax.Array | None,
@@ -379,15 +386,6 @@ def revolute(model: SerialModel) -> tuple[bool, ...]:
     C = model.coupling
     return tuple(any(C[i][j] != 0 and model.joint_types[i] == "R" for i in range(len(C)))
                  for j in range(model.n_active))  # fmt: skip
-
-
-def project(q: jax.Array, lower: jax.Array, upper: jax.Array, wrap: jax.Array) -> jax.Array:
-    """Joint limits by projection: a revolute joint whose range spans a full turn first
-    moves by ±2π back into it (the same pose), then every joint is clipped."""
-    two_pi = 2 * jnp.pi
-    q = jnp.where(wrap & (q > upper) & (q - two_pi >= lower), q - two_pi, q)
-    q = jnp.where(wrap & (q < lower) & (q + two_pi <= upper), q + two_pi, q)
-    return jnp.clip(q, lower, upper)
 
 
 # -------------------------------------------------------------------------- seeds
@@ -464,16 +462,6 @@ def _nearest(index, p_t: jax.Array, R_t: jax.Array | None, L: jax.Array, mode: M
         return jnp.take_along_axis(cand, jnp.stack(picks, 1), 1).astype(jnp.int32)
 
     return jax.lax.map(chunk, (code_t, f_t)).reshape(-1, min(k, W))[:T]
-
-
-def database(model: SerialModel, X: jax.Array, key: jax.Array, lower: jax.Array,
-             upper: jax.Array, n: int) -> tuple[jax.Array, jax.Array, jax.Array]:  # fmt: skip
-    """(q (n, nA), p (n, 3), R (n, 3, 3)): FK of n configurations uniform in the limits
-    for one design X (D,) (the same draws for every design: common random numbers)."""
-    u = jax.random.uniform(key, (n, lower.shape[0]), dtype=lower.dtype)
-    q = lower + u * (upper - lower)
-    R, p = _fk_arrays(_Chain(model), jnp.asarray(X)[None], q)
-    return q, p[0], R[0]
 
 
 def _fk_arrays(ch: _Chain, X: jax.Array, q: jax.Array) -> tuple[jax.Array, jax.Array]:
