@@ -332,5 +332,22 @@ def _peer_lost(e: BaseException, ses) -> None:
     os._exit(1)
 
 
+def console() -> None:
+    """The ``designopt`` command: :func:`main`, then a prompt exit. Everything is written
+    and closed when main returns; interpreter teardown (freeing JAX's and matplotlib's
+    modules and XLA's client, 0.3-0.8 s after a run on 2 cores) is skipped. A process of a
+    multi-process job exits normally (``jax.distributed``'s shutdown meets its peers)."""
+    rc = main()
+    jax = sys.modules.get("jax")
+    if jax is not None and jax.distributed.is_initialized():
+        sys.exit(rc)
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    import os
+
+    os._exit(int(rc or 0))
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    console()

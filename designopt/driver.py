@@ -20,7 +20,10 @@ def optimise(cfg: Any, problem: Problem, key: Any, members: list[dict[str, float
     """The configured optimizer on ``problem``; with ``members`` (overrides of optimizer
     settings) one vmapped batch on common keys. Chunks are small (≤ 5 % of the run and
     about DESIGN_SAMPLES_PER_CHUNK of work), so a stop meets an iteration boundary soon.
-    A ``parallel:`` section shards the job over devices (designopt.parallel)."""
+    A ``parallel:`` section shards the job over devices (designopt.parallel). The
+    objective runs as a program of its own between each iteration's ask and tell
+    (``optim.run(separate=True)``): one compiled objective for the whole run and its
+    scoring, instead of one inside each of the runner's programs."""
     from designopt import optim
     from designopt.problems import penalty
 
@@ -37,7 +40,8 @@ def optimise(cfg: Any, problem: Problem, key: Any, members: list[dict[str, float
     common = dict(n_particles=o.n_particles, n_iters=o.n_iters, n_runs=o.n_runs, bounds=o.bounds,
                   dtype=dtype_of(cfg), chunk_iters=chunk,
                   progress=progress, checkpoint=checkpoint, resume=resume,
-                  checkpoint_at_end=checkpoint is not None)  # fmt: skip
+                  checkpoint_at_end=checkpoint is not None,
+                  separate=True)  # fmt: skip
     if plan is not None:
         common["plan"] = plan
     if ref_point is not None:  # a front's hypervolume reference (designopt.front)

@@ -5,12 +5,17 @@ The bounds (min_i, max_i) of each weighted index come from scoring a space-filli
 IEEE Access 2019, eq. 43, does not say where its normalisation bounds come from); they
 stay fixed during the run, travel in ``params["bounds"]`` (k, 2) for the trace and are
 archived (``Problem.norm_bounds``). Studies call :func:`probe_bounds` at set-up and
-:func:`weighted_sum` inside their swarm function.
+:func:`weighted_sum` inside their swarm function. Within :func:`evaluation_shape` (the
+pipeline sets the optimizer's (runs, particles) around building a problem) the probe
+scores its designs in batches of that shape through ``evaluate_batch``: the very program
+the run evaluates its swarm with, so the probe compiles nothing of its own.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+import contextlib
+import contextvars
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import Any
 
 import jax
@@ -20,6 +25,22 @@ import numpy as np
 from designopt import montecarlo as mc
 
 Array = jnp.ndarray
+
+
+_SHAPE: contextvars.ContextVar[tuple[int, int] | None] = contextvars.ContextVar(
+    "designopt_evaluation_shape", default=None
+)
+
+
+@contextlib.contextmanager
+def evaluation_shape(shape: tuple[int, int] | None) -> Iterator[None]:
+    """Within: :func:`probe_bounds` scores in batches of ``shape`` (groups, rows), the
+    shape of the run's objective calls (``RunResult.eval_shape``)."""
+    token = _SHAPE.set(shape)
+    try:
+        yield
+    finally:
+        _SHAPE.reset(token)
 
 
 def unit_bounds(k: int, dtype: Any) -> Array:
@@ -42,8 +63,17 @@ def probe_bounds(
     the swarm function ``fn`` with the Monte-Carlo key ``keys["samples"]``. An index that
     is flat over the sample gets max = min + 1 (no scaling, never a division by 0)."""
     Xn = mc.box_samples(keys["normalisation"], lower, upper, n_norm, "halton", dtype)
-    _, sub = jax.jit(fn)(params, Xn, keys["samples"])
-    vals = [np.asarray(sub[k]) for k in names]  # on the host: no reduction to compile
+    shape = _SHAPE.get()
+    if shape is None:
+        _, sub = jax.jit(fn)(params, Xn, keys["samples"])
+        vals = [np.asarray(sub[k]) for k in names]  # on the host: no reduction to compile
+    else:
+        from designopt.problems.base import Problem
+        from designopt.scoring import score
+
+        box = Problem(tuple(f"x{i}" for i in range(len(lower))), lower, upper, fn, params)
+        sub = score(box, np.asarray(Xn), eval_shape=shape, dtype=dtype)
+        vals = [sub[k] for k in names]
     b = np.array([[float(v.min()), float(v.max())] for v in vals])
     b[:, 1] = np.where(b[:, 1] > b[:, 0], b[:, 1], b[:, 0] + 1.0)
     return b

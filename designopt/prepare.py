@@ -44,9 +44,15 @@ def build_problem(cfg: Any, keys: Mapping[str, jax.Array], where: str = "config"
     """The study's Problem for this config; a ValueError becomes a ConfigError. The last
     few are kept: a second run of the same study settings, keys and dtype in one process
     reuses the Problem, so its compiled programs too (a resume, a test, a notebook)."""
+    from designopt import normalise
+
     dtype = dtype_of(cfg)
+    o = cfg.optimizer
+    # the shape of the run's objective calls (optim.run separate): the normalisation probe
+    # scores in it, so the study's objective compiles once for probe, run and scoring
+    shape = (o.n_runs, o.n_particles) if getattr(cfg, "parallel", None) is None else None
     key = (cfg.study.name, cfg.study.model_dump_json(), str(dtype), bool(jax.config.jax_enable_x64),
-           repr(key_data(keys)))  # fmt: skip
+           repr(key_data(keys)), shape)  # fmt: skip
     if key in _PROBLEMS:
         return _PROBLEMS[key]
     st = study_of(cfg)
@@ -54,7 +60,8 @@ def build_problem(cfg: Any, keys: Mapping[str, jax.Array], where: str = "config"
         raise ConfigError(f"{where}: study '{st.name}' has no design problem (its run is a "
                           "replay); use `designopt run`")  # fmt: skip
     try:
-        problem = st.problem(cfg.study, keys, dtype)
+        with normalise.evaluation_shape(shape):
+            problem = st.problem(cfg.study, keys, dtype)
     except ValueError as e:
         raise ConfigError(f"{where}: study: {e}") from None
     while len(_PROBLEMS) >= 4:

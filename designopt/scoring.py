@@ -18,12 +18,18 @@ from designopt.prepare import dtype_of
 from designopt.problems.base import Problem
 
 
-def score(problem: Problem, X: np.ndarray, batch: int | None = None,
-          plan: Any = None) -> dict[str, np.ndarray]:  # fmt: skip
+def score(problem: Problem, X: np.ndarray, batch: int | None = None, plan: Any = None,
+          eval_shape: tuple[int, int] | None = None, dtype: Any = None
+          ) -> dict[str, np.ndarray]:  # fmt: skip
     """f and every index (with standard errors) of designs X (n, D), in vmapped batches of
     a fixed size (the last one padded), so one compiled program serves any n. ``plan``
-    (``designopt.parallel.scoring_plan``) splits each batch's designs over its devices."""
+    (``designopt.parallel.scoring_plan``) splits each batch's designs over its devices.
+    ``eval_shape`` (a run's ``RunResult.eval_shape``) and ``dtype`` (the run's): batches
+    of that shape through the run's own compiled objective (``evaluate_batch``), so
+    scoring a run's designs compiles nothing new."""
     X = np.asarray(X, np.float64)
+    if eval_shape is not None and plan is None:
+        return _score_groups(problem, X, eval_shape, dtype)
     n = X.shape[0]
     b = n if batch is None else max(1, min(batch, n))
     fn = _scorer(problem.fn, problem.constraints)
@@ -40,6 +46,32 @@ def score(problem: Problem, X: np.ndarray, batch: int | None = None,
             Xi = np.concatenate([Xi, np.repeat(Xi[-1:], pad, 0)])
         f, sub = fn(params, rows(Xi), key)
         outs.append({"f": host(f)[: b - pad]} | {k: host(v)[: b - pad] for k, v in sub.items()})
+    return {k: np.concatenate([o[k] for o in outs]) for k in outs[0]}
+
+
+def _score_groups(problem: Problem, X: np.ndarray, shape: tuple[int, int],
+                  dtype: Any) -> dict[str, np.ndarray]:  # fmt: skip
+    """``score`` through ``evaluate_batch`` in batches of G·rows designs (G groups of
+    rows, the last batch padded with its last design), every group with key 0."""
+    from designopt.problems.base import evaluate_batch
+
+    G, r = shape
+    n, D = X.shape
+    b = G * r
+    keys = jnp.broadcast_to(jax.random.key(0), (G,))
+    dt = X.dtype if dtype is None else np.dtype(dtype)
+    outs = []
+    for i in range(0, n, b):
+        Xi = X[i : i + b]
+        m = Xi.shape[0]
+        if m < b:
+            Xi = np.concatenate([Xi, np.repeat(Xi[-1:], b - m, 0)])
+        f, aux, v = evaluate_batch(problem.params, jnp.asarray(Xi.reshape(G, r, D), dt), keys,
+                                   fn=problem.fn, constraints=problem.constraints)  # fmt: skip
+        if problem.constraints is not None:
+            aux = aux | {"violation": v}
+        flat = lambda a, m=m: np.asarray(a).reshape((b,) + a.shape[2:])[:m]  # noqa: E731
+        outs.append({"f": flat(f)} | {k: flat(a) for k, a in aux.items()})
     return {k: np.concatenate([o[k] for o in outs]) for k in outs[0]}
 
 
@@ -132,7 +164,8 @@ def run_groups(cfg: Any, problem: Problem, res: Any) -> dict[str, Any]:
             x_final, stage = rr.x[i][None], "refine"
     # the best run's history and the final design in one call (one compiled program)
     hist_x = res.history_x[best]
-    sc = score(problem, np.concatenate([hist_x, x_final]))
+    sc = score(problem, np.concatenate([hist_x, x_final]),
+               eval_shape=getattr(res, "eval_shape", None), dtype=res.history_x.dtype)  # fmt: skip
     tree["best_run"] = {k: v[:-1] for k, v in sc.items()} | {
         "iteration": np.arange(res.history.shape[-1]),
         "attrs": {"run_index": best},

@@ -97,22 +97,26 @@ class CMAES(Optimizer):
     Params: ClassVar[type] = Params
     min_population: ClassVar[int] = 4  # μ = λ/2 ≥ 2 keeps the rank-μ update defined
 
-    def init(self, key: jax.Array, p: Params, task: Task) -> State:
+    def init_ask(self, key: jax.Array, p: Params, task: Task) -> tuple[Array, Array]:
+        """The initial mean, uniform in the box (unit coordinates), asked as one design."""
         lo, hi = task.lower, task.upper
-        dt = lo.dtype
-        D = lo.shape[0]
-        m = jax.random.uniform(jax.random.fold_in(key, 0), (D,), dt)
-        x = lo + (hi - lo) * m
-        f, v = task.evaluate(x[None], jax.random.fold_in(key, 1))
-        z = jnp.zeros(D, dt)
-        sigma = jnp.asarray(p.sigma0, dt)
-        return State(m, sigma, z, z, jnp.eye(D, dtype=dt), x, f[0], v[0], jnp.asarray(0, jnp.int32))
+        m = jax.random.uniform(jax.random.fold_in(key, 0), lo.shape, lo.dtype)
+        return (lo + (hi - lo) * m)[None], m
 
-    def step(self, key: jax.Array, s: State, p: Params, task: Task) -> State:
+    def init_tell(self, key: jax.Array, x: Array, m: Array, f: Array, v: Array, p: Params,
+                  task: Task) -> State:  # fmt: skip
+        dt = m.dtype
+        z = jnp.zeros(m.shape[0], dt)
+        sigma = jnp.asarray(p.sigma0, dt)
+        return State(m, sigma, z, z, jnp.eye(m.shape[0], dtype=dt), x[0], f[0], v[0],
+                     jnp.asarray(0, jnp.int32))  # fmt: skip
+
+    def ask(self, key: jax.Array, s: State, p: Params, task: Task) -> tuple[Array, tuple]:
+        """λ samples of N(mean, σ² C), repaired into the unit box, in design units; the
+        pending part is (unit samples, Cholesky factor, symmetrised C)."""
         lo, hi = task.lower, task.upper
         dt = lo.dtype
         lam, D = self.n, lo.shape[0]
-        k = constants(p, lam, D, dt)
         C = (s.C + s.C.T) / 2
         A = cholesky_factor(C)
         z = jax.random.normal(jax.random.fold_in(key, 0), (lam, D), dt)
@@ -120,8 +124,15 @@ class CMAES(Optimizer):
         zero, one = jnp.zeros(D, dt), jnp.ones(D, dt)
         u = apply_bounds(s.mean + s.sigma * y, zero, one, self.bounds,
                          lambda: jax.random.uniform(jax.random.fold_in(key, 2), (lam, D), dt))  # fmt: skip
-        x = lo + (hi - lo) * u
-        f, v = task.evaluate(x, jax.random.fold_in(key, 1))
+        return lo + (hi - lo) * u, (u, A, C)
+
+    def tell(self, key: jax.Array, s: State, x: Array, pending: tuple, f: Array, v: Array,
+             p: Params, task: Task) -> State:  # fmt: skip
+        """Mean, step size, paths and covariance from the ranked samples."""
+        u, A, C = pending
+        dt = x.dtype
+        lam, D = x.shape
+        k = constants(p, lam, D, dt)
         idx = order(f, v)
         ys = (u[idx] - s.mean) / s.sigma  # repaired steps, best first
         y_w = k["w_pos"] @ ys

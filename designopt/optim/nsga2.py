@@ -168,20 +168,23 @@ class NSGA2(Optimizer):
     }
     min_population: ClassVar[int] = 4
     multi_objective: ClassVar[bool] = True
+    eval_slot: ClassVar[int] = _EVAL
 
     def _u(self, key: jax.Array, slot: int, shape: tuple[int, ...], dt) -> Array:
         return rng.uniform(self.draws, jax.random.fold_in(key, slot), 0, shape, dt)
 
-    def init(self, key: jax.Array, p: Params, task: Task) -> State:
+    def init_ask(self, key: jax.Array, p: Params, task: Task) -> tuple[Array, tuple]:
         lo, hi = task.lower, task.upper
-        dt = lo.dtype
-        P, D = self.n, lo.shape[0]
-        x = lo + (hi - lo) * self._u(key, _INIT, (P, D), dt)
-        f, v = task.evaluate(x, jax.random.fold_in(key, _EVAL))
-        return survive(x, f.astype(dt), v.astype(dt), P, self._u(key, _TIE, (P,), dt),
+        return lo + (hi - lo) * self._u(key, _INIT, (self.n, lo.shape[0]), lo.dtype), ()
+
+    def init_tell(self, key: jax.Array, x: Array, pending: tuple, f: Array, v: Array,
+                  p: Params, task: Task) -> State:  # fmt: skip
+        dt = x.dtype
+        return survive(x, f.astype(dt), v.astype(dt), self.n, self._u(key, _TIE, (self.n,), dt),
                        self.survival)  # fmt: skip
 
-    def step(self, key: jax.Array, s: State, p: Params, task: Task) -> State:
+    def ask(self, key: jax.Array, s: State, p: Params, task: Task) -> tuple[Array, tuple]:
+        """Offspring: binary tournaments, SBX, polynomial mutation, duplicates dropped."""
         lo, hi = task.lower, task.upper
         dt = lo.dtype
         P, D = self.n, lo.shape[0]
@@ -228,9 +231,14 @@ class NSGA2(Optimizer):
             return polynomial_mutation(xo, lo, hi, p, u(_PM, (K, D)), mut)
 
         xo = jax.lax.cond(p.p_mut >= 0, mutate, lambda xo: xo, xo)
-        xo = xo[first_unique(s.x, xo, P)]
+        return xo[first_unique(s.x, xo, P)], ()
 
-        fo, vo = task.evaluate(xo, jax.random.fold_in(key, _EVAL))
+    def tell(self, key: jax.Array, s: State, xo: Array, pending: tuple, fo: Array, vo: Array,
+             p: Params, task: Task) -> State:  # fmt: skip
+        """Survival of parents and offspring (``survival``)."""
+        dt = xo.dtype
+        P = self.n
+        u = lambda slot, shape: self._u(key, slot, shape, dt)  # noqa: E731
         return survive(
             jnp.concatenate([s.x, xo]),
             jnp.concatenate([s.f, fo.astype(dt)]),

@@ -10,6 +10,17 @@ defaults on the class):
     state = opt.step(key, state, params, task)    # one iteration
     x, f, v = opt.best(state)                     # best design so far (Deb's rules)
 
+``init`` and ``step`` are each an ask, one evaluation and a tell, as in evosax:
+
+    X, pending = opt.ask(key, state, params, task)        # candidates (N, D), no evaluation
+    f, v = task.evaluate(X, opt.eval_key(key))
+    state = opt.tell(key, state, X, pending, f, v, params, task)
+
+(``init_ask``/``init_tell`` likewise for the first population). The runner uses the
+halves when it evaluates the objective as a program of its own (one compiled objective
+for the first population, every iteration and the scoring after the run); an entry that
+implements only ``init``/``step`` runs fused.
+
 A multi-objective entry (``multi_objective = True``, e.g. NSGA-II) is given problems whose
 objective is a vector: ``evaluate`` returns f (M, m), all minimised, and instead of
 ``best`` it implements ``front(state) -> Front(x, f, v, rank)``, its current population
@@ -124,11 +135,47 @@ class Optimizer:
     min_population: ClassVar[int] = 2
     multi_objective: ClassVar[bool] = False  # True: f is (M, m) and ``front`` replaces best
 
+    eval_slot: ClassVar[int] = 1
+    """The objective's key is ``fold_in(key, eval_slot)`` of the init/step key."""
+
+    def eval_key(self, key: jax.Array) -> jax.Array:
+        return jax.random.fold_in(key, self.eval_slot)
+
     def init(self, key: jax.Array, params: Any, task: Task) -> Any:
-        raise NotImplementedError
+        """The first population, evaluated: init_ask, evaluate, init_tell."""
+        X, pending = self.init_ask(key, params, task)
+        f, v = task.evaluate(X, self.eval_key(key))
+        return self.init_tell(key, X, pending, f, v, params, task)
 
     def step(self, key: jax.Array, state: Any, params: Any, task: Task) -> Any:
+        """One iteration: ask, evaluate, tell."""
+        X, pending = self.ask(key, state, params, task)
+        f, v = task.evaluate(X, self.eval_key(key))
+        return self.tell(key, state, X, pending, f, v, params, task)
+
+    def init_ask(self, key: jax.Array, params: Any, task: Task) -> tuple[Array, Any]:
+        """The first candidates X (N, D) and what ``init_tell`` needs beside them."""
         raise NotImplementedError
+
+    def init_tell(self, key: jax.Array, X: Array, pending: Any, f: Array, v: Array,
+                  params: Any, task: Task) -> Any:  # fmt: skip
+        """The first state from the evaluated candidates (f NaN-cleaned, v)."""
+        raise NotImplementedError
+
+    def ask(self, key: jax.Array, state: Any, params: Any, task: Task) -> tuple[Array, Any]:
+        """This iteration's candidates X (N, D) and what ``tell`` needs beside them; only
+        the box of ``task`` is used."""
+        raise NotImplementedError
+
+    def tell(self, key: jax.Array, state: Any, X: Array, pending: Any, f: Array, v: Array,
+             params: Any, task: Task) -> Any:  # fmt: skip
+        """The next state from the evaluated candidates (f NaN-cleaned, v)."""
+        raise NotImplementedError
+
+    @classmethod
+    def asks(cls) -> bool:
+        """Whether the entry implements ask/tell (else only init/step: run fused)."""
+        return cls.ask is not Optimizer.ask and cls.init_ask is not Optimizer.init_ask
 
     def best(self, state: Any) -> Best:
         raise NotImplementedError

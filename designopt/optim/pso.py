@@ -132,6 +132,7 @@ class PSO(Optimizer):
     """p1..p7 (the variant is the preset; see VARIANTS). Options: ``draws``."""
 
     draws: str = rng.DEFAULT
+    eval_slot: ClassVar[int] = 99
 
     Params: ClassVar[type] = Params
     options: ClassVar[dict[str, tuple[str, ...]]] = {"draws": rng.DRAWS}
@@ -142,15 +143,18 @@ class PSO(Optimizer):
     def _u(self, key, slot, shape, dt):
         return rng.uniform(self.draws, key, slot, shape, dt)
 
-    def init(self, key: jax.Array, p: Params, task: Task) -> State:
-        """Uniform positions in the box, velocities uniform in ±v_max, first evaluation."""
+    def init_ask(self, key: jax.Array, p: Params, task: Task) -> tuple[Array, Array]:
+        """Uniform positions in the box (asked) and velocities uniform in ±v_max."""
         lo, hi = task.lower, task.upper
         dt = lo.dtype
         shape = (self.n, lo.shape[0])
         x = lo + (hi - lo) * self._u(key, _RX, shape, dt)
         vmax = p.vmax_frac * (hi - lo)
         v = (vmax * (2.0 * self._u(key, _RV, shape, dt) - 1.0)).astype(dt)
-        f, viol = task.evaluate(x, jax.random.fold_in(key, 99))
+        return x, v
+
+    def init_tell(self, key: jax.Array, x: Array, v: Array, f: Array, viol: Array, p: Params,
+                  task: Task) -> State:  # fmt: skip
         i = argbest(f, viol)
         return State(x, v, f, x, f, viol, f, x[i], f[i], viol[i], jnp.asarray(0, jnp.int32))
 
@@ -190,8 +194,9 @@ class PSO(Optimizer):
         w = jax.lax.switch(p.rule, [branches[r] for r in INERTIA_RULES])
         return w[:, None]
 
-    def step(self, key: jax.Array, s: State, p: Params, task: Task) -> State:
-        """One iteration of eq. (44)-(50) for the whole swarm."""
+    def ask(self, key: jax.Array, s: State, p: Params, task: Task) -> tuple[Array, Array]:
+        """The moves of eq. (44)-(49) for the whole swarm: new positions (asked) and
+        velocities."""
         lower, upper = task.lower, task.upper
         M, D = s.x.shape
         dt = s.x.dtype
@@ -243,7 +248,11 @@ class PSO(Optimizer):
             v = jnp.where(out, 0.0, v)
         elif self.bounds == "reflect":
             v = jnp.where(out, -v, v)
-        f, viol = task.evaluate(x, jax.random.fold_in(key, 99))
+        return x, v
+
+    def tell(self, key: jax.Array, s: State, x: Array, v: Array, f: Array, viol: Array,
+             p: Params, task: Task) -> State:  # fmt: skip
+        """Personal and global bests of eq. (50) by Deb's rules."""
         imp = better(f, viol, s.pbest_f, s.pbest_v)
         pbest_x = jnp.where(imp[:, None], x, s.pbest_x)
         pbest_f = jnp.where(imp, f, s.pbest_f)

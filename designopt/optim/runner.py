@@ -30,7 +30,7 @@ import numpy as np
 from designopt.optim import registry
 from designopt.optim.protocol import Front, Optimizer, Task, clean
 from designopt.pareto import hypervolume_jax
-from designopt.problems.base import Problem, scored
+from designopt.problems.base import Problem, evaluate_batch, scored
 
 CONVERGENCE_TOL = 1e-6
 
@@ -53,13 +53,16 @@ class RunResult(NamedTuple):
     best_v: np.ndarray | None = None  # ([B,] n_runs) 0 = feasible
     front: Front | None = None  # MO: x ([B,] n_runs, P, D), f (…, P, m), v (…, P), rank (…, P)
     ref_point: np.ndarray | None = None  # MO: (m,) the hypervolume's reference point
+    eval_shape: tuple[int, int] | None = None
+    """(groups, rows) of the separate objective program's calls (``separate``), which
+    ``designopt.scoring.score`` reuses; None when the objective ran inside the steps."""
 
     def member(self, j: int) -> RunResult:
         """Member ``j`` of a batched result (``run_batch``, a sweep): every array sliced on
         its leading member axis, the settings that vary per member picked."""
         sets = {a: (b[j] if isinstance(b, list) else b) for a, b in self.settings.items()}
         sliced = {k: (None if v is None else jax.tree.map(lambda a: a[j], v))
-                  for k, v in self._asdict().items() if k not in ("settings", "ref_point")}  # fmt: skip
+                  for k, v in self._asdict().items() if k not in ("settings", "ref_point", "eval_shape")}  # fmt: skip
         return self._replace(**sliced, settings=sets)
 
 
@@ -138,6 +141,77 @@ def _advance(carry, params, pparams, lower, upper, opt, fn, cons, length, batche
     return _over_runs(one, batched)(carry, params)
 
 
+def _flat(X, ek, rows: int):
+    """Candidates (…runs, N, D) and their keys (…runs,) as the objective program's groups:
+    X (R, rows, D) with each group padded by repeating its last row, keys (R,)."""
+    N, D = X.shape[-2:]
+    Xf = X.reshape((-1, N, D))
+    if N < rows:
+        Xf = jnp.concatenate([Xf, jnp.repeat(Xf[:, -1:], rows - N, axis=1)], axis=1)
+    return Xf, ek.reshape((-1,))
+
+
+def _unflat(a, X):
+    """The objective's output a (R, rows[, m]) back to X's run axes and N candidates."""
+    lead, N = X.shape[:-2], X.shape[-2]
+    return a.reshape(lead + a.shape[1:])[(slice(None),) * len(lead) + (slice(0, N),)]
+
+
+@partial(jax.jit, static_argnames=("opt", "batched", "rows"))
+def _init_ask(keys, params, lower, upper, opt, batched=False, rows=1):
+    """Separate objective: the first candidates of every run (``init`` up to evaluate)."""
+    task = Task(None, lower, upper)
+
+    def one(key, p):
+        k0, k1 = jax.random.split(key)
+        X, pending = opt.init_ask(k0, p, task)
+        return k1, k0, X, opt.eval_key(k0), pending
+
+    keys, k0, X, ek, pending = _over_runs(one, batched)(keys, params)
+    return keys, k0, X, pending, *_flat(X, ek, rows)
+
+
+@partial(jax.jit, static_argnames=("opt", "batched"))
+def _init_tell(keys, k0, X, pending, f, v, params, lower, upper, opt, batched=False):
+    task = Task(None, lower, upper)
+
+    def one(run, p):
+        key, k, x, pend, fr, vr = run
+        return key, opt.init_tell(k, x, pend, clean(fr).astype(x.dtype), vr, p, task)
+
+    f, v = _unflat(f, X), _unflat(v, X)
+    return _over_runs(one, batched)((keys, k0, X, pending, f, v), params)
+
+
+@partial(jax.jit, static_argnames=("opt", "batched", "rows"))
+def _ask(carry, params, lower, upper, opt, batched=False, rows=1):
+    """Separate objective: one iteration's candidates of every run (``step`` up to
+    evaluate), the run keys advanced as ``_advance`` does."""
+    task = Task(None, lower, upper)
+
+    def one(c, p):
+        key, state = c
+        key, k = jax.random.split(key)
+        X, pending = opt.ask(k, state, p, task)
+        return key, k, X, opt.eval_key(k), pending
+
+    keys, k, X, ek, pending = _over_runs(one, batched)(carry, params)
+    return keys, k, X, pending, *_flat(X, ek, rows)
+
+
+@partial(jax.jit, static_argnames=("opt", "batched"))
+def _tell(carry, k, X, pending, f, v, params, lower, upper, opt, batched=False, ref=None):
+    task = Task(None, lower, upper)
+
+    def one(run, p):
+        (key, state), kr, x, pend, fr, vr = run
+        state = opt.tell(kr, state, x, pend, clean(fr).astype(x.dtype), vr, p, task)
+        return (key, state), _track(opt, state, ref)
+
+    f, v = _unflat(f, X), _unflat(v, X)
+    return _over_runs(one, batched)((carry, k, X, pending, f, v), params)
+
+
 @partial(jax.jit, static_argnames=("opt", "batched"))
 def _records(carry, ref, opt, batched):
     f = lambda c, _: _track(opt, c[1], ref)  # noqa: E731
@@ -196,8 +270,11 @@ def _from_numpy(d: dict[str, np.ndarray], template) -> Any:
 
 
 def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress, checkpoint,
-           resume, batched, B, record, at_end=False, plan=None, ref_point=None):  # fmt: skip
+           resume, batched, B, record, at_end=False, plan=None, ref_point=None,
+           separate=False):  # fmt: skip
     n_iters = opt.n_iters
+    separate = separate and plan is None and opt.asks()
+    rows = opt.n  # candidates per run in each call of the separate objective
     lower = jnp.asarray(problem.lower, dtype)
     upper = jnp.asarray(problem.upper, dtype)
     keys = jax.random.split(key, n_runs)
@@ -212,8 +289,19 @@ def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress
     statics = dict(opt=opt, fn=problem.fn, cons=problem.constraints, batched=batched)
     mo = opt.multi_objective
     ref = None if ref_point is None else jnp.asarray(ref_point, dtype)
+
+    def objective(Xf, ek):  # the separate objective program: (f, v) of every group
+        f, _, v = evaluate_batch(pparams, Xf, ek, fn=problem.fn, constraints=problem.constraints)
+        return f, v
+
+    if resume is None and separate:
+        keys1, k0, X, pending, Xf, ek = _init_ask(keys, params, lower, upper, opt=opt,
+                                                  batched=batched, rows=rows)  # fmt: skip
+        carry = _init_tell(keys1, k0, X, pending, *objective(Xf, ek), params, lower, upper,
+                           opt=opt, batched=batched)  # fmt: skip
     if resume is None:
-        carry = place(_init(keys, params, pparams, lower, upper, **statics))
+        if not separate:
+            carry = place(_init(keys, params, pparams, lower, upper, **statics))
         if mo and ref is None:
             fr = _fronts(carry, opt, batched)
             ref = jnp.asarray(first_nadir(host(fr.f), host(fr.v)), dtype)
@@ -248,9 +336,20 @@ def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress
     chunk = n_iters if chunk_iters is None else max(1, min(chunk_iters, n_iters))
     while done < n_iters:
         length = min(chunk, n_iters - done)
-        carry, (x, f, v) = _advance(
-            carry, params, pparams, lower, upper, length=length, ref=ref, **statics
-        )
+        if separate:  # ask, the objective program, tell: one iteration at a time
+            tracks = []
+            for _ in range(length):
+                keys1, k, X, pending, Xf, ek = _ask(carry, params, lower, upper, opt=opt,
+                                                    batched=batched, rows=rows)  # fmt: skip
+                carry, tr = _tell((keys1, carry[1]), k, X, pending, *objective(Xf, ek), params,
+                                  lower, upper, opt=opt, batched=batched, ref=ref)  # fmt: skip
+                tracks.append(tuple(np.asarray(a) for a in tr))
+            axis = 2 if batched else 1  # (…runs, iterations, …) as _advance's scan gives
+            x, f, v = (np.stack([t[i] for t in tracks], axis=axis) for i in range(3))
+        else:
+            carry, (x, f, v) = _advance(
+                carry, params, pparams, lower, upper, length=length, ref=ref, **statics
+            )
         if plan is not None:
             carry = place(carry)  # the same placement every chunk: one compiled program
         hf.append(host(f))
@@ -282,6 +381,7 @@ def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress
         best_v=history_v[..., -1],
         front=front,
         ref_point=host(ref) if mo else None,
+        eval_shape=(int(np.prod(keys.shape)), rows) if separate else None,
     )
 
 
@@ -328,6 +428,7 @@ def run(
     checkpoint_at_end: bool = False,
     plan: Any = None,
     ref_point: Sequence[float] | None = None,
+    separate: bool = False,
     **settings: Any,
 ) -> RunResult:
     """Run ``n_runs`` independent runs of optimizer ``name`` (``registry.names()``) on
@@ -344,13 +445,21 @@ def run(
     a single-objective one a problem with one objective (ValueError otherwise);
     ``ref_point`` (m,) is the hypervolume's reference point (default: the componentwise
     maximum of the first generation's feasible values, over all runs).
+
+    ``separate``: evaluate the objective as a program of its own between each iteration's
+    ask and tell (protocol.py) instead of inside the chunked scan: one compiled objective
+    serves the first population, every iteration and the scoring after the run
+    (``RunResult.eval_shape``), at the price of three calls per iteration: for expensive
+    objectives (Monte-Carlo studies), where compiling the objective dominates. Ignored
+    with a ``plan`` or an optimizer without ask/tell. Deterministic and resumable as the
+    fused run, though not bitwise equal to it (XLA may fuse the objective differently).
     """
     opt = _prepare(name, n_particles, n_iters, n_runs, bounds, [settings], problem, ref_point)
     e = registry.resolve(name)
     params = e.cls.make_params(dtype, e.preset, **registry.split_settings(name, settings)[0])
     return _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress,
                   checkpoint, resume, False, 1, _record(name, opt, params, n_runs),
-                  checkpoint_at_end, plan, ref_point)  # fmt: skip
+                  checkpoint_at_end, plan, ref_point, separate)  # fmt: skip
 
 
 def run_batch(
@@ -370,13 +479,15 @@ def run_batch(
     checkpoint_at_end: bool = False,
     plan: Any = None,
     ref_point: Sequence[float] | None = None,
+    separate: bool = False,
 ) -> RunResult:
     """Run the optimizer once per settings dict in ``members``, all as one vmapped program.
 
     Every member uses the same run keys (common random numbers), so member i equals
     ``run(name, ..., **members[i])`` up to floating-point reassociation. Results carry a
     leading member axis. String options must be equal across members. A
-    multi-objective optimizer's members share one reference point.
+    multi-objective optimizer's members share one reference point. ``separate`` as in
+    :func:`run`.
     """
     if not members:
         raise ValueError("members must hold at least one settings dict")
@@ -389,4 +500,4 @@ def run_batch(
     params = jax.tree.map(lambda *a: jnp.stack(a), *plist)
     return _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress,
                   checkpoint, resume, True, len(members), _record(name, opt, params, n_runs),
-                  checkpoint_at_end, plan, ref_point)  # fmt: skip
+                  checkpoint_at_end, plan, ref_point, separate)  # fmt: skip

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any
 
 import jax
@@ -129,3 +130,14 @@ def violation_of(constraints: Callable | None, params: Any, X: Array,
     if constraints is None:
         return jnp.zeros(X.shape[:1], X.dtype)
     return total_violation(constraint_values(constraints, params, X, aux)).astype(X.dtype)
+
+
+@partial(jax.jit, static_argnames=("fn", "constraints"))
+def evaluate_batch(params: Any, X: Array, keys: jax.Array, fn: ProblemFn,
+                   constraints: Callable | None = None
+                   ) -> tuple[Array, dict[str, Array], Array]:  # fmt: skip
+    """:func:`scored` over R groups of candidates X (R, N, D), group r with keys[r] (R,):
+    f (R, N[, m]), aux {name: (R, N)}, v (R, N). The one compiled objective of a run: the
+    runner's every evaluation (``optim.run(..., separate=True)``) and the scoring after
+    it (``designopt.scoring.score`` with the run's ``eval_shape``) call it with one shape."""
+    return jax.vmap(lambda x, k: scored(fn, constraints, params, x, k))(X, keys)
