@@ -22,7 +22,12 @@ def draw_figures(path: Path, record: Record | None = None) -> list[Path]:
         if not ses.covers(path):
             output.claim(path, overwrite=True)  # lock: no run may write it meanwhile
         draw, folder, swap = figures.drawer(rec, path)
-        return output.publish_figures(lambda d: draw(rec, d), folder, swap=swap)
+
+        def drawn(d: Path) -> list[Path]:
+            with figures.parallel_saves():  # each figure written by a child process
+                return draw(rec, d)
+
+        return output.publish_figures(drawn, folder, swap=swap)
 
 
 def write_html(path: Path, record: Record | None = None) -> Path:

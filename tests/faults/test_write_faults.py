@@ -90,7 +90,10 @@ def test_injected_fault_while_writing(tmp_path, monkeypatch, capsys, reference, 
 
 @pytest.mark.parametrize("code", [errno.ENOSPC, errno.EIO])
 def test_injected_fault_while_drawing_figures(tmp_path, monkeypatch, capsys, reference, code):
-    """A figure write fails: exit 1, the archive complete, the earlier figures kept."""
+    """Figure writes fail from the nth on (a disk that filled up): exit 1, the archive
+    complete, the earlier figures kept. The count is kept in a file, as the figures are
+    written by child processes (a failed child's figure is drawn again by the caller,
+    where the fault meets it too)."""
     import matplotlib.figure
 
     nth = random.Random(code).randint(1, 3)
@@ -98,11 +101,13 @@ def test_injected_fault_while_drawing_figures(tmp_path, monkeypatch, capsys, ref
     out = tmp_path / "a.h5"
     (tmp_path / "a_figures").mkdir()
     (tmp_path / "a_figures" / "earlier.png").write_bytes(b"earlier figure")
-    real, calls = matplotlib.figure.Figure.savefig, []
+    real, counter = matplotlib.figure.Figure.savefig, tmp_path / "savefig-calls"
 
     def savefig(self, fname, *a, **kw):
-        calls.append(fname)
-        if len(calls) == nth:
+        fd = os.open(counter, os.O_WRONLY | os.O_APPEND | os.O_CREAT)
+        os.write(fd, b".")
+        os.close(fd)
+        if counter.stat().st_size >= nth:
             raise OSError(code, os.strerror(code), str(fname))
         return real(self, fname, *a, **kw)
 
@@ -113,6 +118,7 @@ def test_injected_fault_while_drawing_figures(tmp_path, monkeypatch, capsys, ref
     assert REASON[code] in msg and "figures" in msg and f"{out} is complete" in msg
     same_result(out, reference)
     assert [p.name for p in (tmp_path / "a_figures").iterdir()] == ["earlier.png"]
+    counter.unlink()
     assert strays(tmp_path) == [] and not archive.partial_path(out).exists()
 
 

@@ -85,8 +85,10 @@ def _extent(a: np.ndarray, b: np.ndarray) -> tuple[float, float, float, float]:
 
 def _maps(z_all, axes_deg, title: str, name: str, unit: str, labels: list[str], cmap: str):
     """Rows: designs; columns: joint pairs; one colour scale over every panel."""
-    fig, axes = style.subplots(len(labels), 3, figsize=(11, 3.1 * len(labels) + 0.6),
-                               squeeze=False)  # fmt: skip
+    # a fixed grid (style.grid): two-line titles, degree ticks, the colour bar at the right
+    fig, axes, cax = style.grid(len(labels), 3, (11, 3.1 * len(labels) + 0.6),
+                                margins=(0.7, 1.35, 0.5, 0.75), gaps=(0.75, 0.85),
+                                colorbar=True)  # fmt: skip
     names = ("q1", "q2", "q3")
     mid = np.rad2deg(m.POSITION_LIMITS.mean(axis=1))
     ims = []
@@ -103,7 +105,7 @@ def _maps(z_all, axes_deg, title: str, name: str, unit: str, labels: list[str], 
             ax.set_title(f"{label}: mean {z.mean():.4g}\n{names[held]} held at {mid[held]:.0f}° "
                          f"({HELD})", fontsize=8)  # fmt: skip
     style.shared_scale(fig, ims)
-    fig.colorbar(ims[0], ax=axes, label=style.label(name, unit), shrink=0.8)
+    fig.colorbar(ims[0], cax=cax, label=style.label(name, unit))
     fig.suptitle(title + " — one colour scale for all panels", fontsize=10)
     return fig
 
@@ -122,7 +124,7 @@ def draw(
     to a full design dict; ``sub_history`` holds f, f_k, f_l, f_p, volume, L per iteration;
     the maps have ``resolution`` × ``resolution`` points."""
     out = []
-    fig, axes = style.subplots(2, 2, figsize=(9, 6))
+    fig, axes = style.grid(2, 2, (9, 6), margins=(0.85, 0.2, 0.5, 0.45), gaps=(1.15, 0.65))
     for ax, k, lab, u in zip(axes.flat, ("f", "f_k", "f_l", "f_p"),
                              ("composite f, eq. (43)", "f_k = GCSEI − GCI", "f_l = L / V^(1/3)",
                               "f_p = GPI"), ("-", "-", "-", "mm"), strict=True):  # fmt: skip

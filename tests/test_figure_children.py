@@ -1,0 +1,66 @@
+"""Figures written by forked children (``designopt.figures.parallel_saves``): the same
+bytes as drawn in the calling process, and a child that fails leaves its figure to the
+caller (so a disk fault still raises there)."""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pytest
+
+from designopt import figures
+
+pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="fork: Linux")
+
+
+def _draw(folder: Path) -> list[Path]:
+    out = []
+    for i in range(3):
+        fig, ax = plt.subplots(figsize=(3, 2))
+        ax.plot(np.sin(np.linspace(0, 6, 50) + i))
+        ax.set_title(f"panel {i}")
+        out += figures.save(fig, folder, f"f{i}")
+    return out
+
+
+def test_children_write_the_same_pngs(tmp_path: Path) -> None:
+    seq = _draw(tmp_path / "seq")
+    with figures.parallel_saves(workers=2):
+        par = _draw(tmp_path / "par")
+    assert [p.name for p in par] == [p.name for p in seq]
+    for a, b in zip(seq, par, strict=True):
+        if a.suffix == ".png":
+            assert a.read_bytes() == b.read_bytes()
+        else:
+            assert b.read_bytes()[:5] == b"%PDF-" and b.stat().st_size > 1000
+    assert plt.get_fignums() == []
+
+
+def test_a_failing_child_leaves_its_figure_to_the_caller(tmp_path: Path, monkeypatch) -> None:
+    parent, real = os.getpid(), figures._write
+    calls = []
+
+    def write(fig, png, pdf, dpi):
+        if os.getpid() != parent:
+            raise OSError("the child cannot write")
+        calls.append(png.name)
+        real(fig, png, pdf, dpi)
+
+    monkeypatch.setattr(figures, "_write", write)
+    with figures.parallel_saves(workers=2):
+        out = _draw(tmp_path)
+    assert sorted(calls) == ["f0.png", "f1.png", "f2.png"]
+    assert all(p.exists() for p in out)
+
+
+def test_a_disk_fault_raises_in_the_caller(tmp_path: Path) -> None:
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    (ro / "f0.png").mkdir()  # a folder where the PNG goes: no process can write it
+    with pytest.raises(OSError), figures.parallel_saves(workers=2):
+        _draw(ro)
+    assert plt.get_fignums() == []
