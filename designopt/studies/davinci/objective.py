@@ -42,7 +42,8 @@ _SCALE = {"alpha_deg": math.pi / 180, "beta_deg": math.pi / 180, "l_QH": 1.0, "l
 def cone_axis(q12_deg: tuple[float, float]) -> np.ndarray:
     """World direction of the Table 1 arm's shaft at (q1, q2) (deg)."""
     q = np.array([math.radians(q12_deg[0]), math.radians(q12_deg[1]), 0, 0, 0, 0])
-    R, _ = mech.frame_model(3).fk(jnp.asarray(mech.table1()), jnp.asarray(q))
+    # one jitted call (op by op, the FK compiled some twenty one-op programs at set-up)
+    R, _ = jax.jit(mech.frame_model(3).fk)(jnp.asarray(mech.table1()), jnp.asarray(q))
     return np.asarray(R)[:, 1]
 
 
