@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import csv
 import math
+from functools import partial
 from pathlib import Path
 from typing import Annotated, Any, Literal, Union
 
@@ -267,13 +268,17 @@ def sample_region(kind: str, params: dict[str, jax.Array], key: jax.Array, n: in
 def sample_axes(direction: Vec3, cone_deg: float, key: jax.Array, n: int, dtype=jnp.float64):
     """n unit vectors uniform on the spherical cap of half-angle ``cone_deg`` about
     ``direction`` (n, 3): cos θ uniform in [cos c, 1], azimuth uniform."""
-    u = jax.random.uniform(key, (n, 2), dtype=dtype)
     c = jnp.cos(jnp.radians(jnp.asarray(cone_deg, dtype)))
-    ct = 1.0 - u[:, 0] * (1.0 - c)
+    return _cap(jnp.asarray(_frame(direction), dtype), c, key, n)
+
+
+def _cap(frame: jax.Array, cos_c: jax.Array, key: jax.Array, n: int) -> jax.Array:
+    u = jax.random.uniform(key, (n, 2), dtype=frame.dtype)
+    ct = 1.0 - u[:, 0] * (1.0 - cos_c)
     st = jnp.sqrt(jnp.maximum(1.0 - ct * ct, 0.0))
     t = 2 * jnp.pi * u[:, 1]
     local = jnp.stack([st * jnp.cos(t), st * jnp.sin(t), ct], -1)
-    return local @ jnp.asarray(_frame(direction), dtype).T
+    return local @ frame.T
 
 
 def kind(region: Any) -> str:
@@ -285,11 +290,22 @@ def targets(task: Task, key: jax.Array, n: int, dtype=jnp.float64):
     """(positions (N, 3), tool frames (N, 3, 3) or None): the task's samples. A tool
     frame's last column is the sampled tool axis (its roll is arbitrary: the IK leaves
     it free)."""
+    ax = task.tool_axis
+    frame = None if ax is None else jnp.asarray(_frame(ax.direction), dtype)
+    cos_c = None if ax is None else jnp.cos(jnp.radians(jnp.asarray(ax.cone, dtype)))
+    # one jitted call (op by op, the sampling compiled some fifteen one-op programs)
+    return _targets(kind(task.region), region_params(task.region, dtype), key, n, frame, cos_c)
+
+
+@partial(jax.jit, static_argnames=("region_kind", "n"))
+def _targets(region_kind: str, rparams: dict[str, jax.Array], key: jax.Array, n: int,
+             frame: jax.Array | None, cos_c: jax.Array | None):  # fmt: skip
     k_p, k_a = jax.random.split(key)
-    p = sample_region(kind(task.region), region_params(task.region, dtype), k_p, n)
-    if task.tool_axis is None:
+    p = sample_region(region_kind, rparams, k_p, n)
+    if frame is None:
         return p, None
-    z = sample_axes(task.tool_axis.direction, task.tool_axis.cone, k_a, p.shape[0], dtype)
+    z = _cap(frame, cos_c, k_a, p.shape[0])
+    dtype = p.dtype
     a = jnp.where(
         jnp.abs(z[:, :1]) < 0.9, jnp.array([1.0, 0, 0], dtype), jnp.array([0, 1.0, 0], dtype)
     )
