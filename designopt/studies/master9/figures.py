@@ -123,53 +123,60 @@ def draw(
     """Write Fig. 12-15 into ``folder``. ``designs`` maps a label ('initial', 'final', …)
     to a full design dict; ``sub_history`` holds f, f_k, f_l, f_p, volume, L per iteration;
     the maps have ``resolution`` × ``resolution`` points."""
-    out = []
-    fig, axes = style.grid(2, 2, (9, 6), margins=(0.85, 0.2, 0.5, 0.45), gaps=(1.15, 0.65))
-    for ax, k, lab, u in zip(axes.flat, ("f", "f_k", "f_l", "f_p"),
-                             ("composite f, eq. (43)", "f_k = GCSEI − GCI", "f_l = L / V^(1/3)",
-                              "f_p = GPI"), ("-", "-", "-", "mm"), strict=True):  # fmt: skip
-        se = sub_history.get(k + "_se")
-        style.band(ax, iters, np.asarray(sub_history[k], np.float64), se, marker=".", lw=1)
-        ax.set_xlabel(style.label("iteration", style.DIMENSIONLESS))
-        ax.set_ylabel(style.label(lab, u))
-        ax.grid(alpha=0.3)
-    fig.suptitle("Best run: objective and sub-objectives, band ± 2 SE (IEEE Access 2019, "
-                 "Fig. 12)", fontsize=10)  # fmt: skip
-    out += save(fig, folder, "fig12_convergence")
+
+    def fig12() -> list[Path]:
+        fig, axes = style.grid(2, 2, (9, 6), margins=(0.85, 0.2, 0.5, 0.45), gaps=(1.15, 0.65))
+        for ax, k, lab, u in zip(axes.flat, ("f", "f_k", "f_l", "f_p"),
+                                 ("composite f, eq. (43)", "f_k = GCSEI − GCI", "f_l = L / V^(1/3)",
+                                  "f_p = GPI"), ("-", "-", "-", "mm"), strict=True):  # fmt: skip
+            se = sub_history.get(k + "_se")
+            style.band(ax, iters, np.asarray(sub_history[k], np.float64), se, marker=".", lw=1)
+            ax.set_xlabel(style.label("iteration", style.DIMENSIONLESS))
+            ax.set_ylabel(style.label(lab, u))
+            ax.grid(alpha=0.3)
+        fig.suptitle("Best run: objective and sub-objectives, band ± 2 SE (IEEE Access 2019, "
+                     "Fig. 12)", fontsize=10)  # fmt: skip
+        return save(fig, folder, "fig12_convergence")
+
+    def fig15() -> list[Path]:
+        fig = style.figure(figsize=(5.0 * len(designs) + 0.8, 4.8))
+        P_all = d["cloud"]
+        lo, hi = P_all.reshape(-1, 3).min(axis=0), P_all.reshape(-1, 3).max(axis=0)
+        scs = []
+        for i, (label, x) in enumerate(designs.items()):
+            ax = fig.add_subplot(1, len(designs), i + 1, projection="3d")
+            full, P = d["designs"][i], d["cloud"][i]
+            scs.append(ax.scatter(P[:, 0], P[:, 1], P[:, 2], s=2, alpha=0.8, c=P[:, 2],
+                                  cmap="viridis", rasterized=True, depthshade=False))  # fmt: skip
+            ax.set(xlim=(lo[0], hi[0]), ylim=(lo[1], hi[1]), zlim=(lo[2], hi[2]))
+            for a in (ax.xaxis, ax.yaxis, ax.zaxis):
+                a.set_major_locator(MaxNLocator(4))
+            ax.set_xlabel(style.label("x", "mm"), fontsize=8, labelpad=2)
+            ax.set_ylabel(style.label("y", "mm"), fontsize=8, labelpad=2)
+            ax.set_zlabel(style.label("z", "mm"), fontsize=8, labelpad=2)
+            L = full["a1"] + full["a3"] + full["d3"]
+            vol = x.get("volume")
+            vtxt = f"V = {vol:.4e} mm³, " if vol is not None else ""
+            ax.set_title(f"{label}:\n{vtxt}L = {L:.3f} mm", fontsize=9)
+            ax.tick_params(labelsize=6, pad=0)
+        style.shared_scale(fig, scs)
+        fig.colorbar(scs[0], ax=fig.axes, label=style.label("tip height z", "mm"), shrink=0.6)
+        fig.suptitle(f"Workspace of the position mechanism ({n_cloud} uniform joint samples; IEEE "
+                     "Access 2019, Fig. 15): common axes and colours", fontsize=10)  # fmt: skip
+        return save(fig, folder, "fig15_workspace")
+
     d = figure_data(designs, backlash_deg, key_data, resolution, n_cloud)
     labels = list(designs)
+    # the slowest figure (3-D) first: within figures.parallel_saves its child renders
+    # while the others are built
+    f15 = fig15()
     fig = _maps(d["inv_cond"], d["axes"], "Dexterity 1/k of J_v (Frobenius; IEEE Access 2019, "
                 "Fig. 13)", "1/k", "-", labels, "viridis")  # fmt: skip
-    out += save(fig, folder, "fig13_dexterity_maps")
+    f13 = save(fig, folder, "fig13_dexterity_maps")
     fig = _maps(d["emax"], d["axes"], f"Backlash error e_max for {tuple(backlash_deg)}° (IEEE "
                 "Access 2019, Fig. 14)", "e_max", "mm", labels, "magma")  # fmt: skip
-    out += save(fig, folder, "fig14_backlash_maps")
-    fig = style.figure(figsize=(5.0 * len(designs) + 0.8, 4.8))
-    P_all = d["cloud"]
-    lo, hi = P_all.reshape(-1, 3).min(axis=0), P_all.reshape(-1, 3).max(axis=0)
-    scs = []
-    for i, (label, x) in enumerate(designs.items()):
-        ax = fig.add_subplot(1, len(designs), i + 1, projection="3d")
-        full, P = d["designs"][i], d["cloud"][i]
-        scs.append(ax.scatter(P[:, 0], P[:, 1], P[:, 2], s=2, alpha=0.8, c=P[:, 2],
-                              cmap="viridis", rasterized=True, depthshade=False))  # fmt: skip
-        ax.set(xlim=(lo[0], hi[0]), ylim=(lo[1], hi[1]), zlim=(lo[2], hi[2]))
-        for a in (ax.xaxis, ax.yaxis, ax.zaxis):
-            a.set_major_locator(MaxNLocator(4))
-        ax.set_xlabel(style.label("x", "mm"), fontsize=8, labelpad=2)
-        ax.set_ylabel(style.label("y", "mm"), fontsize=8, labelpad=2)
-        ax.set_zlabel(style.label("z", "mm"), fontsize=8, labelpad=2)
-        L = full["a1"] + full["a3"] + full["d3"]
-        vol = x.get("volume")
-        vtxt = f"V = {vol:.4e} mm³, " if vol is not None else ""
-        ax.set_title(f"{label}:\n{vtxt}L = {L:.3f} mm", fontsize=9)
-        ax.tick_params(labelsize=6, pad=0)
-    style.shared_scale(fig, scs)
-    fig.colorbar(scs[0], ax=fig.axes, label=style.label("tip height z", "mm"), shrink=0.6)
-    fig.suptitle(f"Workspace of the position mechanism ({n_cloud} uniform joint samples; IEEE "
-                 "Access 2019, Fig. 15): common axes and colours", fontsize=10)  # fmt: skip
-    out += save(fig, folder, "fig15_workspace")
-    return out
+    f14 = save(fig, folder, "fig14_backlash_maps")
+    return fig12() + f13 + f14 + f15
 
 
 def draw_run(rec: Any, folder: Path, resolution: int = MAP_RESOLUTION) -> list[Path]:
