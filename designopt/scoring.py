@@ -28,7 +28,9 @@ def score(problem: Problem, X: np.ndarray, batch: int | None = None, plan: Any =
     of that shape through the run's own compiled objective (``evaluate_batch``), so
     scoring a run's designs compiles nothing new."""
     X = np.asarray(X, np.float64)
-    if eval_shape is not None and plan is None:
+    # the run's program where at least half of its rows are real designs (a sweep's run
+    # shape holds all members' runs: padding a member's few designs to it costs more)
+    if eval_shape is not None and plan is None and 2 * len(X) >= eval_shape[0] * eval_shape[1]:
         return _score_groups(problem, X, eval_shape, dtype)
     n = X.shape[0]
     b = n if batch is None else max(1, min(batch, n))

@@ -64,3 +64,13 @@ def test_a_disk_fault_raises_in_the_caller(tmp_path: Path) -> None:
     with pytest.raises(OSError), figures.parallel_saves(workers=2):
         _draw(ro)
     assert plt.get_fignums() == []
+
+
+def test_no_fork_draws_here(tmp_path: Path, monkeypatch) -> None:
+    def no_fork():
+        raise OSError(12, "Cannot allocate memory")
+
+    monkeypatch.setattr(os, "fork", no_fork)
+    with figures.parallel_saves(workers=2):
+        out = _draw(tmp_path)
+    assert all(p.exists() for p in out) and plt.get_fignums() == []

@@ -56,6 +56,10 @@ CHILD = textwrap.dedent(
             pl = parallel.plan(P(devices=4, axis=axis), n_runs=4, n_particles=8, problem=pr)
             res = optim.run("ptpso", pl.problem(pr), key, plan=pl, **kw)
             out[f"{name}/{axis}"] = same(ref, res)
+            if axis != "runs":  # the objective as its own program (the CLI's runs)
+                sref = optim.run("ptpso", pr, key, separate=True, **kw)
+                sres = optim.run("ptpso", pl.problem(pr), key, plan=pl, separate=True, **kw)
+                out[f"{name}/{axis}/separate"] = same(sref, sres)
         # the sample-sharded swarm function itself: same indices as one device
         pl = parallel.plan(P(devices=4, axis="samples"), n_runs=1, n_particles=8, problem=pr)
         X = jnp.asarray(np.random.default_rng(1).uniform(pr.lower, pr.upper, (8, pr.dim)),
@@ -137,13 +141,14 @@ def test_same_numbers_particles_and_samples(child: dict, name: str, axis: str) -
     """Particles: the per-design work is unchanged (bitwise). Samples: the per-chunk sums
     are gathered and added in chunk order (bitwise indices); master9's elementwise tail
     after the sums may round differently by an ulp (≤ 1e-6 of the run's f scale, the same
-    best design; docs/scaling.md)."""
-    r = child[f"{name}/{axis}"]
-    assert r["x"], r
-    if name == "master9" and axis == "samples":
-        assert r["final"] <= 1e-6, r
-    else:
-        assert r["f"] and r["history"], r
+    best design; with the objective as its own program, as the CLI runs it, ≤ 5e-6;
+    docs/scaling.md)."""
+    for tol, r in ((1e-6, child[f"{name}/{axis}"]), (5e-6, child[f"{name}/{axis}/separate"])):
+        assert r["x"], r
+        if name == "master9" and axis == "samples":
+            assert r["final"] <= tol, r  # separate objective: 1.7e-6 measured
+        else:
+            assert r["f"] and r["history"], r
 
 
 @pytest.mark.parametrize("name", ["rcm", "serial", "master9"])

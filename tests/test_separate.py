@@ -83,3 +83,25 @@ def test_scoring_in_the_runs_shape_equals_plain_scoring() -> None:
     assert a.keys() == b.keys()
     for k in a:
         np.testing.assert_allclose(b[k], a[k], rtol=1e-12, atol=1e-15, err_msg=k)
+
+
+def test_raw_keys_and_subclasses_with_their_own_step() -> None:
+    """A raw uint32 key runs separate as fused; a subclass that overrides ``step`` (its
+    own algorithm) is never run through the inherited ask/tell."""
+    from dataclasses import dataclass
+
+    from designopt.optim.pso import PSO
+
+    pr = _problem("rcm", jnp.float64)
+    kw = dict(n_particles=6, n_iters=3, n_runs=2, dtype=jnp.float64)
+    a = optim.run("cmaes", pr, jax.random.PRNGKey(0), **kw)
+    b = optim.run("cmaes", pr, jax.random.PRNGKey(0), separate=True, **kw)
+    assert b.eval_shape == (2, 6)
+    np.testing.assert_allclose(b.history, a.history, rtol=1e-10)
+
+    @dataclass(frozen=True)
+    class Frozen(PSO):
+        def step(self, key, state, params, task):
+            return state  # never moves
+
+    assert PSO.asks() and not Frozen.asks()

@@ -45,49 +45,64 @@ class _Children:
         self.running: list[tuple[int, plt.Figure, Path, Path, int, float]] = []
 
     def submit(self, fig: plt.Figure, png: Path, pdf: Path, dpi: int) -> None:
+        import signal
+
         while len(self.running) >= self.workers:
             self._reap(self.running[0])
         # JAX (and Python ≥ 3.12) warn that a fork beside threads may deadlock a child that
         # uses them; this one uses numpy and matplotlib only, JAX is idle meanwhile, and a
-        # child stuck anyway is killed after CHILD_TIMEOUT and its figure drawn here
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", DeprecationWarning)
-            warnings.filterwarnings("ignore", r"os\.fork\(\) was called", RuntimeWarning)
-            pid = os.fork()
-        if pid == 0:  # the child: render, write, leave without running the parent's code
+        # child stuck anyway is killed after CHILD_TIMEOUT and its figure drawn here.
+        # Signals are blocked across the fork, so none runs the caller's code in the child.
+        block = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP}
+        old = signal.pthread_sigmask(signal.SIG_BLOCK, block)
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", DeprecationWarning)
+                warnings.filterwarnings("ignore", r"os\.fork\(\) was called", RuntimeWarning)
+                pid = os.fork()
+        except OSError:  # no fork (memory, process limit): draw it here
+            signal.pthread_sigmask(signal.SIG_SETMASK, old)
+            try:
+                _write(fig, png, pdf, dpi)
+            finally:
+                plt.close(fig)
+            return
+        if pid == 0:  # the child: render, write, leave without running the caller's code
             code = 1
             try:
-                import signal
-
-                signal.signal(signal.SIGINT, signal.SIG_DFL)
-                signal.signal(signal.SIGTERM, signal.SIG_DFL)
+                _child_setup(block)
+                signal.pthread_sigmask(signal.SIG_SETMASK, old)
                 _write(fig, png, pdf, dpi)
                 code = 0
             finally:
                 os._exit(code)
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
         self.running.append((pid, fig, png, pdf, dpi, time.monotonic()))
 
     def _reap(self, job: tuple) -> None:
-        """Wait for one child; a failed, killed or stuck one: draw its figure here (so a
-        disk fault raises its own OSError in this process)."""
+        """Wait for one child; a failed, killed or stuck one (or one that cannot be waited
+        for): draw its figure here, so a disk fault raises its own OSError here."""
         pid, fig, png, pdf, dpi, t0 = job
-        self.running.remove(job)
         status = None
-        while status is None:
-            done, st = os.waitpid(pid, os.WNOHANG)
-            if done:
-                status = st
-            elif time.monotonic() - t0 > CHILD_TIMEOUT:
-                with contextlib.suppress(OSError):
-                    os.kill(pid, 9)
-                    os.waitpid(pid, 0)
-                status = -1
-            else:
-                time.sleep(0.005)
         try:
+            while status is None:
+                try:
+                    done, st = os.waitpid(pid, os.WNOHANG)
+                except ChildProcessError:  # already reaped elsewhere (SIGCHLD ignored)
+                    done, st = pid, -1
+                if done:
+                    status = st
+                elif time.monotonic() - t0 > CHILD_TIMEOUT:
+                    _kill(pid)
+                    status = -1
+                else:
+                    time.sleep(0.005)
             if status != 0 or not (png.exists() and pdf.exists()):
                 _write(fig, png, pdf, dpi)
         finally:
+            if status is None:  # interrupted while waiting
+                _kill(pid)
+            self.running.remove(job)
             plt.close(fig)
 
     def finish(self) -> None:
@@ -96,11 +111,33 @@ class _Children:
 
     def kill(self) -> None:
         for pid, fig, *_ in self.running:
-            with contextlib.suppress(OSError):
-                os.kill(pid, 9)
-                os.waitpid(pid, 0)
+            _kill(pid)
             plt.close(fig)
         self.running.clear()
+
+
+def _kill(pid: int) -> None:
+    with contextlib.suppress(OSError):
+        os.kill(pid, 9)
+        os.waitpid(pid, 0)
+
+
+def _child_setup(signals: set) -> None:
+    """In a figure's child: default signal handlers, no wake-up pipe of the caller's, and
+    (Linux) SIGKILL when the caller dies, so no child outlives it (or its output lock)."""
+    import signal
+
+    with contextlib.suppress(ValueError, OSError):
+        signal.set_wakeup_fd(-1)
+    for sig in signals:
+        signal.signal(sig, signal.SIG_DFL)
+    with contextlib.suppress(Exception):
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+        if os.getppid() == 1:  # the caller died before prctl
+            os._exit(1)
 
 
 _CHILDREN: contextvars.ContextVar[_Children | None] = contextvars.ContextVar(

@@ -175,7 +175,10 @@ class Optimizer:
     @classmethod
     def asks(cls) -> bool:
         """Whether the entry implements ask/tell (else only init/step: run fused)."""
-        return cls.ask is not Optimizer.ask and cls.init_ask is not Optimizer.init_ask
+        halves = cls.ask is not Optimizer.ask and cls.init_ask is not Optimizer.init_ask
+        # a subclass that overrides init or step itself (the older extension point) means
+        # its own algorithm: the inherited halves would silently run the parent's
+        return halves and cls.init is Optimizer.init and cls.step is Optimizer.step
 
     def best(self, state: Any) -> Best:
         raise NotImplementedError

@@ -148,7 +148,8 @@ def _flat(X, ek, rows: int):
     Xf = X.reshape((-1, N, D))
     if N < rows:
         Xf = jnp.concatenate([Xf, jnp.repeat(Xf[:, -1:], rows - N, axis=1)], axis=1)
-    return Xf, ek.reshape((-1,))
+    # the run axes flattened; a raw uint32 key (…runs, 2) keeps its last axis
+    return Xf, ek.reshape((Xf.shape[0],) + ek.shape[X.ndim - 2 :])
 
 
 def _unflat(a, X):
@@ -212,6 +213,15 @@ def _tell(carry, k, X, pending, f, v, params, lower, upper, opt, batched=False, 
     return _over_runs(one, batched)((carry, k, X, pending, f, v), params)
 
 
+def _template(keys, params, lower, upper, opt, batched, rows, m, dtype):
+    """The first state's shapes without tracing the objective (resuming a separate run)."""
+    keys1, k0, X, pending, Xf, _ = _init_ask(keys, params, lower, upper, opt=opt,
+                                             batched=batched, rows=rows)  # fmt: skip
+    f = jnp.zeros(Xf.shape[:2] + ((m,) if m > 1 else ()), dtype)
+    v = jnp.zeros(Xf.shape[:2], dtype)
+    return _init_tell(keys1, k0, X, pending, f, v, params, lower, upper, opt=opt, batched=batched)
+
+
 @partial(jax.jit, static_argnames=("opt", "batched"))
 def _records(carry, ref, opt, batched):
     f = lambda c, _: _track(opt, c[1], ref)  # noqa: E731
@@ -273,7 +283,7 @@ def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress
            resume, batched, B, record, at_end=False, plan=None, ref_point=None,
            separate=False):  # fmt: skip
     n_iters = opt.n_iters
-    separate = separate and plan is None and opt.asks()
+    separate = separate and opt.asks()
     rows = opt.n  # candidates per run in each call of the separate objective
     lower = jnp.asarray(problem.lower, dtype)
     upper = jnp.asarray(problem.upper, dtype)
@@ -297,8 +307,8 @@ def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress
     if resume is None and separate:
         keys1, k0, X, pending, Xf, ek = _init_ask(keys, params, lower, upper, opt=opt,
                                                   batched=batched, rows=rows)  # fmt: skip
-        carry = _init_tell(keys1, k0, X, pending, *objective(Xf, ek), params, lower, upper,
-                           opt=opt, batched=batched)  # fmt: skip
+        carry = place(_init_tell(keys1, k0, X, pending, *objective(Xf, ek), params, lower,
+                                 upper, opt=opt, batched=batched))  # fmt: skip
     if resume is None:
         if not separate:
             carry = place(_init(keys, params, pparams, lower, upper, **statics))
@@ -315,7 +325,10 @@ def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress
         )
         done = 0
     else:
-        template = jax.eval_shape(lambda: _init(keys, params, pparams, lower, upper, **statics))
+        template = jax.eval_shape(lambda: _template(keys, params, lower, upper, opt, batched,
+                                                    rows, problem.n_objectives, dtype)
+                                  if separate else _init(keys, params, pparams, lower, upper,
+                                                         **statics))  # fmt: skip
         st = dict(resume.state)
         hv0 = st.pop("runner.history_v", None)
         ref0 = st.pop("runner.ref_point", None)
@@ -337,15 +350,16 @@ def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress
     while done < n_iters:
         length = min(chunk, n_iters - done)
         if separate:  # ask, the objective program, tell: one iteration at a time
-            tracks = []
+            tracks = []  # on the device until the chunk ends: no host sync per iteration
             for _ in range(length):
                 keys1, k, X, pending, Xf, ek = _ask(carry, params, lower, upper, opt=opt,
                                                     batched=batched, rows=rows)  # fmt: skip
                 carry, tr = _tell((keys1, carry[1]), k, X, pending, *objective(Xf, ek), params,
                                   lower, upper, opt=opt, batched=batched, ref=ref)  # fmt: skip
-                tracks.append(tuple(np.asarray(a) for a in tr))
+                carry = place(carry)  # the same placement every iteration: one program
+                tracks.append(tr)
             axis = 2 if batched else 1  # (…runs, iterations, …) as _advance's scan gives
-            x, f, v = (np.stack([t[i] for t in tracks], axis=axis) for i in range(3))
+            x, f, v = (np.stack([host(t[i]) for t in tracks], axis=axis) for i in range(3))
         else:
             carry, (x, f, v) = _advance(
                 carry, params, pparams, lower, upper, length=length, ref=ref, **statics
@@ -381,7 +395,7 @@ def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress
         best_v=history_v[..., -1],
         front=front,
         ref_point=host(ref) if mo else None,
-        eval_shape=(int(np.prod(keys.shape)), rows) if separate else None,
+        eval_shape=(int(np.prod(keys.shape[: 2 if batched else 1])), rows) if separate else None,
     )
 
 
@@ -451,7 +465,7 @@ def run(
     serves the first population, every iteration and the scoring after the run
     (``RunResult.eval_shape``), at the price of three calls per iteration: for expensive
     objectives (Monte-Carlo studies), where compiling the objective dominates. Ignored
-    with a ``plan`` or an optimizer without ask/tell. Deterministic and resumable as the
+    for an optimizer without ask/tell. Deterministic and resumable as the
     fused run, though not bitwise equal to it (XLA may fuse the objective differently).
     """
     opt = _prepare(name, n_particles, n_iters, n_runs, bounds, [settings], problem, ref_point)

@@ -42,9 +42,15 @@ _SCALE = {"alpha_deg": math.pi / 180, "beta_deg": math.pi / 180, "l_QH": 1.0, "l
 def cone_axis(q12_deg: tuple[float, float]) -> np.ndarray:
     """World direction of the Table 1 arm's shaft at (q1, q2) (deg)."""
     q = np.array([math.radians(q12_deg[0]), math.radians(q12_deg[1]), 0, 0, 0, 0])
-    # one jitted call (op by op, the FK compiled some twenty one-op programs at set-up)
-    R, _ = jax.jit(mech.frame_model(3).fk)(jnp.asarray(mech.table1()), jnp.asarray(q))
+    R, _ = _fk3(jnp.asarray(mech.table1()), jnp.asarray(q))
     return np.asarray(R)[:, 1]
+
+
+@jax.jit
+def _fk3(links, q):
+    """The Table 1 arm's frame 3 in one jitted call (op by op, the FK compiled some twenty
+    one-op programs at set-up)."""
+    return mech.frame_model(3).fk(links, q)
 
 
 def _basis(c: np.ndarray) -> np.ndarray:
