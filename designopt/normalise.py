@@ -60,8 +60,10 @@ def probe_bounds(
 ) -> np.ndarray:
     """(len(names), 2) min and max of the indices ``names`` over ``n_norm`` Halton designs
     of the box [lower, upper] (shifted by the ``normalisation`` stream), scored once by
-    the swarm function ``fn`` with the Monte-Carlo key ``keys["samples"]``. An index that
-    is flat over the sample gets max = min + 1 (no scaling, never a division by 0)."""
+    the swarm function ``fn`` with the Monte-Carlo key ``keys["samples"]`` (within
+    :func:`evaluation_shape`: through ``scoring.score``, key 0, as the run's scoring; the
+    studies' functions draw their samples from ``params`` and ignore the key). An index
+    that is flat over the sample gets max = min + 1 (no scaling, never a division by 0)."""
     Xn = mc.box_samples(keys["normalisation"], lower, upper, n_norm, "halton", dtype)
     shape = _SHAPE.get()
     if shape is None:

@@ -304,13 +304,13 @@ def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress
         f, _, v = evaluate_batch(pparams, Xf, ek, fn=problem.fn, constraints=problem.constraints)
         return f, v
 
-    if resume is None and separate:
-        keys1, k0, X, pending, Xf, ek = _init_ask(keys, params, lower, upper, opt=opt,
-                                                  batched=batched, rows=rows)  # fmt: skip
-        carry = place(_init_tell(keys1, k0, X, pending, *objective(Xf, ek), params, lower,
-                                 upper, opt=opt, batched=batched))  # fmt: skip
     if resume is None:
-        if not separate:
+        if separate:
+            keys1, k0, X, pending, Xf, ek = _init_ask(keys, params, lower, upper, opt=opt,
+                                                      batched=batched, rows=rows)  # fmt: skip
+            carry = place(_init_tell(keys1, k0, X, pending, *objective(Xf, ek), params, lower,
+                                     upper, opt=opt, batched=batched))  # fmt: skip
+        else:
             carry = place(_init(keys, params, pparams, lower, upper, **statics))
         if mo and ref is None:
             fr = _fronts(carry, opt, batched)
