@@ -36,9 +36,9 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 from _timing import best_of, compile_time, header  # noqa: E402
 
-from designopt import montecarlo as mc  # noqa: E402
 from designopt.kinematics import ET, inv_cond  # noqa: E402
 from designopt.kinematics.kernel import dh_model, et_model  # noqa: E402
+from designopt.numerics import montecarlo as mc  # noqa: E402
 from designopt.studies.master9 import mechanism as m  # noqa: E402
 from designopt.studies.master9.indices import (  # noqa: E402
     _features,

@@ -36,8 +36,8 @@ SUMMARY = re.compile(
 REPORT_AFTER_IMPORTS = """
 import sys, time
 from pathlib import Path
-from designopt import pipeline
-from designopt.timing import Stopwatch
+from designopt.app import pipeline
+from designopt.core.timing import Stopwatch
 import designopt.figures, designopt.studies.master9.figures  # noqa: F401 (imports first)
 with Stopwatch() as sw:
     pipeline.draw_figures(Path(sys.argv[1]))
@@ -76,7 +76,7 @@ def _at(lines: list[tuple[float, str]], prefix: str) -> float:
 
 def one_run(config: str, out: Path, cache: Path) -> dict[str, float]:
     """The main job once, figures included, with the given compilation cache folder."""
-    from designopt import archive
+    from designopt.io import archive
 
     env = os.environ | {"DESIGNOPT_CACHE_DIR": str(cache), "PYTHONUNBUFFERED": "1"}
     e2e, lines = _timed_lines([*_cli(), "run", config, "--out", str(out), "--quiet"], env)

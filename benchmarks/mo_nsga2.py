@@ -5,7 +5,7 @@ generations (the first one random: 25 000 evaluations per run, as pymoo's
 ``("n_gen", 250)``), 11 runs each, on this machine in this process. Both use pymoo 0.6's
 NSGA-II defaults (binary tournament, SBX eta 15 prob 0.9, polynomial mutation eta 20,
 per-variable rate 1/D). The hypervolume of each run's final non-dominated feasible set is
-computed by the same exact routine (``designopt.pareto.hypervolume``, checked against
+computed by the same exact routine (``designopt.numerics.pareto.hypervolume``, checked against
 moocore in tests/test_pareto.py) against the reference point (1.1, …, 1.1).
 
 Printed per problem: median [min–max] hypervolume of both, the optimum (the true front's
@@ -38,7 +38,7 @@ from _timing import header  # noqa: E402
 from scipy.stats import mannwhitneyu  # noqa: E402
 
 from designopt import optim  # noqa: E402
-from designopt import pareto as pa  # noqa: E402
+from designopt.numerics import pareto as pa  # noqa: E402
 from designopt.problems.multi import multi_benchmark, true_front  # noqa: E402
 
 

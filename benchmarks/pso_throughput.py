@@ -267,13 +267,13 @@ def main() -> None:
     if a.breakdown:
         breakdown(a.runs, a.iters, a.repeat, evo)
     if a.suite:
-        from designopt import benchsuite
+        from designopt.bench import suite
 
-        cfg = benchsuite.BenchConfig(
-            bench=benchsuite.Bench(shifted=False, n_runs=a.runs, n_iters=a.iters)
+        cfg = suite.BenchConfig(
+            bench=suite.Bench(shifted=False, n_runs=a.runs, n_iters=a.iters)
         )
         t0 = time.perf_counter()
-        benchsuite.run_suite(cfg)
+        suite.run_suite(cfg)
         print(f"  seed suite ({len(cfg.bench.variants)} optimizers × 4 functions × {a.runs} runs, "
               f"float32, defaults): {time.perf_counter() - t0:.1f} s incl. compile")  # fmt: skip
     print(f"  {machine()}")

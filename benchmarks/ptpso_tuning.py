@@ -20,9 +20,9 @@ import numpy as np
 from _timing import header
 
 from designopt import optim
+from designopt.core.timing import Stopwatch
 from designopt.figures import plt, save
 from designopt.problems.benchmarks import benchmark
-from designopt.timing import Stopwatch
 
 GAMMAS = (1e-7, 1e-5, 1e-3, 1e-1)
 AS = (2.0, 10.0, 100.0)

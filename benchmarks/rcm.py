@@ -19,7 +19,7 @@ jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
-from designopt import montecarlo as mc  # noqa: E402
+from designopt.numerics import montecarlo as mc  # noqa: E402
 from designopt.studies import streams  # noqa: E402
 from designopt.studies.rcm import objective as o  # noqa: E402
 from designopt.studies.rcm.settings import RcmSettings  # noqa: E402

@@ -34,14 +34,15 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def child(devices: int, procs: int, pid: int, coord: str | None, reps: int) -> None:
     """One process of a layout: time every workload, print JSON (process 0)."""
-    from designopt import parallel
+    from designopt.core import devices as dev
 
-    parallel.configure(devices, coord, procs if coord else None, pid if coord else None)
+    dev.configure(devices, coord, procs if coord else None, pid if coord else None)
     import jax
     import jax.numpy as jnp
     import numpy as np
 
-    from designopt import optim, pipeline
+    from designopt import optim
+    from designopt.app import pipeline
     from designopt.studies.master9.objective import problem as master9
     from designopt.studies.master9.settings import Master9Settings
 
@@ -60,7 +61,7 @@ def child(devices: int, procs: int, pid: int, coord: str | None, reps: int) -> N
         return out
 
     n = len(jax.devices())
-    P = parallel.ParallelSettings
+    P = devices.ParallelSettings
     res: dict[str, object] = {"devices": n, "processes": jax.process_count()}
     pr = problem(65_536, 8192)
     rng = np.random.default_rng(0)
@@ -71,10 +72,10 @@ def child(devices: int, procs: int, pid: int, coord: str | None, reps: int) -> N
             if n == 1:
                 res[key] = timed(lambda X=X: pipeline.score(pr, X, batch=M))
             elif axis == "designs":
-                pl = parallel.scoring_plan(P(devices=n))
+                pl = devices.scoring_plan(P(devices=n))
                 res[key] = timed(lambda X=X, pl=pl: pipeline.score(pr, X, batch=M, plan=pl))
             else:
-                pl = parallel.plan(P(devices=n, axis="samples"), n_runs=1, n_particles=M,
+                pl = devices.plan(P(devices=n, axis="samples"), n_runs=1, n_particles=M,
                                    problem=pr)  # fmt: skip
                 sp = pl.problem(pr)
                 res[key] = timed(lambda X=X, sp=sp: pipeline.score(sp, X, batch=M))
@@ -83,7 +84,7 @@ def child(devices: int, procs: int, pid: int, coord: str | None, reps: int) -> N
     for mode, runs in (("strong", 4), ("weak", n)):
         kw = dict(n_particles=32, n_iters=10, n_runs=runs, dtype=jnp.float32, chunk_iters=10)
         pl = (
-            parallel.plan(P(devices=n, axis="runs"), n_runs=runs, n_particles=32) if n > 1 else None
+            devices.plan(P(devices=n, axis="runs"), n_runs=runs, n_particles=32) if n > 1 else None
         )
         res[f"ptpso/runs/{mode}"] = timed(
             lambda kw=kw, pl=pl: optim.run("ptpso", pr, k, plan=pl, **kw)

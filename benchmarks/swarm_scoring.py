@@ -21,7 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 from _timing import best_of, compile_time, header
 
-from designopt import montecarlo as mc
+from designopt.numerics import montecarlo as mc
 from designopt.studies.master9 import mechanism as m
 from designopt.studies.master9 import objective as obj
 from designopt.studies.master9.indices import (

@@ -14,7 +14,7 @@ script that wants float64 calls ``jax.config.update("jax_enable_x64", True)`` fi
 
 from typing import Any
 
-from designopt.errors import ConfigError, WriteError
+from designopt.core.errors import ConfigError, WriteError
 
 __version__ = "0.1.0"
 

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from designopt.errors import ConfigError
+from designopt.core.errors import ConfigError
 from designopt.results import Record, RunRecord, ScanRecord, SweepRecord
 
 Config = Any
@@ -47,7 +47,7 @@ def load_config(path: str | os.PathLike, overrides: Mapping[str, Any] | None = N
     """The validated config of a YAML file; ``overrides`` maps dotted keys to values
     (``{"optimizer.n_iters": 5, "study.indices.n_samples": 4096}``), set in the parsed
     YAML before validation, so they are checked exactly like the file's own keys."""
-    from designopt.config import parse, validate
+    from designopt.app.config import parse, validate
 
     raw, _ = parse(path)
     for k, v in (overrides or {}).items():
@@ -59,15 +59,15 @@ def load_config(path: str | os.PathLike, overrides: Mapping[str, Any] | None = N
 
 def _config(config: Config) -> tuple[Any, str]:
     """(validated config, where) of a path, a parsed dict or a validated config."""
-    from designopt import finite
-    from designopt.config import validate
+    from designopt.core import validation
+    from designopt.app.config import validate
 
     if isinstance(config, str | os.PathLike):
         return load_config(config), str(config)
     if isinstance(config, Mapping):
         return validate(dict(config), "config"), "config"
-    finite.check_tree(config, "config")  # a config built or changed in Python
-    finite.check_seed(config.seed, "config: key 'seed'")
+    validation.check_tree(config, "config")  # a config built or changed in Python
+    validation.check_seed(config.seed, "config: key 'seed'")
     return config, "config"
 
 
@@ -80,7 +80,7 @@ def _bar(total: int, desc: str) -> Iterator[Callable[[int], None]]:
 
 
 def _progress(progress: bool) -> Any:
-    from designopt.pipeline import no_progress
+    from designopt.app.pipeline import no_progress
 
     return _bar if progress else no_progress
 
@@ -90,7 +90,7 @@ def run(config: Config, out: str | os.PathLike | None = None, progress: bool = F
     """Optimise the config's study → ``RunRecord``. ``out=None``: in memory, nothing
     written; with ``out``: the archive the CLI writes (claimed, atomic; an existing one
     refused unless ``overwrite``)."""
-    from designopt import pipeline
+    from designopt.app import pipeline
 
     cfg, where = _config(config)
     if overwrite:
@@ -103,7 +103,7 @@ def run(config: Config, out: str | os.PathLike | None = None, progress: bool = F
 def sweep(config: Config, out: str | os.PathLike | None = None, progress: bool = False,
           overwrite: bool = False) -> SweepRecord:  # fmt: skip
     """Every member of the config's ``sweep:`` section → ``SweepRecord``."""
-    from designopt import pipeline
+    from designopt.app import pipeline
 
     cfg, where = _config(config)
     if overwrite:
@@ -116,7 +116,7 @@ def sweep(config: Config, out: str | os.PathLike | None = None, progress: bool =
 def scan(config: Config, out: str | os.PathLike | None = None, progress: bool = False,
          overwrite: bool = False) -> ScanRecord:  # fmt: skip
     """Score the designs of the config's ``scan:`` section → ``ScanRecord``."""
-    from designopt import pipeline
+    from designopt.app import pipeline
 
     cfg, where = _config(config)
     if overwrite:
@@ -132,7 +132,7 @@ def evaluate(config: Config, designs: Any) -> dict[str, np.ndarray]:
     arrays (``float(res["f"][0])`` for one design). ``designs``: {variable: value or
     array} (arrays broadcast) or a list of such dicts; a variable not given takes the
     middle of its box."""
-    from designopt import pipeline
+    from designopt.app import pipeline
 
     cfg, where = _config(config)
     return pipeline.evaluate(cfg, designs, where)
@@ -141,6 +141,6 @@ def evaluate(config: Config, designs: Any) -> dict[str, np.ndarray]:
 def load(path: str | os.PathLike) -> Record:
     """The record an archive holds (run, scan, sweep, bench, IK; a checkpoint; a
     replay)."""
-    from designopt import archive
+    from designopt.app import records
 
-    return archive.load(path)
+    return records.load(path)

@@ -23,9 +23,10 @@ def _release_compiled_programs():
     maps each) and ran into the kernel's map limit (vm.max_map_count 65530), which
     crashed XLA mid-suite."""
     yield
-    from designopt import prepare, scoring
+    from designopt.app import job
+    from designopt.problems import evaluate
 
-    prepare._PROBLEMS.clear()
-    scoring._SCORERS.clear()
+    job._PROBLEMS.clear()
+    evaluate._SCORERS.clear()
     jax.clear_caches()
     gc.collect()

@@ -116,7 +116,7 @@ def _name(t) -> str:
 
 
 def assert_clean(rec) -> None:
-    """Every figure recorded (``designopt.figures.RECORD``) passes :func:`problems`."""
+    """Every figure recorded (``designopt.canvas.RECORD``) passes :func:`problems`."""
     assert rec, "no figure was saved"
     bad = {name: p for name, fig in rec if (p := problems(fig))}
     assert not bad, "\n".join(f"{k}: {v}" for k, v in bad.items())

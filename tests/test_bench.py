@@ -1,11 +1,14 @@
-"""The benchmark suite: ``benchsuite.command`` end to end (PSO variants beside CMA-ES),
+"""The benchmark suite: ``designopt.app.bench.command`` end to end (PSO variants beside CMA-ES),
 bad input, and redrawing the figures from the archive."""
 
 import pytest
 
-from designopt import archive, benchsuite
-from designopt.config import ConfigError
+from designopt.app import bench as bench_job
+from designopt.app import records
+from designopt.bench import suite
+from designopt.core.errors import ConfigError
 from designopt.figures import bench as bench_figs
+from designopt.io import archive
 
 BENCH = """
 bench:
@@ -29,7 +32,7 @@ def write(tmp_path, text, name="c.yaml"):
 
 def test_bench_small_suite(tmp_path, capsys):
     cfg = write(tmp_path, BENCH)
-    assert benchsuite.command(str(cfg), None, None, True) == 0
+    assert bench_job.command(str(cfg), None, None, True) == 0
     out = capsys.readouterr().out
     assert "rastrigin_shifted" in out and "p (Holm)" in out and "cmaes" in out
     assert f"archive: {tmp_path / 'a.h5'}" in out
@@ -47,7 +50,7 @@ def test_bench_small_suite(tmp_path, capsys):
     names = ("fig10_final_values", "fig11_convergence_iterations", "convergence_curves")
     for n in names:
         assert (tmp_path / f"{n}.png").exists() and (tmp_path / f"{n}.pdf").exists()
-    figs = bench_figs.draw_record(archive.load(tmp_path / "a.h5"), tmp_path / "again")
+    figs = bench_figs.draw_record(records.load(tmp_path / "a.h5"), tmp_path / "again")
     assert {p.stem for p in figs} == set(names)
 
 
@@ -70,7 +73,7 @@ def test_bench_bad_input(tmp_path, old, new, needle):
     assert old in BENCH
     cfg = write(tmp_path, BENCH.replace(old, new))
     with pytest.raises(ConfigError) as e:
-        benchsuite.command(str(cfg), None, None, True)
+        bench_job.command(str(cfg), None, None, True)
     assert needle in str(e.value) and "\n" not in str(e.value)
     assert not (tmp_path / "a.h5").exists()
 
@@ -80,18 +83,18 @@ def test_bench_unwritable_output(tmp_path):
     target = tmp_path / "afile" / "x.h5"  # its folder cannot be created (a file is in the way)
     cfg = write(tmp_path, BENCH)
     with pytest.raises(ConfigError, match="output '.*x.h5'"):
-        benchsuite.command(str(cfg), None, str(target), True)
+        bench_job.command(str(cfg), None, str(target), True)
 
 
 def test_shipped_config_is_valid():
     from pathlib import Path
 
-    from designopt.config import load
+    from designopt.app.config import load
 
     p = Path(__file__).resolve().parents[1] / "configs" / "pso_benchmark.yaml"
-    cfg, _ = load(p, benchsuite.BenchConfig)
-    benchsuite.check(cfg, str(p))
-    labels = [lab for lab, _, _ in benchsuite.entries(cfg)]
+    cfg, _ = load(p, suite.BenchConfig)
+    suite.check(cfg, str(p))
+    labels = [lab for lab, _, _ in suite.entries(cfg)]
     assert labels == ["p1", "p2", "p3", "p4", "p5", "p6", "p7", "cmaes"]
 
 
@@ -118,11 +121,11 @@ def test_multi_objective_cases_compare_hypervolumes(tmp_path, capsys):
     import numpy as np
 
     cfg = write(tmp_path, MO_BENCH)
-    assert benchsuite.command(str(cfg), None, None, True) == 0
+    assert bench_job.command(str(cfg), None, None, True) == 0
     out = capsys.readouterr().out
     assert "zdt1  (hypervolume against (1.1, 1.1)" in out and "dtlz2_m3_d7" in out
     assert "IGD+ med" in out and "sphere  (success" in out
-    rec = archive.load(tmp_path / "a.h5")
+    rec = records.load(tmp_path / "a.h5")
     assert set(rec.entries("zdt1")) == {"nsga2", "wide"} and set(rec.entries("sphere")) == {"p3"}
     for case, m in (("zdt1", 2), ("dtlz2_m3_d7", 3)):
         st = rec.stats(case)
@@ -151,7 +154,7 @@ def test_multi_objective_bench_refuses_a_wrong_reference(tmp_path):
         ),
     )
     with pytest.raises(ConfigError, match=r"key 'bench.hypervolume_reference': 2 values for 3"):
-        benchsuite.command(str(cfg), None, None, True)
+        bench_job.command(str(cfg), None, None, True)
     cfg = write(tmp_path, MO_BENCH.replace("zdt1, {name: dtlz2, n_objectives: 3, dim: 7}, ", ""))
     with pytest.raises(ConfigError, match=r"'nsga2' is multi-objective and bench.functions has no"):
-        benchsuite.command(str(cfg), None, None, True)
+        bench_job.command(str(cfg), None, None, True)

@@ -11,8 +11,8 @@ import h5py
 import numpy as np
 import yaml
 
-from designopt import pipeline
-from designopt.config import validate
+from designopt.app import pipeline
+from designopt.app.config import validate
 
 JOINT = {"type": "R", "alpha": 0, "d": 0, "theta": 0, "limits": [-180, 180]}
 TINY = {  # a planar 2R arm: every stage (setup, PSO, polish, scoring), quick to compile

@@ -4,7 +4,7 @@ import h5py
 import numpy as np
 import pytest
 
-from designopt.cli import main
+from designopt.cli.commands import main
 
 TINY = """
 study:
@@ -94,17 +94,17 @@ def test_output_that_is_a_folder_or_unwritable_is_refused_before_the_run(tmp_pat
 def test_long_jobs_print_their_eta_once_after_the_first_timed_chunk(monkeypatch, capsys):
     import time
 
-    from designopt import cli
+    from designopt.cli import commands
 
     clock = iter([10.0, 15.0, 20.0, 25.0])  # the first chunk (compile) ends at 10 s
     monkeypatch.setattr(time, "monotonic", lambda: next(clock))
-    with cli._progress(True)(100, "ptpso on master9") as update:
+    with commands._progress(True)(100, "ptpso on master9") as update:
         for _ in range(4):
             update(1)
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "about 8 min left" in err and "--max-minutes" in err
     clock = iter([10.0, 10.1, 10.2])
-    with cli._progress(True)(10, "short") as update:
+    with commands._progress(True)(10, "short") as update:
         for _ in range(3):
             update(1)
     assert capsys.readouterr().err == ""

@@ -6,7 +6,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from designopt import optim, stats
+from designopt import optim
+from designopt.numerics import statistics
 from designopt.problems import benchmark
 from designopt.problems.base import Problem
 
@@ -73,6 +74,6 @@ def test_cmaes_matches_evosax(P, budget):
     ev_it, _ = _evosax_iterations(P, budget, n, 0.3, 1e-8)
     r = optim.run("cmaes", P, jax.random.key(3), LAM, budget, n)
     ours = _iterations_to(r.history, 1e-8)
-    _, p = stats.mann_whitney_u(ours, ev_it)
+    _, p = statistics.mann_whitney_u(ours, ev_it)
     assert p > 0.01, (np.median(ours), np.median(ev_it))
     assert abs(np.median(ours) / np.median(ev_it) - 1) < 0.25

@@ -16,9 +16,9 @@ import yaml
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
-from designopt import config
-from designopt.cli import main
-from designopt.errors import ConfigError
+from designopt.app import config
+from designopt.cli.commands import main
+from designopt.core.errors import ConfigError
 
 ROOT = Path(__file__).resolve().parents[1]
 TINY = {

@@ -256,8 +256,8 @@ def test_check_poses_names_bad_rows():
 
 
 def test_gci_depends_on_l_ij_not_on_beta_and_coverage_on_beta():
-    from designopt.config import validate
-    from designopt.pipeline import evaluate
+    from designopt.app.config import validate
+    from designopt.app.pipeline import evaluate
 
     raw = {"study": {"name": "davinci", "workspace": {"cone_deg": 60, "depth_mm": [20, 250]},
                      "indices": {"n_samples": 512, "n_ik": 64, "solver": "closed_form"}},

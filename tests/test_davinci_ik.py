@@ -7,9 +7,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from designopt import archive
-from designopt.cli import build_parser
-from designopt.errors import ConfigError
+from designopt.cli.commands import build_parser
+from designopt.core.errors import ConfigError
+from designopt.io import archive
 from designopt.studies.davinci import ikcli, paper
 from designopt.studies.davinci import mechanism as m
 
@@ -125,7 +125,7 @@ def test_orthonormal_within_tolerance_is_accepted_and_nonunit_quaternion_refused
 
 
 def test_api_refuses_nan_and_inf_with_the_pose_number():
-    from designopt.config import load
+    from designopt.app.config import load
 
     cfg, _ = load(CONFIG)
     _, T = poses()
@@ -147,7 +147,7 @@ def test_batches_padding_and_trajectory_segments_agree(tmp_path):
     segments (each warm-started from the previous segment's last solution)."""
     import yaml
 
-    from designopt.config import validate
+    from designopt.app.config import validate
 
     raw = yaml.safe_load(open(CONFIG))
     raw["study"]["ik"]["batch"] = 4

@@ -6,7 +6,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from designopt import optim, stats
+from designopt import optim
+from designopt.numerics import statistics
 from designopt.optim import draws
 from designopt.problems import benchmark
 
@@ -70,6 +71,6 @@ def test_mix32_and_threefry_give_the_same_ptpso_results(fname):
     with jax.enable_x64(False):
         a = optim.run("ptpso", P, jax.random.key(0), **kw)
         b = optim.run("ptpso", P, jax.random.key(0), draws="uniform", **kw)
-    _, p = stats.mann_whitney_u(a.best_f, b.best_f)
+    _, p = statistics.mann_whitney_u(a.best_f, b.best_f)
     assert a.settings["draws"] == "mix32" and b.settings["draws"] == "uniform"
     assert p > 0.01, (fname, np.median(a.best_f), np.median(b.best_f), p)

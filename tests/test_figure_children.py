@@ -1,4 +1,4 @@
-"""Figures written by forked children (``designopt.figures.parallel_saves``): the same
+"""Figures written by forked children (``designopt.canvas.parallel_saves``): the same
 bytes as drawn in the calling process, and a child that fails leaves its figure to the
 caller (so a disk fault still raises there)."""
 
@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from designopt import figures
+from designopt.figures import canvas
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="fork: Linux")
 
@@ -23,13 +24,13 @@ def _draw(folder: Path) -> list[Path]:
         fig, ax = plt.subplots(figsize=(3, 2))
         ax.plot(np.sin(np.linspace(0, 6, 50) + i))
         ax.set_title(f"panel {i}")
-        out += figures.save(fig, folder, f"f{i}")
+        out += canvas.save(fig, folder, f"f{i}")
     return out
 
 
 def test_children_write_the_same_pngs(tmp_path: Path) -> None:
     seq = _draw(tmp_path / "seq")
-    with figures.parallel_saves(workers=2):
+    with canvas.parallel_saves(workers=2):
         par = _draw(tmp_path / "par")
     assert [p.name for p in par] == [p.name for p in seq]
     for a, b in zip(seq, par, strict=True):
@@ -41,7 +42,7 @@ def test_children_write_the_same_pngs(tmp_path: Path) -> None:
 
 
 def test_a_failing_child_leaves_its_figure_to_the_caller(tmp_path: Path, monkeypatch) -> None:
-    parent, real = os.getpid(), figures._write
+    parent, real = os.getpid(), canvas._write
     calls = []
 
     def write(fig, png, pdf, dpi):
@@ -51,7 +52,7 @@ def test_a_failing_child_leaves_its_figure_to_the_caller(tmp_path: Path, monkeyp
         real(fig, png, pdf, dpi)
 
     monkeypatch.setattr(figures, "_write", write)
-    with figures.parallel_saves(workers=2):
+    with canvas.parallel_saves(workers=2):
         out = _draw(tmp_path)
     assert sorted(calls) == ["f0.png", "f1.png", "f2.png"]
     assert all(p.exists() for p in out)
@@ -61,7 +62,7 @@ def test_a_disk_fault_raises_in_the_caller(tmp_path: Path) -> None:
     ro = tmp_path / "ro"
     ro.mkdir()
     (ro / "f0.png").mkdir()  # a folder where the PNG goes: no process can write it
-    with pytest.raises(OSError), figures.parallel_saves(workers=2):
+    with pytest.raises(OSError), canvas.parallel_saves(workers=2):
         _draw(ro)
     assert plt.get_fignums() == []
 
@@ -71,6 +72,6 @@ def test_no_fork_draws_here(tmp_path: Path, monkeypatch) -> None:
         raise OSError(12, "Cannot allocate memory")
 
     monkeypatch.setattr(os, "fork", no_fork)
-    with figures.parallel_saves(workers=2):
+    with canvas.parallel_saves(workers=2):
         out = _draw(tmp_path)
     assert all(p.exists() for p in out) and plt.get_fignums() == []

@@ -14,12 +14,14 @@ import numpy as np
 import pytest
 from figcheck import assert_clean, problems
 
-from designopt import archive, figures, output, pipeline, stats
-from designopt.config import validate
+from designopt.app import pipeline, records, reporting
+from designopt.app.config import validate
 from designopt.figures import bench as bench_figs
+from designopt.figures import canvas, style
 from designopt.figures import scan as scan_figs
-from designopt.figures import style
 from designopt.figures import sweep as sweep_figs
+from designopt.io import archive, writer
+from designopt.numerics import statistics
 from designopt.results import BenchRecord, SweepRecord
 from designopt.studies import STUDIES, get
 
@@ -28,9 +30,9 @@ ROOT = Path(__file__).resolve().parents[1]
 
 @pytest.fixture
 def record():
-    figures.RECORD = []
-    yield figures.RECORD
-    figures.RECORD = None
+    canvas.RECORD = []
+    yield canvas.RECORD
+    canvas.RECORD = None
     plt.close("all")
 
 
@@ -105,7 +107,7 @@ def test_replay_figures(name, tmp_path, record):
     contract run test in tests/test_studies.py)."""
     cfg = _config(name)
     rep = pipeline.run(cfg, "tiny", str(ROOT / "configs" / "tiny.yaml"), tmp_path / "a.h5")
-    rec = archive.load(rep.out)
+    rec = records.load(rep.out)
     assert rec == rep.record
     get(name).figures(rec, tmp_path / "figs")
     assert_clean(record)
@@ -116,12 +118,12 @@ def test_replay_figures(name, tmp_path, record):
 def _scan(name: str, tmp_path: Path, scan: dict):
     cfg = _config(name, scan=scan)
     rep = pipeline.scan(cfg, "tiny", "tiny", tmp_path / f"{name}_{scan.get('mode', 'grid')}.h5")
-    return archive.load(rep.out)
+    return records.load(rep.out)
 
 
 def test_scan_curves_merge_equal_indices(tmp_path, record):
     a = _scan("rcm", tmp_path, {"vary": {"c": {"from": 200, "to": 400, "num": 5}}})
-    scan_figs.draw(a, tmp_path / "f")
+    scan_figs.draw(a, tmp_path / "f", reporting.hints(a))
     assert_clean(record)
     (_, fig), = record  # fmt: skip
     ys = [ax.get_ylabel() for ax in fig.axes if ax.get_visible()]
@@ -136,7 +138,7 @@ def test_scan_curves_merge_equal_indices(tmp_path, record):
 def test_scan_grid_hatches_infeasible_cells_and_designs(tmp_path, record):
     grid = {"a": {"from": 60, "to": 200, "num": 4}, "c": {"from": 200, "to": 400, "num": 3}}
     a = _scan("rcm", tmp_path, {"mode": "grid", "vary": grid})
-    scan_figs.draw(a, tmp_path / "f")
+    scan_figs.draw(a, tmp_path / "f", reporting.hints(a))
     assert (a.values["violation"] > 0).any()  # eq. (19) fails for small a, large c
     fig = record[0][1]
     texts = [
@@ -146,7 +148,7 @@ def test_scan_grid_hatches_infeasible_cells_and_designs(tmp_path, record):
     a = _scan(
         "rcm", tmp_path, {"mode": "list", "vary": {"a": [80, 120, 160], "c": [220, 250, 300]}}
     )
-    scan_figs.draw(a, tmp_path / "g")
+    scan_figs.draw(a, tmp_path / "g", reporting.hints(a))
     assert_clean(record)
 
 
@@ -157,7 +159,7 @@ def test_sweep_figure(tmp_path, record):
     # the members run in vmapped batches (one per swarm size) and are kept in the sweep's
     # order, in memory as in the archive
     assert list(rep.record.members) == ["000", "001", "002", "003"]
-    rec = archive.load(rep.out)
+    rec = records.load(rep.out)
     assert isinstance(rec, SweepRecord) and rec == rep.record
     sweep_figs.draw(rec, tmp_path / "f")
     assert_clean(record)
@@ -191,7 +193,7 @@ def test_bench_figures(tmp_path, record):
         for v in ("p1", "p3", "cmaes"):
             h = np.sort(rng.lognormal(0, 2, (6, 30)), axis=1)[:, ::-1] * np.geomspace(1, scale, 30)
             hist[case][v] = h
-            rows[v] = stats.summary(h[:, -1], rng.integers(5, 30, 6), 1e-3)
+            rows[v] = statistics.summary(h[:, -1], rng.integers(5, 30, 6), 1e-3)
         st[case] = {"threshold": 1e-3, "rows": rows}
     bench_figs.draw(tmp_path, st, hist, 6)
     assert_clean(record)
@@ -202,9 +204,9 @@ def test_bench_figures(tmp_path, record):
             for c in hist}  # fmt: skip
     raw = {"bench": {"functions": ["sphere", "griewank"], "n_runs": 6}}
     attrs = {"kind": "bench", "config_resolved": raw, "seed": 0}
-    with output.session():
+    with writer.session():
         archive.save(tmp_path / "b.h5", BenchRecord(attrs, {"bench": tree}))
-    rec = archive.load(tmp_path / "b.h5")
+    rec = records.load(tmp_path / "b.h5")
     assert isinstance(rec, BenchRecord) and rec.n_runs == 6
     assert list(rec.cases) == ["griewank_shifted", "sphere"]  # HDF5: sorted by name
     assert rec.case_names() == ["sphere", "griewank_shifted"]  # the config's order

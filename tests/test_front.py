@@ -9,10 +9,11 @@ import pytest
 import yaml
 
 import designopt
-from designopt import front as fr
-from designopt import pareto, results
-from designopt.cli import main
-from designopt.scoring import score
+from designopt import results
+from designopt.app import fronts as fr
+from designopt.cli.commands import main
+from designopt.numerics import pareto
+from designopt.problems.evaluate import score
 from designopt.studies import streams
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -19,7 +19,7 @@ from matplotlib.collections import PathCollection
 from matplotlib.container import ErrorbarContainer
 
 import designopt
-from designopt import figures
+from designopt.figures import canvas
 from designopt.figures import front as front_figs
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -49,9 +49,9 @@ def front3(tmp_path_factory):
 
 @pytest.fixture
 def record():
-    figures.RECORD = []
-    yield figures.RECORD
-    figures.RECORD = None
+    canvas.RECORD = []
+    yield canvas.RECORD
+    canvas.RECORD = None
     plt.close("all")
 
 
@@ -226,7 +226,7 @@ def test_unit_of_a_hypervolume():
 
 
 def test_report_command_draws_the_front_pngs(front2, tmp_path):
-    from designopt.cli import main
+    from designopt.cli.commands import main
 
     path, _ = front2
     arch = tmp_path / "front.h5"

@@ -21,10 +21,36 @@ from typing import Any
 import numpy as np
 import pytest
 
-from designopt import archive, pipeline
-from designopt.config import validate
+from designopt import results
+from designopt.app import pipeline
+from designopt.app.config import validate
 from designopt.figures import html as H
+from designopt.io import archive
 from designopt.studies import get
+
+
+def _hints(tree):
+    """The study's hints, as ``designopt report --html`` passes them to the page."""
+    from designopt.app import records, reporting
+
+    try:
+        return reporting.hints(records.bind(results.from_tree(tree)))
+    except (KeyError, ValueError):
+        from designopt.figures.hints import NONE
+
+        return NONE
+
+
+def sections(tree, **kw):
+    return H.sections(tree, hints=_hints(tree), **kw)
+
+
+def page(tree, **kw):
+    return H.page(tree, hints=_hints(tree), **kw)
+
+
+def write(tree, path, **kw):
+    return H.write(tree, path, hints=_hints(tree), **kw)
 
 ROOT = Path(__file__).resolve().parents[1]
 ARTIFACTS = ROOT / "results" / "test_artifacts"
@@ -119,7 +145,7 @@ def _sweep(run: dict[str, Any], path: Path) -> dict[str, Any]:
 
 
 def _bench(rng, path: Path) -> dict[str, Any]:
-    from designopt.benchsuite import Bench, BenchConfig, statistics
+    from designopt.bench.suite import Bench, BenchConfig, statistics
 
     cfg = BenchConfig(bench=Bench(functions=["sphere", "rastrigin"], variants=["p1", "p3"],
                                   reference="p3"))  # fmt: skip
@@ -212,7 +238,7 @@ def _decode(v: Any) -> np.ndarray:
 
 def test_run_page_holds_the_archive(trees):
     t = trees["run"]
-    secs = H.sections(t)
+    secs = sections(t)
     plots = _plots(secs)
     opt, br = t["optimizer"], t["best_run"]
     best = int(br["attrs"]["run_index"])
@@ -236,7 +262,7 @@ def test_run_page_holds_the_archive(trees):
     lo, hi, line = r.fig["data"]
     assert np.all(lo["y"] >= 0) and np.all(hi["y"] <= 1) and np.all(lo["y"] <= line["y"])
     assert "Wilson" in r.fig["layout"]["title"]["text"]
-    text = H.page(t)
+    text = page(t)
     fin = next(s for s in secs if s.id == "final").items[0]
     assert f"{float(t['final']['eta']):.6g} ± {float(t['final']['eta_se']):.2g}" in fin
     assert f"{t['final']['x'][0]:.6g}" in fin
@@ -258,7 +284,7 @@ def test_front_2d_3d_values_errors_hover_and_ambiguity(trees):
         t = trees[key]
         fr = t["front"]
         n = len(fr["f"])
-        (p,) = [p for p in _plots(H.sections(t)).values() if p.id.split("-", 2)[2].startswith("front")]  # fmt: skip
+        (p,) = [p for p in _plots(sections(t)).values() if p.id.split("-", 2)[2].startswith("front")]  # fmt: skip
         tr = p.fig["data"][-1]
         assert tr["type"] == ("scatter" if m == 2 else "scatter3d")
         # shown as the indices themselves (a max objective not negated), bars ± 2 SE
@@ -288,10 +314,10 @@ def test_front_2d_3d_values_errors_hover_and_ambiguity(trees):
     t = copy.deepcopy(trees["front2"])
     i, j = np.nonzero(np.triu(t["front"]["ambiguous"], 1))
     t["front"]["ambiguous"] = np.stack([i, j], 1)
-    (a,) = [p for p in _plots(H.sections(t)).values() if p.id.endswith("front")]
-    (b,) = [p for p in _plots(H.sections(trees["front2"])).values() if p.id.endswith("front")]
+    (a,) = [p for p in _plots(sections(t)).values() if p.id.endswith("front")]
+    (b,) = [p for p in _plots(sections(trees["front2"])).values() if p.id.endswith("front")]
     assert a.fig["data"][-1]["marker"]["symbol"] == b.fig["data"][-1]["marker"]["symbol"]
-    hv = [p for p in _plots(H.sections(trees["front2"])).values() if "hypervolume" in p.fig["layout"]["title"]["text"]]  # fmt: skip
+    hv = [p for p in _plots(sections(trees["front2"])).values() if "hypervolume" in p.fig["layout"]["title"]["text"]]  # fmt: skip
     assert len(hv) == 1
     np.testing.assert_array_equal(_trace(hv[0], "median of 3 runs")["y"],
                                   np.median(trees["front2"]["front"]["hypervolume"], axis=0))  # fmt: skip
@@ -300,7 +326,7 @@ def test_front_2d_3d_values_errors_hover_and_ambiguity(trees):
 def test_scan_curves_and_maps_mark_infeasible_designs(trees):
     t = trees["scan_curve"]
     sc = t["scan"]
-    plots = _plots(H.sections(t))
+    plots = _plots(sections(t))
     c = sc["x"][:, 1]  # names: a, c
     o = np.argsort(c)
     p = next(p for p in plots.values() if p.id.endswith("scan-eta"))
@@ -316,7 +342,7 @@ def test_scan_curves_and_maps_mark_infeasible_designs(trees):
     t = trees["scan_grid"]
     sc = t["scan"]
     n0, n1 = sc["attrs"]["shape"]
-    maps = [p for p in _plots(H.sections(t)).values() if p.fig["data"][0]["type"] == "heatmap"]
+    maps = [p for p in _plots(sections(t)).values() if p.fig["data"][0]["type"] == "heatmap"]
     assert len(maps) >= 4
     m = next(p for p in maps if p.id.endswith("map-reach"))
     hm = m.fig["data"][0]
@@ -332,11 +358,11 @@ def test_scan_curves_and_maps_mark_infeasible_designs(trees):
 
 def test_sweep_bench_and_ik_pages(trees):
     s = trees["sweep"]
-    p = next(iter(_plots(H.sections(s)).values()))
+    p = next(iter(_plots(sections(s)).values()))
     np.testing.assert_allclose(p.fig["data"][0]["x"], [float(m["final"]["f"]) for k, m in sorted(s["members"].items()) if k != "attrs"])  # fmt: skip
     assert p.fig["data"][0]["y"][1] == "[001] gamma=0.0001"
     b = trees["bench"]
-    plots = _plots(H.sections(b))
+    plots = _plots(sections(b))
     box = next(p for p in plots.values() if p.id.endswith("box-sphere"))
     y = {tr["name"]: tr["y"] for tr in box.fig["data"]}
     np.testing.assert_allclose(y["p1"], b["bench"]["sphere"]["p1"]["best_f"])
@@ -351,11 +377,11 @@ def test_sweep_bench_and_ik_pages(trees):
     np.testing.assert_allclose(med["y"], np.median(h, axis=0)[med["x"].astype(int)])
     hv = next(p for p in plots.values() if p.id.endswith("hv-rastrigin-shifted"))
     np.testing.assert_array_equal(hv.fig["data"][1]["y"], b["bench"]["rastrigin_shifted"]["p3"]["hypervolume"])  # fmt: skip
-    text = H.page(b)
+    text = page(b)
     st = b["bench"]["sphere"]["attrs"]["stats"]["rows"]["p1"]
     assert f"<td>{st['median']:.4g}</td>" in text and f"<td>{st['p_holm']:.4g}</td>" in text
     ik = trees["ik"]
-    plots = _plots(H.sections(ik))
+    plots = _plots(sections(ik))
     rate = next(p for p in plots.values() if p.id.endswith("ik-rate")).fig["data"][0]
     ok = ik["ik"]["success"]
     n, k = len(ok), ok.sum()
@@ -373,7 +399,7 @@ def test_sweep_bench_and_ik_pages(trees):
 
 def test_replay_and_checkpoint_pages(trees):
     r = trees["replay"]["teleop"]
-    plots = _plots(H.sections(trees["replay"]))
+    plots = _plots(sections(trees["replay"]))
     path = next(p for p in plots.values() if p.id.endswith("teleop-path"))
     np.testing.assert_array_equal(_trace(path, "commanded")["z"], r["command"][:, 2])
     np.testing.assert_array_equal(_trace(path, "achieved")["x"], r["tip"][:, 0])
@@ -383,7 +409,7 @@ def test_replay_and_checkpoint_pages(trees):
     h = trees["run"]["optimizer"]["history"]
     ck = {"attrs": {"kind": "run", "complete": np.False_},
           "checkpoint": {"history": h[:, :3], "attrs": {"done": 2}}}  # fmt: skip
-    text = H.page(ck)
+    text = page(ck)
     assert "This archive is a checkpoint" in text and "2 iterations done" in text
 
 
@@ -392,7 +418,7 @@ def test_records_give_the_same_page(trees):
     results = pytest.importorskip("designopt.results")
     for key in ("run", "scan_grid", "sweep", "bench", "ik", "front2"):
         t = trees[key]
-        assert H.page(results.from_tree(t).to_tree()) == H.page(t), key
+        assert page(results.from_tree(t).to_tree()) == page(t), key
 
 
 def test_untrusted_text_is_escaped(trees):
@@ -401,7 +427,7 @@ def test_untrusted_text_is_escaped(trees):
     t["attrs"]["study"] = "<b>evil</b>"
     t["problem"]["names"] = np.array([EVIL.encode(), b"c"])
     t["front"]["attrs"]["objectives"] = [EVIL, "reach"]
-    text = H.page(t, title="</title><script>alert(2)</script>", units={EVIL: "<i>mm</i>"})
+    text = page(t, title="</title><script>alert(2)</script>", units={EVIL: "<i>mm</i>"})
     for raw in ("<script>alert", EVIL, "<b>evil</b>", "<i>mm</i>", "</title><script>"):
         assert raw not in text
     assert "&lt;/pre&gt;&lt;script&gt;alert(1)&lt;/script&gt;" in text
@@ -426,7 +452,7 @@ def test_size_budget_and_write(tmp_path):
     tree = {"attrs": {"kind": "run", "study": "nothing-registered", "config_yaml": "x" * (H.MAX_TEXT + 5)},
             "optimizer": {"history": h, "best_f": h[:, -1]}, "best_run": br | {"attrs": {"run_index": 3}},
             "final": {"x": np.zeros(2), "f": np.float64(1.0)}, "scan": sc}  # fmt: skip
-    secs = H.sections(tree, cloud=_cloud(200_000))
+    secs = sections(tree, cloud=_cloud(200_000))
     n = H.budget(secs)
     assert n <= H.MAX_VALUES
     conv = _plots(secs)["plot-1-convergence"]
@@ -436,7 +462,7 @@ def test_size_budget_and_write(tmp_path):
     assert "of 20001 iterations" in conv.fig["layout"]["title"]["text"]
     assert "of 200 runs drawn" in conv.fig["layout"]["title"]["text"]
     t0 = time.perf_counter()
-    out = H.write(tree, tmp_path / "big.html", cloud=_cloud(200_000))
+    out = write(tree, tmp_path / "big.html", cloud=_cloud(200_000))
     dt = time.perf_counter() - t0
     size = out.stat().st_size
     print(f"big page: {size / 1e6:.2f} MB, {n} numbers, built in {dt:.2f} s")
@@ -451,7 +477,7 @@ def test_figures_pass_plotly_validation(trees):
     import plotly.graph_objects as go
 
     for key, t in trees.items():
-        for s in H.sections(t, cloud=_cloud(300) if key == "run" else None):
+        for s in sections(t, cloud=_cloud(300) if key == "run" else None):
             for p in s.plots():
                 go.Figure(p.fig)  # raises ValueError on an unknown property
 
@@ -636,7 +662,7 @@ def test_page_renders_in_chromium(name, trees, browser, tmp_path):
     tree = copy.deepcopy(trees[key])
     if name == "run_front_cloud":  # hostile names must show as text, never run
         tree["problem"]["names"] = np.array([EVIL.encode(), b"c"])
-    path = H.write(tree, tmp_path / f"{name}.html", cloud=_cloud() if kw.get("cloud") else None)
+    path = write(tree, tmp_path / f"{name}.html", cloud=_cloud() if kw.get("cloud") else None)
     figs = _figs_json(path.read_text())
     dt = browser.load(path)
     print(f"{name}: {path.stat().st_size / 1e6:.2f} MB, loaded and drawn in {dt:.2f} s")
@@ -657,7 +683,7 @@ def test_page_renders_in_chromium(name, trees, browser, tmp_path):
             assert r["points"] > 0, r
     if name == "run_front_cloud":
         best = int(tree["best_run"]["attrs"]["run_index"])
-        secs = H.sections(tree, cloud=_cloud())
+        secs = sections(tree, cloud=_cloud())
         pid = next(p.id for s in secs for p in s.plots()
                    if p.fig["layout"]["title"]["text"] == "best-so-far f per iteration")  # fmt: skip
         y = browser.js(f"""(() => {{ const g = document.getElementById('{pid}');
@@ -682,7 +708,7 @@ def test_page_renders_in_chromium(name, trees, browser, tmp_path):
 
 def test_browser_check_sees_javascript_errors(trees, browser, tmp_path):
     """The check above can fail: a page with a script error is caught."""
-    text = H.page(trees["ik"]).replace("</body>", "<script>notDefined();</script></body>")
+    text = page(trees["ik"]).replace("</body>", "<script>notDefined();</script></body>")
     p = tmp_path / "broken.html"
     p.write_text(text)
     browser.load(p)

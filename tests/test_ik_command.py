@@ -1,4 +1,4 @@
-"""``designopt ik CONFIG --poses FILE`` for any study with ``Study.ik`` (designopt/ikcmd.py)
+"""``designopt ik CONFIG --poses FILE`` for any study with ``Study.ik`` (designopt/cli/ik.py)
 on a serial chain: the PUMA 560 (standard DH, m) solving targets made by an independent
 numpy FK from random joints, every CSV format, ``--mode``, the archive and its summary;
 bad files and refused requests are one line each, exit 2, nothing written. The da Vinci
@@ -12,8 +12,12 @@ import numpy as np
 import pytest
 import yaml
 
-from designopt import archive, ikcmd, results
-from designopt.cli import main
+from designopt import results
+from designopt.app import records
+from designopt.cli.commands import main
+from designopt.io import archive
+from designopt.io import poses as target_files
+from designopt.kinematics import poses
 
 ROOT = Path(__file__).resolve().parents[1]
 N = 256
@@ -92,7 +96,7 @@ def case(tmp_path_factory):
     p, R = T[:, :3, 3], T[:, :3, :3]
     qrows = np.c_[quat(R)[:, [1, 2, 3, 0]], p]
     files = {
-        "matrix": write_csv(d / "m.csv", list(ikcmd.MATRIX_COLUMNS), T.reshape(N, 16)),
+        "matrix": write_csv(d / "m.csv", list(target_files.MATRIX_COLUMNS), T.reshape(N, 16)),
         "quat": write_csv(d / "q.csv", ["qx", "qy", "qz", "qw", "x", "y", "z"], qrows),
         "axis": write_csv(d / "a.csv", ["x", "y", "z", "ax", "ay", "az"], np.c_[p, R[:, :, 2]]),
         "xyz": write_csv(d / "p.csv", ["z", "y", "x"], p[:, ::-1]),
@@ -127,7 +131,7 @@ def check_solved(ik: dict, T: np.ndarray, mode: str, rate: float = 0.99, **desig
 
 
 def test_pose_csv_solves_and_archives(case, capsys):
-    rec = archive.load(case["out"])
+    rec = records.load(case["out"])
     assert isinstance(rec, results.IKRecord) and rec.study == "serial"
     ik = rec.ik
     ok = check_solved(ik, case["T"], "pose")
@@ -138,7 +142,7 @@ def test_pose_csv_solves_and_archives(case, capsys):
     # the archive round-trips, and `show` prints its summary
     assert results.from_tree(rec.to_tree()) == rec
     archive.save(case["dir"] / "copy.h5", rec)
-    assert archive.load(case["dir"] / "copy.h5") == rec
+    assert records.load(case["dir"] / "copy.h5") == rec
     capsys.readouterr()
     assert main(["show", str(case["out"])]) == 0
     out = capsys.readouterr().out
@@ -194,7 +198,7 @@ def _bad(tmp_path: Path, case: dict, edit: str) -> tuple[Path, int | None, str]:
     T = case["T"][:6]
     f = tmp_path / f"{edit}.csv"
     rows = T.reshape(6, 16).copy()
-    head = list(ikcmd.MATRIX_COLUMNS)
+    head = list(target_files.MATRIX_COLUMNS)
     if edit == "header":
         head[0] = "A00"
         return write_csv(f, head, rows), None, "header"
@@ -208,10 +212,10 @@ def _bad(tmp_path: Path, case: dict, edit: str) -> tuple[Path, int | None, str]:
         rows[4, [0, 4, 8]] *= -1
         return write_csv(f, head, rows), 5, "det −1"
     if edit == "quaternion":
-        return write_csv(f, list(ikcmd.QUAT_COLUMNS), [[0.1, 0, 0, 1, 0, 0, 0],
+        return write_csv(f, list(target_files.QUAT_COLUMNS), [[0.1, 0, 0, 1, 0, 0, 0],
                                                        [0.1, 0, 0, 0.9, 0, 0, 0]]), 2, "quaternion"  # fmt: skip
     if edit == "axis":
-        return write_csv(f, list(ikcmd.AXIS_COLUMNS), [[0.1, 0, 0, 0, 0, 1], [0.1, 0, 0, 0, 0, 1],
+        return write_csv(f, list(target_files.AXIS_COLUMNS), [[0.1, 0, 0, 0, 0, 1], [0.1, 0, 0, 0, 0, 1],
                                                        [0.1, 0, 0, 0, 0.5, 0]]), 3, "unit vector"  # fmt: skip
     text = write_csv(f, head, rows).read_text().splitlines()
     if edit == "text":
@@ -280,11 +284,11 @@ def test_refused_requests(case, tmp_path, capsys):
 def test_axis_frames_and_modes_match_the_solver():
     from designopt.kinematics import ik
 
-    assert ikcmd.MODES == ik.MODES
+    assert poses.MODES == ik.MODES
     a = np.random.default_rng(0).normal(size=(50, 3))
     a /= np.linalg.norm(a, axis=-1, keepdims=True)
     a[0] = [1.0, 0.0, 0.0]
-    R = ikcmd.axis_frames(a)
+    R = poses.axis_frames(a)
     np.testing.assert_allclose(np.einsum("nji,njk->nik", R, R), np.broadcast_to(np.eye(3), R.shape),
                                atol=1e-15)  # fmt: skip
     np.testing.assert_allclose(np.linalg.det(R), 1.0, atol=1e-15)

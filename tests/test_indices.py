@@ -5,7 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from designopt import montecarlo as mc
+from designopt.numerics import montecarlo as mc
 from designopt.studies.master9 import mechanism as m
 from designopt.studies.master9 import objective as obj
 from designopt.studies.master9.indices import _features, inv_cond_fro_jv, jv_entries, swarm_indices
@@ -205,7 +205,7 @@ def test_problem_carries_its_bounds_and_samples_typed():
 
 def test_weighted_sum_and_flat_bounds():
     """normalise.weighted_sum against the formula in numpy; a flat index gets max = min + 1."""
-    from designopt import normalise
+    from designopt.problems import normalise
 
     rng = np.random.default_rng(5)
     x = [rng.normal(size=7) for _ in range(3)]

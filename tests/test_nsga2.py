@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from designopt import optim
-from designopt import pareto as pa
+from designopt.numerics import pareto as pa
 from designopt.optim import nsga2
 from designopt.problems import benchmark
 from designopt.problems.multi import multi_benchmark, true_front

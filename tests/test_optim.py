@@ -200,8 +200,8 @@ def test_checkpoint_resume_gives_the_uninterrupted_result():
 
 
 def test_refine_reaches_known_minimisers_and_respects_the_box():
+    from designopt.optim.polish import refine
     from designopt.problems.base import Problem
-    from designopt.refine import refine
 
     P = benchmark("sphere", 4, shift=2)  # interior optimum at the seeded shift
     x0 = np.array([[50.0, -40.0, 10.0, 30.0]])

@@ -1,4 +1,4 @@
-"""Sharding inside one process (designopt.parallel, docs/scaling.md): 1 device against 4
+"""Sharding inside one process (designopt.core.devices, docs/scaling.md): 1 device against 4
 forced host devices, for every shardable axis, in one child process (the device count
 must be set before JAX starts, and this test process has started it already)."""
 
@@ -15,8 +15,8 @@ import h5py
 import numpy as np
 import pytest
 
-from designopt import parallel
-from designopt.config import ConfigError
+from designopt.core import devices
+from designopt.core.errors import ConfigError
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -27,12 +27,14 @@ CHILD = textwrap.dedent(
     jax.config.update("jax_num_cpu_devices", 4)
     import jax.numpy as jnp
     import numpy as np
-    from designopt import optim, parallel, pipeline
-    from designopt.config import ConfigError
+    from designopt import optim
+    from designopt.core import devices
+    from designopt.app import pipeline
+    from designopt.core.errors import ConfigError
     from designopt.problems.base import Problem
     from designopt.studies import STUDIES, streams
 
-    P = parallel.ParallelSettings
+    P = devices.ParallelSettings
     out = {"devices": len(jax.devices())}
 
     def problem(name):
@@ -53,7 +55,7 @@ CHILD = textwrap.dedent(
         pr = problem(name)
         ref = optim.run("ptpso", pr, key, **kw)
         for axis in ("runs", "particles", "samples"):
-            pl = parallel.plan(P(devices=4, axis=axis), n_runs=4, n_particles=8, problem=pr)
+            pl = devices.plan(P(devices=4, axis=axis), n_runs=4, n_particles=8, problem=pr)
             res = optim.run("ptpso", pl.problem(pr), key, plan=pl, **kw)
             out[f"{name}/{axis}"] = same(ref, res)
             if axis != "runs":  # the objective as its own program (the CLI's runs)
@@ -61,7 +63,7 @@ CHILD = textwrap.dedent(
                 sres = optim.run("ptpso", pl.problem(pr), key, plan=pl, separate=True, **kw)
                 out[f"{name}/{axis}/separate"] = same(sref, sres)
         # the sample-sharded swarm function itself: same indices as one device
-        pl = parallel.plan(P(devices=4, axis="samples"), n_runs=1, n_particles=8, problem=pr)
+        pl = devices.plan(P(devices=4, axis="samples"), n_runs=1, n_particles=8, problem=pr)
         X = jnp.asarray(np.random.default_rng(1).uniform(pr.lower, pr.upper, (8, pr.dim)),
                         jnp.float32)
         a = jax.jit(pr.fn)(pr.params, X, key)[1]
@@ -74,13 +76,13 @@ CHILD = textwrap.dedent(
     members = [{"c1": 1.5}, {"c1": 2.0}, {"c1": 2.05}, {"c1": 1.2}]
     ref = optim.run_batch("ptpso", pr, key, members, **kw)
     for axis in ("members", "runs"):
-        pl = parallel.plan(P(devices=4, axis=axis), n_runs=4, n_particles=8, members=4,
+        pl = devices.plan(P(devices=4, axis=axis), n_runs=4, n_particles=8, members=4,
                            problem=pr)
         out[f"batch/{axis}"] = same(ref, optim.run_batch("ptpso", pr, key, members, plan=pl,
                                                          **kw))
 
     # checkpoints of a 4-device run resume on one device, and the other way round
-    pl = parallel.plan(P(devices=4, axis="runs"), n_runs=4, n_particles=8, problem=pr)
+    pl = devices.plan(P(devices=4, axis="runs"), n_runs=4, n_particles=8, problem=pr)
     cks = []
     full = optim.run("ptpso", pr, key, plan=pl, checkpoint=cks.append, **kw)
     on1 = optim.run("ptpso", pr, key, resume=cks[0], **kw)
@@ -93,7 +95,7 @@ CHILD = textwrap.dedent(
 
     # auto: the first axis that divides over the devices, else samples
     def auto(**k):
-        return parallel.plan(P(devices=4), problem=pr, **k).axis
+        return devices.plan(P(devices=4), problem=pr, **k).axis
     out["auto"] = [auto(n_runs=4, n_particles=8), auto(n_runs=1, n_particles=8),
                    auto(n_runs=3, n_particles=50), auto(n_runs=1, n_particles=8, members=8)]
 
@@ -104,7 +106,7 @@ CHILD = textwrap.dedent(
     for label, args in (("samples", dict(axis="samples")), ("auto", dict()),
                         ("runs", dict(axis="runs")), ("members", dict(axis="members"))):
         try:
-            parallel.plan(P(devices=4, **args), n_runs=3, n_particles=50, problem=bare)
+            devices.plan(P(devices=4, **args), n_runs=3, n_particles=50, problem=bare)
             errs[label] = None
         except ConfigError as e:
             errs[label] = str(e)
@@ -113,7 +115,7 @@ CHILD = textwrap.dedent(
     # scoring (scan/eval): designs split over the devices, padded to a multiple
     Xs = np.random.default_rng(2).uniform(pr.lower, pr.upper, (37, pr.dim))
     s1 = pipeline.score(pr, Xs, batch=10)
-    s4 = pipeline.score(pr, Xs, batch=10, plan=parallel.scoring_plan(P(devices=4)))
+    s4 = pipeline.score(pr, Xs, batch=10, plan=devices.scoring_plan(P(devices=4)))
     out["score"] = {k: float(np.max(np.abs(s1[k] - s4[k])) / np.max(np.abs(s1[k])))
                     for k in s1 if not np.array_equal(s1[k], s4[k], equal_nan=True)}
     json.dump(out, sys.stdout)
@@ -203,13 +205,13 @@ def test_more_devices_than_jax_sees_is_a_config_error() -> None:
     """In this process JAX has started with one CPU device: asking for 4 is refused with
     the way out (the CLI's --devices sets the count before JAX starts)."""
     with pytest.raises(ConfigError, match=r"'parallel.devices': 4 devices asked, JAX sees 1"):
-        parallel.plan(parallel.ParallelSettings(devices=4), n_runs=4, n_particles=8)
-    assert parallel.plan(parallel.ParallelSettings(devices=1), n_runs=4, n_particles=8) is None
-    assert parallel.plan(None, n_runs=4, n_particles=8) is None
+        devices.plan(devices.ParallelSettings(devices=4), n_runs=4, n_particles=8)
+    assert devices.plan(devices.ParallelSettings(devices=1), n_runs=4, n_particles=8) is None
+    assert devices.plan(None, n_runs=4, n_particles=8) is None
 
 
 def test_config_section_validated(tmp_path: Path) -> None:
-    from designopt.config import validate
+    from designopt.app.config import validate
 
     base = {"study": {"name": "rcm", "eta": {"n_samples": 1024}}}
     cfg = validate(base | {"parallel": {"devices": 2, "axis": "particles"}}, "c")

@@ -1,4 +1,4 @@
-"""designopt.pareto: hypervolume against moocore, sorting and crowding against brute force
+"""designopt.numerics.pareto: hypervolume against moocore, sorting and crowding against brute force
 and pymoo (where installed), IGD+ by hand, and the multi-objective test problems' fronts."""
 
 import jax
@@ -6,7 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from designopt import pareto as pa
+from designopt.numerics import pareto as pa
 from designopt.problems import multi
 
 moocore = pytest.importorskip("moocore")

@@ -4,8 +4,8 @@ import h5py
 import numpy as np
 import pytest
 
-from designopt import archive
-from designopt.cli import main
+from designopt.cli.commands import main
+from designopt.io import archive
 
 TINY = """
 study:
@@ -122,7 +122,6 @@ def _signal_at(monkeypatch, iteration, signum):
     import contextlib
     import signal
 
-    from designopt import cli
 
     @contextlib.contextmanager
     def bar(total, desc):
@@ -135,7 +134,9 @@ def _signal_at(monkeypatch, iteration, signum):
 
         yield update
 
-    monkeypatch.setattr(cli, "_progress", lambda quiet: bar)
+    from designopt.cli import commands as cli_main
+
+    monkeypatch.setattr(cli_main, "_progress", lambda quiet: bar)
 
 
 def test_interrupted_run_is_marked_incomplete_and_resume_matches(tmp_path, monkeypatch, capsys):
@@ -181,7 +182,7 @@ def test_interrupted_run_is_marked_incomplete_and_resume_matches(tmp_path, monke
 
 
 def test_score_reports_the_constraint_violation():
-    from designopt import pipeline
+    from designopt.app import pipeline
     from designopt.problems.constrained import sphere_linear
 
     P = sphere_linear(3)

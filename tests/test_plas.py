@@ -7,9 +7,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from designopt import pipeline
-from designopt.cli import main
-from designopt.config import validate
+from designopt.app import pipeline
+from designopt.app.config import validate
+from designopt.cli.commands import main
 from designopt.studies import streams
 from designopt.studies.plas import mechanism as m
 from designopt.studies.plas import objective as obj
@@ -251,7 +251,7 @@ def test_scale_invariance_reduction_and_constraints(prob):
 
 
 def test_run_config_and_scan_config_load():
-    from designopt.config import load
+    from designopt.app.config import load
 
     for p in ("configs/plas.yaml", "configs/plas_scan.yaml"):
         cfg, _ = load(p)

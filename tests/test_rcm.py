@@ -7,9 +7,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from designopt import archive, pipeline
-from designopt.cli import main
-from designopt.config import validate
+from designopt.app import pipeline
+from designopt.app.config import validate
+from designopt.cli.commands import main
+from designopt.io import archive
 from designopt.studies import streams
 from designopt.studies.rcm import mechanism as m
 from designopt.studies.rcm import objective as obj

@@ -11,8 +11,10 @@ import numpy as np
 import pytest
 
 import designopt
-from designopt import api, archive, results
-from designopt.errors import ConfigError
+from designopt import api, results
+from designopt.app import records
+from designopt.core.errors import ConfigError
+from designopt.io import archive
 from designopt.studies import STUDIES
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -74,7 +76,7 @@ def test_a_changed_value_makes_records_differ(run_pair):
 def _round_trip(rec, path):
     assert results.from_tree(rec.to_tree()) == rec
     archive.save(path, rec)
-    back = archive.load(path)
+    back = records.load(path)
     assert type(back) is type(rec)
     assert back == rec, back.differs(rec)
     return back
@@ -110,7 +112,7 @@ def test_a_checkpoint_is_a_record(tmp_path):
         "state": {"x": np.ones((2, 3))}, "history": np.ones((2, 4)),
         "history_x": np.ones((2, 4, 3)), "attrs": {"done": 3}}})  # fmt: skip
     archive.save(tmp_path / "c.partial.h5", ck, complete=False)
-    back = archive.load(tmp_path / "c.partial.h5")
+    back = records.load(tmp_path / "c.partial.h5")
     assert isinstance(back, results.CheckpointRecord) and back.done == 3
     c = back.checkpoint()
     assert c.done == 3 and np.array_equal(c.state["x"], np.ones((2, 3)))
@@ -185,7 +187,7 @@ def test_no_generic_module_names_a_study():
 
 
 def test_report_html_writes_one_page_with_the_workspace_cloud(run_pair, capsys):
-    from designopt.cli import main
+    from designopt.cli.commands import main
     from designopt.studies.serial import figures
 
     out = run_pair[2]

@@ -1,4 +1,4 @@
-"""Randomised QMC (designopt.montecarlo): layout, bitwise accumulation, and honest SEs.
+"""Randomised QMC (designopt.numerics.montecarlo): layout, bitwise accumulation, and honest SEs.
 
 The SE tests draw many independent seeds and compare the reported SE with the observed
 spread (pooled ratio within 1.5) and the z-scores against a high-accuracy reference
@@ -12,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from designopt import montecarlo as mc
+from designopt.numerics import montecarlo as mc
 
 jax.config.update("jax_enable_x64", True)
 

@@ -74,7 +74,7 @@ def test_main_job_compiles_its_objective_once() -> None:
 
 
 def test_scoring_in_the_runs_shape_equals_plain_scoring() -> None:
-    from designopt.scoring import score
+    from designopt.problems.evaluate import score
 
     pr = _problem("serial", jnp.float64)
     X = np.random.default_rng(3).uniform(pr.lower, pr.upper, (11, pr.dim))

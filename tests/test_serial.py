@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 from scipy import integrate
 
-from designopt import montecarlo as mc
-from designopt import pipeline
-from designopt.cli import main
-from designopt.config import load, validate
+from designopt.app import pipeline
+from designopt.app.config import load, validate
+from designopt.cli.commands import main
+from designopt.numerics import montecarlo as mc
 from designopt.studies import streams
 from designopt.studies.serial.mechanism import build
 
@@ -155,7 +155,7 @@ def test_scan_and_eval_commands(tmp_path, capsys):
     idx = ("f", "gci", "gcsei", "manipulability", "volume")
     assert set(one) == set(idx) | {k + "_se" for k in idx}
     assert main(["scan", str(cfg), "--quiet", "--out", str(tmp_path / "s.h5")]) == 0
-    from designopt import archive
+    from designopt.io import archive
 
     sc = archive.read(tmp_path / "s.h5")["scan"]
     assert sc["x"].shape == (3, 2) and sc["gci"].shape == (3,) and sc["gci_se"].shape == (3,)
@@ -210,8 +210,8 @@ def test_bad_design_on_the_command_line(tmp_path, capsys):
 def test_linear_constraints_from_yaml_bind_the_optimum(tmp_path):
     """max workspace area ∫|det J| dq = 8π·l1·l2 of a planar 2R s.t. l1 + l2 ≤ 1: the
     optimum is l1 = l2 = 0.5 on the constraint (Deb's rules and the quadratic penalty)."""
-    from designopt import pipeline
-    from designopt.config import validate
+    from designopt.app import pipeline
+    from designopt.app.config import validate
 
     base = {
         "study": {
@@ -239,7 +239,7 @@ def test_linear_constraints_from_yaml_bind_the_optimum(tmp_path):
 
 
 def test_linear_constraint_names_must_be_design_variables():
-    from designopt.config import ConfigError, validate
+    from designopt.core.errors import ConfigError, validate
 
     raw = {"study": {"name": "serial",
                      "chain": {"joints": [{"type": "R", "a": "l1", "limits": [-90, 90]}]},

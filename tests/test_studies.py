@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 from figcheck import assert_clean
 
-from designopt import archive, figures, pipeline
-from designopt.config import validate
+from designopt.app import pipeline, records
+from designopt.app.config import validate
+from designopt.figures import canvas
 from designopt.studies import STUDIES, get, streams
 
 NAMES = sorted(n for n, st in STUDIES.items() if st.replay is None)  # design studies
@@ -123,7 +124,7 @@ def test_run_stays_in_box_resumes_bit_exact_and_round_trips(name, tmp_path):
     np.testing.assert_array_equal(resumed.history_x, full.history_x)
     # config round trip through the archive, and the record read back equals the run's
     rep = pipeline.run(cfg, "tiny", "tiny", tmp_path / "a.h5")
-    rec = archive.load(rep.out)
+    rec = records.load(rep.out)
     assert rec == rep.record, rec.differs(rep.record)
     # the numbers of the release before the records/pipeline redesign (#23)
     np.testing.assert_allclose(list(rec.x.values()), BEFORE[name]["x"], rtol=1e-9, atol=1e-12)
@@ -140,13 +141,13 @@ def test_run_stays_in_box_resumes_bit_exact_and_round_trips(name, tmp_path):
         n = len(c["value"])
         assert c["xyz"].shape == (n, 3) and n >= 1000 and c["label"] and c["unit"]
         assert np.all(np.isfinite(c["xyz"])) and np.all((c["value"] >= 0) & (c["value"] <= 1))
-    figures.RECORD = []  # every figure drawn also passes the figure checks (docs/figures.md)
+    canvas.RECORD = []  # every figure drawn also passes the figure checks (docs/figures.md)
     try:
         figs = get(name).figures(rec, tmp_path / "figs")
         assert figs and all(p.exists() for p in figs)
-        assert_clean(figures.RECORD)
+        assert_clean(canvas.RECORD)
     finally:
-        figures.RECORD = None
+        canvas.RECORD = None
         plt.close("all")
 
 
@@ -159,7 +160,7 @@ def test_eval_agrees_with_scan(name, tmp_path):
     scan = {"vary": {v0: {"from": float(lo), "to": float(hi), "num": 3}}, "batch": 2}
     cfg = config(name, tmp_path, scan=scan)
     rep = pipeline.scan(cfg, "tiny", "tiny", tmp_path / "s.h5")
-    rec = archive.load(rep.out)
+    rec = records.load(rep.out)
     X, a = rec.X, rec.values
     assert X.shape == (3, P.dim)
     one = pipeline.evaluate(cfg, {v0: float(X[1, 0]), v1: float(X[1, -1])})

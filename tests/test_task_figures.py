@@ -18,8 +18,7 @@ from figcheck import assert_clean
 from PIL import Image
 
 import designopt
-from designopt import figures
-from designopt.figures import html
+from designopt.figures import canvas, html
 from designopt.studies.serial import figures as serial_figs
 from designopt.studies.serial import taskindex
 
@@ -42,9 +41,9 @@ def run(tmp_path_factory):
 
 @pytest.fixture
 def record():
-    figures.RECORD = []
-    yield figures.RECORD
-    figures.RECORD = None
+    canvas.RECORD = []
+    yield canvas.RECORD
+    canvas.RECORD = None
     plt.close("all")
 
 

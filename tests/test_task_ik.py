@@ -1,4 +1,4 @@
-"""Generic batched IK (designopt.kinematics.ik) and task regions (designopt.task) against
+"""Generic batched IK (designopt.kinematics.ik) and task regions (designopt.kinematics.task) against
 independent references: FK round trips on random 6R chains (every success re-checked by
 the kernel's own FK), targets that are certainly unreachable, a swarm against single
 designs, the planar 2R over a disk (reach = area of the disk inside the annulus, task
@@ -17,8 +17,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import integrate
 
-from designopt import task as tk
 from designopt.kinematics import ik
+from designopt.kinematics import task as tk
 from designopt.kinematics.conditioning import inv_cond
 from designopt.kinematics.kernel import dh_model
 

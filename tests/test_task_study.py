@@ -18,7 +18,7 @@ import pytest
 from scipy import integrate, optimize
 
 import designopt
-from designopt.cli import main
+from designopt.cli.commands import main
 
 PI = math.pi
 C, RHO = 1.2, 0.5  # the disk: centre (C, 0, 0), radius RHO, in the base's xy-plane
@@ -308,8 +308,8 @@ def test_tool_axis_targets_fill_the_cone_and_solutions_meet_them():
     [cos 30°, 1]: its mean and the largest angle); at every solved target a numpy DH
     forward kinematics of the returned joints meets the position to 1e-9 of the reach and
     the tool axis to 1e-8 rad, within the joint limits."""
-    from designopt.config import validate
-    from designopt.prepare import build_problem
+    from designopt.app.config import validate
+    from designopt.app.job import build_problem
     from designopt.studies import streams
     from designopt.studies.serial import taskindex
     from designopt.studies.serial.mechanism import build

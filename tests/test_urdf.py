@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 import yaml
 
-from designopt.cli import main
-from designopt.config import validate
-from designopt.errors import ConfigError
+from designopt.app.config import validate
+from designopt.cli.commands import main
+from designopt.core.errors import ConfigError
 from designopt.kinematics import urdf as U
 from designopt.studies.serial.mechanism import build
 
@@ -182,7 +182,7 @@ def test_puma560_urdf_gives_the_dh_chains_gci(tmp_path):
     """configs/puma560.yaml's DH chain and configs/urdf_puma560.yaml (the PUMA 560 URDF,
     frames matched): the same FK and Jacobian, so the same GCI within its standard error
     (here: to rounding)."""
-    from designopt import pipeline
+    from designopt.app import pipeline
 
     cu = validate(_config("urdf_puma560.yaml", tmp_path), "u")
     cd = validate(_config("puma560.yaml", tmp_path), "d")

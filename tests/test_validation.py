@@ -1,4 +1,4 @@
-"""Numbers that cannot be trusted never get through (designopt.finite), and results say
+"""Numbers that cannot be trusted never get through (designopt.core.validation), and results say
 when they are infeasible: one test per row of the table in docs/configs.md ("Numbers
 that are refused"), plus a sweep of NaN, ±inf and huge values over every real number of
 every shipped config, and the API and CLI flags."""
@@ -16,9 +16,10 @@ import pytest
 import yaml
 
 import designopt
-from designopt import config, finite, pipeline
-from designopt.cli import main
-from designopt.errors import ConfigError
+from designopt.app import config, pipeline
+from designopt.cli.commands import main
+from designopt.core import validation
+from designopt.core.errors import ConfigError
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -129,7 +130,7 @@ def test_seed_flag_out_of_range(tmp_path, capsys, seed):
 
 
 def test_largest_seed_is_accepted(tmp_path, capsys):
-    p = cfg_file(tmp_path, PLANAR, lambda r: r.update(seed=finite.SEED_MAX))
+    p = cfg_file(tmp_path, PLANAR, lambda r: r.update(seed=validation.SEED_MAX))
     assert main(["eval", str(p), "--json"]) == 0
 
 
@@ -309,7 +310,7 @@ def test_bench_seed_out_of_range(tmp_path, capsys):
 
 
 def test_task_points_refuse_non_finite_rows(tmp_path):
-    from designopt.task import read_points
+    from designopt.kinematics.task import read_points
 
     p = tmp_path / "pts.csv"
     p.write_text("x,y,z\n0,0,0\n1,nan,0\n")

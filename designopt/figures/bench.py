@@ -12,7 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from designopt.figures import save, style
+from designopt.figures import style
+from designopt.figures.canvas import save
 from designopt.results import BenchRecord
 
 

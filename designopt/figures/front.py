@@ -20,7 +20,8 @@ import numpy as np
 from matplotlib.collections import LineCollection
 from matplotlib.lines import Line2D
 
-from designopt.figures import plt, save, style
+from designopt.figures import style
+from designopt.figures.canvas import plt, save
 from designopt.results import FrontRecord
 
 AMBIGUOUS = "tab:orange"

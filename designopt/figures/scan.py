@@ -1,7 +1,7 @@
 """Figure of a scan archive: curves (± 2 SE bands) for one varied variable, heat maps for a
 grid over two, and f against the design number otherwise.
 
-Axes carry the study's units (``Study.units``). A study's ``figures`` module may declare
+Axes carry the study's units (``Hints.units``, from ``Study.units``). A study's ``figures`` module may declare
 ``SCAN_PANELS`` ({panel title: indices drawn together}), ``RATES`` (success rates: clipped
 to [0, 1] with a Wilson band) and ``UNDEFINED_WHEN_ZERO`` ({index: index}: not drawn where
 the other is 0, e.g. η over the reached part of a cone where nothing is reached). Curves
@@ -12,7 +12,6 @@ cells, named in the legend.
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -22,8 +21,9 @@ from matplotlib.collections import PatchCollection
 from matplotlib.colors import LogNorm
 from matplotlib.patches import Patch, Rectangle
 
-from designopt.errors import ConfigError
-from designopt.figures import save, style
+from designopt.figures import style
+from designopt.figures.canvas import save
+from designopt.figures.hints import NONE, Hints
 from designopt.results import ScanRecord
 
 INFEASIBLE = {"marker": "o", "mfc": "none", "mec": "0.45", "ls": "none", "ms": 5}
@@ -32,32 +32,6 @@ INFEASIBLE = {"marker": "o", "mfc": "none", "mec": "0.45", "ls": "none", "ms": 5
 def _indices(sc: Mapping[str, Any]) -> list[str]:
     """The indices drawn: f and every index of ``ScanRecord.values`` but the violation."""
     return [k for k in sc if k != "violation" and not k.endswith("_se")]
-
-
-def study_hints(rec: ScanRecord) -> tuple[dict[str, str], Any]:
-    """(units, the study's figures module or None) of a scan's study; the units also
-    hold ``"__summary__"``: the study's summary indices (the maps drawn first)."""
-    from designopt.studies import get
-
-    try:
-        st = get(rec.study)
-        s = rec.config.study
-        units = dict(st.units(s)) | {"__summary__": tuple(st.summary(s))}
-    except (ValueError, KeyError, TypeError, ConfigError):
-        return {}, None
-    return units, figures_module(st)
-
-
-def figures_module(st: Any) -> Any:
-    """A study's figures module (its ``RATES``, ``UNDEFINED_WHEN_ZERO``, ``SCAN_PANELS``
-    hints), found beside its ``figures`` hook; None when it has none."""
-    home = st.figures.__module__  # the study package itself, or a module inside it
-    for name in (home + ".figures", home.rsplit(".", 1)[0] + ".figures"):
-        try:
-            return importlib.import_module(name)
-        except ImportError:
-            continue
-    return None
 
 
 def _same(y0: np.ndarray, y1: np.ndarray) -> int:
@@ -219,9 +193,9 @@ def _designs(rec: ScanRecord, folder: Path) -> list[Path]:
     return save(fig, folder, "scan_designs")
 
 
-def draw(rec: ScanRecord, folder: Path) -> list[Path]:
+def draw(rec: ScanRecord, folder: Path, hints: Hints = NONE) -> list[Path]:
     """The figure of a scan record into ``folder``."""
-    units, mod = study_hints(rec)
+    units, mod = dict(hints.units) | {"__summary__": tuple(hints.summary)}, hints
     varied = rec.varied
     if len(varied) == 1:
         return _curves(rec, folder, units, mod)

@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from designopt.figures import plt
+from designopt.figures.canvas import plt
 
 DIMENSIONLESS = "-"
 """The unit of a dimensionless quantity; written ``[-]`` on an axis."""

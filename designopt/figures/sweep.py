@@ -7,7 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from designopt.figures import save, style
+from designopt.figures import style
+from designopt.figures.canvas import save
 from designopt.results import SweepRecord
 
 

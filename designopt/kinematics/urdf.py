@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from designopt.errors import ConfigError
+from designopt.core.errors import ConfigError
 from designopt.kinematics.kernel import SerialModel, _Lin, _Step
 
 FIELDS = ("x", "y", "z", "roll", "pitch", "yaw", "length")

@@ -13,7 +13,7 @@ operators and constants so that the two can be compared at the same budget:
 - polynomial mutation (Deb's bounded form): per child with probability ``p_mut`` 0.9, per
   variable with min(0.5, ``n_mut_var``/D) (default 1/D), distribution index ``eta_m`` 20;
 - survival of the P best of parents ∪ offspring by Deb's constrained domination
-  (``designopt.pareto.front_ranks``); the last front is pruned one point at a time, the
+  (``designopt.numerics.pareto.front_ranks``); the last front is pruned one point at a time, the
   least crowded first, its neighbours' crowding distances updated after each removal
   (Kukkonen & Deb, "Improved pruning of non-dominated solutions based on crowding
   distance for bi-objective optimization problems", 2006; option ``survival: pruning``,
@@ -42,9 +42,9 @@ from typing import ClassVar, NamedTuple
 import jax
 import jax.numpy as jnp
 
+from designopt.numerics.pareto import crowding_distance, front_ranks, prune_last_front
 from designopt.optim import draws as rng
 from designopt.optim.protocol import Front, Optimizer, Task, apply_bounds
-from designopt.pareto import crowding_distance, front_ranks, prune_last_front
 
 Array = jnp.ndarray
 
@@ -141,7 +141,7 @@ def survive(X: Array, F: Array, V: Array, n: int, tie: Array, survival: str = "p
     crowding distance (larger first), then ``tie`` (random); ranks and crowding as
     computed on the whole set (the crowding of the last front before it is cut, as pymoo
     stores it). ``pruning``: the last front is cut one point at a time, each removal
-    updating its neighbours' crowding (``designopt.pareto.prune_last_front``)."""
+    updating its neighbours' crowding (``designopt.numerics.pareto.prune_last_front``)."""
     rank = front_ranks(F, V, n_stop=n)
     if survival == "pruning":
         kept, crowd = prune_last_front(F, rank, n, tie)

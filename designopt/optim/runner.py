@@ -27,9 +27,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from designopt.numerics.pareto import hypervolume_jax
 from designopt.optim import registry
 from designopt.optim.protocol import Front, Optimizer, Task, clean
-from designopt.pareto import hypervolume_jax
 from designopt.problems.base import Problem, evaluate_batch, scored
 
 CONVERGENCE_TOL = 1e-6
@@ -38,7 +38,7 @@ CONVERGENCE_TOL = 1e-6
 class RunResult(NamedTuple):
     """Per run (and member). For a multi-objective entry ``history`` is the hypervolume of
     the feasible population after each iteration against ``ref_point`` (larger is better;
-    NaN for more than 3 objectives: use ``designopt.pareto.hypervolume`` on ``front``),
+    NaN for more than 3 objectives: use ``designopt.numerics.pareto.hypervolume`` on ``front``),
     ``best_f`` the final hypervolume, ``converged_at`` the iteration after which it never
     grows by > tol, ``history_v``/``best_v`` the least violation in the population,
     ``history_x``/``best_x`` empty (last axis 0) and ``front`` the final populations."""
@@ -55,7 +55,7 @@ class RunResult(NamedTuple):
     ref_point: np.ndarray | None = None  # MO: (m,) the hypervolume's reference point
     eval_shape: tuple[int, int] | None = None
     """(groups, rows) of the separate objective program's calls (``separate``), which
-    ``designopt.scoring.score`` reuses; None when the objective ran inside the steps."""
+    ``designopt.problems.evaluate.score`` reuses; None when the objective ran inside the steps."""
 
     def member(self, j: int) -> RunResult:
         """Member ``j`` of a batched result (``run_batch``, a sweep): every array sliced on
@@ -291,7 +291,7 @@ def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress
     if batched:
         keys = jnp.broadcast_to(keys, (B, n_runs))  # common random numbers across settings
     pparams = problem.params
-    # a Plan (designopt.parallel) places every input on its device mesh; None: as ever
+    # a Plan (designopt.core.devices) places every input on its device mesh; None: as ever
     place = (lambda t: t) if plan is None else plan.put  # noqa: E731
     host = np.asarray if plan is None else plan.host
     if plan is not None:
@@ -452,7 +452,7 @@ def run(
     set its string options (e.g. PSO's ``draws``). ``checkpoint`` is called between chunks
     of ``chunk_iters`` iterations (and after the last with ``checkpoint_at_end``) with a
     :class:`Checkpoint`; passing one back as ``resume`` continues the run and gives exactly
-    the uninterrupted result. ``plan`` (``designopt.parallel.plan``) shards the runs or
+    the uninterrupted result. ``plan`` (``designopt.core.devices.plan``) shards the runs or
     particles over a device mesh: one compiled program, the same numbers.
 
     A multi-objective optimizer (``nsga2``) needs a problem with ``n_objectives`` > 1 and

@@ -16,7 +16,7 @@ constraint function marked by :func:`reads_indices` is called as ``g(params, X, 
 
 Sample sharding (optional, docs/scaling.md): ``shard_samples(mesh) -> Problem`` gives the
 same problem whose fn (and constraints) spread their Monte-Carlo sample chunks over the
-mesh's ``samples`` axis (``designopt.montecarlo.scan_chunks``); None: not supported.
+mesh's ``samples`` axis (``designopt.numerics.montecarlo.scan_chunks``); None: not supported.
 """
 
 from __future__ import annotations
@@ -139,5 +139,5 @@ def evaluate_batch(params: Any, X: Array, keys: jax.Array, fn: ProblemFn,
     """:func:`scored` over R groups of candidates X (R, N, D), group r with keys[r] (R,):
     f (R, N[, m]), aux {name: (R, N)}, v (R, N). The one compiled objective of a run: the
     runner's every evaluation (``optim.run(..., separate=True)``) and the scoring after
-    it (``designopt.scoring.score`` with the run's ``eval_shape``) call it with one shape."""
+    it (``designopt.problems.evaluate.score`` with the run's ``eval_shape``) call it with one shape."""
     return jax.vmap(lambda x, k: scored(fn, constraints, params, x, k))(X, keys)

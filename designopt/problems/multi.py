@@ -36,7 +36,7 @@ from typing import NamedTuple
 import jax.numpy as jnp
 import numpy as np
 
-from designopt.pareto import non_dominated
+from designopt.numerics.pareto import non_dominated
 from designopt.problems.base import Problem
 
 

@@ -1,6 +1,6 @@
 """Typed results: one record class per archive kind (docs/archive.md says which record
 holds what). ``from_tree`` picks the class from the tree's root attrs; the archive
-(``designopt.archive.load`` / ``save``) stores a record's ``to_tree()``."""
+(``designopt.io.archive.load`` / ``save``) stores a record's ``to_tree()``."""
 
 from __future__ import annotations
 

@@ -6,16 +6,24 @@ HDF5 layout of docs/archive.md. ``to_tree()`` gives the nested dict ``archive.wr
 stores (root attrs under ``"attrs"``); ``from_tree`` reads what ``archive.read`` returns.
 Two records are equal when their data and identity (kind, study, config, seed, keys)
 are; timings, versions and devices are measurements and not compared.
+
+Records are plain data: they import no study and no config model. What a record needs
+beyond its arrays to print itself (its typed config, the study's units and summary
+indices, the study's own summary lines) comes from a *binder* the application layer attaches
+(``Record.bind``; ``designopt.app.records``): the typed config is validated once, when
+first asked for.
 """
 
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
+
+from designopt.core.errors import ConfigError
 
 MEASURED = ("schema_version", "versions", "jax_backend", "jax_devices", "complete",
             "compilations", "compilations_by_stage", "config_dir")  # fmt: skip
@@ -82,6 +90,10 @@ def same(a: Any, b: Any, path: str = "") -> str | None:
     return None if ok else path
 
 
+Binder = Callable[["Record"], tuple[Any, dict[str, Any]]]
+"""``binder(record) -> (typed config, hints)``: what the application layer attaches to a record."""
+
+
 @dataclass(eq=False)
 class Record:
     """One result: root ``attrs`` and the kind's groups (``GROUPS``, in archive order)."""
@@ -93,9 +105,11 @@ class Record:
     attrs: dict[str, Any]
     groups: dict[str, Any] = field(default_factory=dict)
     _config: Any = field(default=None, repr=False)
+    _binder: Binder | None = field(default=None, repr=False)
+    _bound: tuple[Any, dict[str, Any]] | None = field(default=None, repr=False)
 
     @classmethod
-    def from_tree(cls, tree: Mapping[str, Any], config: Any = None) -> Record:
+    def from_tree(cls, tree: Mapping[str, Any], config: Any = None) -> Record:  # noqa: D417
         """The record of an archive tree (``archive.read``'s nested dict, root attrs under
         ``"attrs"``); ``config``: the validated config when already at hand."""
         attrs = {k: _json(v) for k, v in dict(tree.get("attrs", {})).items()}
@@ -148,21 +162,39 @@ class Record:
     def seed(self) -> int:
         return int(self.attrs.get("seed", 0))
 
+    def bind(self, binder: Binder | None) -> Record:
+        """Attach the application layer's ``binder(record) -> (config, hints)`` (returns self)."""
+        self._binder, self._bound = binder, None
+        return self
+
+    def _context(self) -> tuple[Any, dict[str, Any]]:
+        if self._bound is None:
+            if self._binder is None:
+                raise LookupError(f"this {self.kind or 'record'} record is bound to no config; "
+                                  "read archives with designopt.load")  # fmt: skip
+            self._bound = self._binder(self)
+        return self._bound
+
     @property
     def config(self) -> Any:
-        """The validated config the record was made with (rebuilt from the archived
-        resolved config when the record was loaded from a file)."""
+        """The validated config the record was made with (given when it was made, or
+        rebuilt by its binder from the archived resolved config)."""
         if self._config is None:
-            from designopt.config import validate
-
-            raw = self.attrs["config_resolved"]
-            raw = json.loads(raw) if isinstance(raw, str) else raw
-            folder = self.attrs.get("config_dir") or None
-            self._config = validate(raw, f"archive ({self.kind})", self.config_model(), folder)
+            self._config = self._context()[0]
         return self._config
 
-    def config_model(self) -> Any:
-        return None  # the run-config model
+    def hint(self, key: str, default: Any = None) -> Any:
+        """What the binder says of this record beyond its data (``units``, ``summary``,
+        ``extra_lines``, ``case_names``); ``default`` when unbound or its study unknown."""
+        try:
+            return self._context()[1].get(key, default)
+        except (LookupError, ValueError, ConfigError):  # unbound, or a study or config unknown here
+            return default
+
+    def raw_config(self) -> dict[str, Any]:
+        """The archived resolved config as plain data (no validation)."""
+        raw = self.attrs.get("config_resolved", {})
+        return json.loads(raw) if isinstance(raw, str | bytes) else dict(raw)
 
     @property
     def names(self) -> list[str]:
@@ -186,7 +218,7 @@ class Record:
 
     def keys(self) -> dict[str, Any]:
         """The named PRNG streams the record was made with (``studies.STREAMS``)."""
-        from designopt.studies.base import archived_keys
+        from designopt.core.keys import archived_keys
 
         return archived_keys({"attrs": self.attrs})
 

@@ -19,11 +19,6 @@ class BenchRecord(Record):
     KIND: ClassVar[str] = "bench"
     GROUPS: ClassVar[tuple[str, ...]] = ("bench",)
 
-    def config_model(self) -> Any:
-        from designopt.benchsuite import BenchConfig
-
-        return BenchConfig
-
     @property
     def cases(self) -> dict[str, dict[str, Any]]:
         return {c: g for c, g in self.groups["bench"].items() if c != "attrs"}
@@ -49,10 +44,8 @@ class BenchRecord(Record):
     def case_names(self) -> list[str]:
         """The cases in the order the suite ran them (the config's functions, then their
         shifted copies; an archive gives its groups sorted by name)."""
-        from designopt.benchsuite import case_names
-
         have = list(self.cases)
-        ran = [c for c in case_names(self.config) if c in have]
+        ran = [c for c in self.hint("case_names", []) if c in have]
         return ran + [c for c in have if c not in ran]
 
     def histories(self, case: str) -> dict[str, np.ndarray]:
@@ -66,4 +59,4 @@ class BenchRecord(Record):
     @property
     def n_runs(self) -> int:
         """Independent runs per entry (``bench.n_runs`` of the config)."""
-        return int(self.config.bench.n_runs)
+        return int(self.raw_config()["bench"]["n_runs"])

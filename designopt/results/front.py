@@ -109,10 +109,5 @@ class FrontRecord(Record):
     def units(self) -> dict[str, str]:
         """Every variable's, index's and objective's unit: the study's, and the linear
         objectives' own (their variables' common unit)."""
-        from designopt.studies import get
-
         own = dict(self.groups["front"]["attrs"].get("units", {}) or {})
-        try:
-            return {**get(self.study).units(self.config.study), **own}
-        except ValueError:  # a study not registered in this process
-            return own
+        return {**self.hint("units", {}), **own}

@@ -5,12 +5,88 @@ attrs targets (the mode matched), design, joint_names, units (docs/archive.md)."
 
 from __future__ import annotations
 
+import csv
+import io
+from collections.abc import Mapping
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
 
 from designopt.results.base import Record
+
+N_FAILED_SHOWN = 5
+"""How many failed poses the summary names by row."""
+
+
+def joint_names(ik: Mapping[str, Any]) -> list[str]:
+    """The joints' column names: attr ``joint_names``, else q1 … qn."""
+    names = ik.get("attrs", {}).get("joint_names")
+    n = np.asarray(ik["q"]).shape[-1]
+    if names is not None and len(names) == n:
+        return [str(x.decode() if isinstance(x, bytes) else x) for x in names]
+    return [f"q{i + 1}" for i in range(n)]
+
+
+def summary_lines(ik: Mapping[str, Any]) -> list[str]:
+    """Success count and rate, what was matched and the design, the worst errors (and
+    1/k, iterations) of the solved poses, the first failed poses by row (rows counted
+    from 1, as in the poses file)."""
+    ok = np.asarray(ik["success"], bool)
+    pe, re = np.asarray(ik["pos_err"], np.float64), np.asarray(ik["rot_err"], np.float64)
+    units = ik.get("attrs", {}).get("units", "")
+    n, n_ok = len(ok), int(ok.sum())
+    lines = [f"{n} poses: {n_ok} solved ({100 * n_ok / max(n, 1):.2f} %), {n - n_ok} failed "
+             "(unreachable or not converged)"]  # fmt: skip
+    at = ik.get("attrs", {})
+    if at.get("targets") or at.get("design"):
+        des = ", ".join(f"{k} = {float(v):.6g}" for k, v in dict(at.get("design") or {}).items())
+        lines.append(f"matched: {at.get('targets', 'pose')}" + (f"; design: {des}" if des else ""))
+    if n_ok:
+        i, j = int(np.argmax(np.where(ok, pe, -np.inf))), int(np.argmax(np.where(ok, re, -np.inf)))
+        lines.append(f"worst errors of the solved: position {pe[i]:.3g} (row {i + 1}), "
+                     f"orientation {re[j]:.3g} (row {j + 1})" + (f"; units: {units}" if units else ""))  # fmt: skip
+        if "iterations" in ik:
+            it = np.asarray(ik["iterations"])[ok]
+            lines.append(f"iterations of the solved: median {np.median(it):.0f}, max {it.max()}")
+        if "inv_k" in ik:
+            ik_ok = np.asarray(ik["inv_k"], np.float64)[ok]
+            r = int(np.flatnonzero(ok)[np.argmin(ik_ok)])
+            lines.append(f"1/k (position block) of the solved: median {np.median(ik_ok):.3g}, "
+                         f"least {ik_ok.min():.3g} (row {r + 1})")  # fmt: skip
+    bad = np.flatnonzero(~ok)
+    if len(bad):
+        shown = ", ".join(f"{r + 1} (position error {pe[r]:.3g})" for r in bad[:N_FAILED_SHOWN])
+        more = f" and {len(bad) - N_FAILED_SHOWN} more" if len(bad) > N_FAILED_SHOWN else ""
+        lines.append(f"failed rows: {shown}{more}")
+    return lines
+
+
+def csv_text(ik: Mapping[str, Any]) -> str:
+    """One row per pose: row (from 1), success, the joints, pos_err, rot_err (and
+    iterations, inv_k); full float precision (``repr``), so the joints read back exactly."""
+    names = joint_names(ik)
+    q = np.asarray(ik["q"], np.float64)
+    cols = {"success": np.asarray(ik["success"], bool).astype(int)}
+    cols |= {nm: q[:, i] for i, nm in enumerate(names)}
+    cols |= {"pos_err": np.asarray(ik["pos_err"]), "rot_err": np.asarray(ik["rot_err"])}
+    if "iterations" in ik:
+        cols["iterations"] = np.asarray(ik["iterations"]).astype(int)
+    if "inv_k" in ik:
+        cols["inv_k"] = np.asarray(ik["inv_k"], np.float64)
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["row", *cols])
+    for r in range(len(q)):
+        w.writerow([r + 1, *(repr(c[r].item()) for c in cols.values())])
+    return buf.getvalue()
+
+
+def csv_path(archive: str | Path) -> Path:
+    """Where ``--csv`` writes the joints: ``<archive stem>_joints.csv`` beside it."""
+    p = Path(archive)
+    return p.with_name(f"{p.stem}_joints.csv")
 
 
 @dataclass(eq=False)
@@ -43,16 +119,10 @@ class IKRecord(Record):
 
     @property
     def joint_names(self) -> list[str]:
-        from designopt.ikreport import joint_names
-
         return joint_names(self.ik)
 
     def summary(self) -> list[str]:
-        from designopt.ikreport import summary_lines
-
         return [self.timing_line(), *summary_lines(self.ik)]
 
     def csv_text(self) -> str:
-        from designopt.ikreport import csv_text
-
         return csv_text(self.ik)

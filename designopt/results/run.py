@@ -19,12 +19,6 @@ def _pm(name: str, v: float, se: float | None) -> str:
     return f"  {name:<5} = {v:.5f} ± {se:.1e} {rel}"
 
 
-def _study(cfg: Any) -> Any:
-    from designopt.studies import get
-
-    return get(cfg.study.name)
-
-
 @dataclass(eq=False)
 class RunRecord(Record):
     """One optimisation: groups ``optimizer`` (history (runs, T+1), best_f, best_x,
@@ -93,8 +87,7 @@ class RunRecord(Record):
         """The run summary: the best design, f, what the polish gained, the study's
         sub-objectives with ± SE, feasibility, the study's own lines."""
         cfg = self.config
-        st = _study(cfg)
-        units = st.units(cfg.study)
+        units = self.hint("units", {})
         fin, opt, best = self.groups["final"], self.groups["optimizer"], self.best_run_index
         lines = [f"best design (run {best} of {cfg.optimizer.n_runs}; final stage: {self.stage}):"]
         lines += [f"  {n} = {v:9.4f} {units.get(n, '')}".rstrip() for n, v in self.x.items()]
@@ -104,14 +97,14 @@ class RunRecord(Record):
             r = self.groups["refine"]
             lines.append(f"  polish ({r['attrs']['method']}, {r['attrs']['steps']} steps) "
                          f"gained Δf = {np.max(r['gain']):.2e}")  # fmt: skip
-        for k in st.summary(cfg.study):
+        for k in self.hint("summary", ()):
             se = fin.get(k + "_se")
             lines.append(_pm(k, float(fin[k]), None if se is None else float(se)))
         if "violation" in fin:
             v = float(fin["violation"])
             ok = "feasible" if v <= 0 else f"violated by {v:.3g} (no feasible design found)"
             lines.append(f"  constraints: {ok}")
-        lines += st.extra_lines(cfg.study, fin)
+        lines += list(self.hint("extra_lines", []))
         return lines
 
     def run_line(self) -> str:
@@ -124,11 +117,9 @@ class RunRecord(Record):
         lines = [self.timing_line(),
                  "final design: " + ", ".join(f"{n} = {v:.4f}" for n, v in self.x.items())]  # fmt: skip
         subs = [k for k in fin if k + "_se" in fin and k != "f"][:6]
-        try:
-            cfg = self.config
-            subs = [k for k in _study(cfg).summary(cfg.study) if k + "_se" in fin]
-        except Exception:  # a study not registered in this process: its first indices
-            pass
+        summary = self.hint("summary")  # None: a study unknown to this process
+        if summary is not None:
+            subs = [k for k in summary if k + "_se" in fin]
         lines.append(f"f = {self.f:.5f} (stage {self.stage}); "
                      + "; ".join(f"{k} = {float(fin[k]):.5f} ± {float(fin[k + '_se']):.1e}"
                                  for k in subs))  # fmt: skip
@@ -191,10 +182,10 @@ class SweepRecord(Record):
                 attrs["config_resolved"] = yaml.safe_load(str(attrs["config_resolved_yaml"]))
                 seed = attrs["config_resolved"].get("seed", attrs.get("seed"))
                 if seed is not None and int(seed) != self.seed:  # a sweep over the seed
-                    from designopt.studies import key_data, streams
+                    from designopt.core.keys import key_data, streams
 
                     attrs |= {"seed": int(seed), "keys": key_data(streams(int(seed)))}
-            out[k] = RunRecord.from_tree({**m, "attrs": attrs})
+            out[k] = RunRecord.from_tree({**m, "attrs": attrs}).bind(self._binder)
         return out
 
     def overrides(self) -> dict[str, dict[str, Any]]:

@@ -12,20 +12,16 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import jax
 import numpy as np
 from pydantic import BaseModel, ConfigDict, field_validator, model_validator
 
+from designopt.core.keys import STREAMS, archived_keys, key_data, streams  # noqa: F401 (re-exported)
+from designopt.core.settings import Section  # noqa: F401 (re-exported: studies' settings use it)
+from designopt.kinematics.ikjob import IKHook
 from designopt.problems.base import Problem
-from designopt.section import Section  # noqa: F401 (re-exported: studies' settings use it)
-
-if TYPE_CHECKING:
-    from designopt.ikcmd import IKHook
-
-STREAMS = ("optimizer", "samples", "normalisation", "figures")
-"""The named PRNG streams split once from the root key ``key(seed)``."""
 
 
 class StudySettings(BaseModel):
@@ -126,8 +122,9 @@ class Command:
     """An extra subcommand a study declares (``Study.commands``): the CLI builds its
     subparser from the registry. ``arguments(parser)`` adds the arguments, ``run(args,
     ctx)`` returns the exit status; ``ctx.load(args)`` loads ``args.config`` as every
-    command does (seed, devices, precision, compilation cache) and ``ctx.progress(quiet)``
-    gives the progress bar. ``writes``: it writes files, so it runs under the output
+    command does (seed, devices, precision, compilation cache), ``ctx.progress(quiet)``
+    gives the progress bar, ``ctx.design(items)`` reads ``--design NAME=VALUE`` items and
+    ``ctx.load_record(path)`` reads an archive bound to its config. ``writes``: it writes files, so it runs under the output
     session with signal handling like ``run``."""
 
     name: str
@@ -176,24 +173,6 @@ def check_replicates(v: int | None, info: Any) -> int | None:
     return v
 
 
-def streams(seed: int) -> dict[str, jax.Array]:
-    """One root key ``key(seed)`` split once into the named streams of :data:`STREAMS`."""
-    keys = jax.random.split(jax.random.key(seed), len(STREAMS))
-    return dict(zip(STREAMS, keys, strict=True))
-
-
-def key_data(keys: Mapping[str, jax.Array]) -> dict[str, list[int]]:
-    """The raw key data of each stream (archived, so a run's keys can be rebuilt)."""
-    return {k: np.asarray(jax.random.key_data(v)).tolist() for k, v in keys.items()}
-
-
-def archived_keys(archive: Mapping[str, Any]) -> dict[str, jax.Array]:
-    """The named streams of a run, rebuilt from its archive (the inverse of
-    :func:`key_data`; root attribute ``keys``)."""
-    raw = archive["attrs"]["keys"]
-    return {k: jax.random.wrap_key_data(np.asarray(v, np.uint32)) for k, v in raw.items()}
-
-
 @dataclass(frozen=True)
 class Study:
     """What a study declares.
@@ -217,7 +196,7 @@ class Study:
       (kind "run") and prints ``lines``. None: optimise.
     - ``cost(settings) -> Cost``: the pre-flight estimate's inputs.
     - ``commands``: the study's own subcommands (``Command``), added by the CLI.
-    - ``ik``: its inverse kinematics for ``designopt ik`` (``designopt.ikcmd.IKHook``).
+    - ``ik``: its inverse kinematics for ``designopt ik`` (``designopt.kinematics.ikjob.IKHook``).
     """
 
     name: str
@@ -236,12 +215,12 @@ class Study:
     meta: dict[str, Any] = field(default_factory=dict)
     cost: Callable[[Any], Cost] = lambda s: Cost()
     """``cost(settings)``: Monte-Carlo samples, chunk and normalisation probes per design,
-    for the pre-flight memory and time estimate (``designopt.preflight``)."""
+    for the pre-flight memory and time estimate (``designopt.app.preflight``)."""
     commands: tuple[Command, ...] = ()
     """Extra subcommands of this study (e.g. the serial ``chain`` and ``export``)."""
     ik: IKHook | None = None
     """``designopt ik CONFIG --poses FILE``: the study's inverse kinematics (an
-    ``designopt.ikcmd.IKHook``: the design solved for with ``--design`` overrides, the
+    ``designopt.kinematics.ikjob.IKHook``: the design solved for with ``--design`` overrides, the
     solver, its target modes and the study's own flags). None: the command refuses the
     study in one line."""
     cloud: Callable[[Any], dict[str, Any] | None] | None = None

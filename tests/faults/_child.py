@@ -18,7 +18,7 @@ def mark(name: str) -> None:
             f.write(f"{name} {time.monotonic() - t0:.4f}\n")
 
 
-from designopt import output  # noqa: E402
+from designopt.io import writer as output  # noqa: E402
 
 install, set_phase = output.Session.install, output.Session.set_phase
 
@@ -57,7 +57,7 @@ output.Session.set_phase = _set_phase
 output.OPS.open = staticmethod(_open)
 output.OPS.write = staticmethod(_write)
 
-from designopt import cli  # noqa: E402
+from designopt.cli import commands as cli  # noqa: E402
 
 progress = cli._progress
 

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 from faultkit import config
 
-from designopt.cli import main
+from designopt.cli.commands import main
 
 
 @pytest.fixture(scope="session")

@@ -12,7 +12,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from designopt.cli import main
+from designopt.cli.commands import main
 
 TINY = """
 study:

@@ -11,7 +11,7 @@ import time
 from faultkit import cli, config, copy, one_line, same_result, spawn, strays
 from test_write_faults import inject
 
-from designopt import archive
+from designopt.io import archive
 
 SCAN = "scan: {vary: {l2: [0.5, 1.0, 1.5]}, design: {l1: 1.0}}\n"
 

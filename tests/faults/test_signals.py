@@ -14,7 +14,7 @@ import pytest
 from faultkit import cli as run_cli
 from faultkit import config, copy, one_line, resume_args, same_result, spawn, strays
 
-from designopt import archive, cli, output
+from designopt.io import archive, writer
 
 CODES = {signal.SIGINT: 130, signal.SIGTERM: 143, signal.SIGHUP: 143}
 N_ITERS = 60  # TINY's; chunks of 3 iterations, so 19 boundaries before the end
@@ -31,13 +31,15 @@ def _signal_at(monkeypatch, iteration: int, signum: int) -> None:
 
         def update(n):
             done[0] += n
-            if done[0] >= iteration and not sent and output.current().phase == "loop":
+            if done[0] >= iteration and not sent and writer.current().phase == "loop":
                 sent.append(signum)  # in this process only where the main thread meets it
                 signal.raise_signal(signum)
 
         yield update
 
-    monkeypatch.setattr(cli, "_progress", lambda quiet: bar)
+    from designopt.cli import commands as cli_main
+
+    monkeypatch.setattr(cli_main, "_progress", lambda quiet: bar)
 
 
 @pytest.mark.parametrize("chain", range(6))

@@ -17,7 +17,7 @@ from collections import namedtuple
 import pytest
 from faultkit import cli, config, copy, one_line, resume_args, same_result, strays
 
-from designopt import archive, output
+from designopt.io import archive, writer
 
 REASON = {errno.ENOSPC: "No space left on device", errno.EIO: "Input/output error",
           errno.EACCES: "Permission denied", errno.EROFS: "Read-only file system"}  # fmt: skip
@@ -50,7 +50,7 @@ def inject(monkeypatch, kind: str, code: int, op: str, nth: int) -> list[str]:
         return staticmethod(op_)
 
     for name in OPS:
-        monkeypatch.setattr(output._Ops, name, wrap(name, getattr(output._Ops, name)))
+        monkeypatch.setattr(writer._Ops, name, wrap(name, getattr(writer._Ops, name)))
     return fired
 
 

@@ -1,10 +1,10 @@
 """The interactive report: one self-contained HTML page per archive (docs/figures.md).
 
-``page(tree)`` takes an archive as the nested dict ``designopt.archive.read`` returns and
+``page(tree)`` takes an archive as the nested dict ``designopt.io.archive.read`` returns and
 gives one HTML document that works offline, with no server: plotly.js is embedded once
 (about 4.8 MB), every plot's data follows as JSON (numeric arrays as base64 typed arrays,
 exact float64), and one script draws them. ``write(tree, path)`` writes the page through
-the one writer (``designopt.output``).
+the one writer (``designopt.io.writer``).
 
 What a page shows, by the root attr ``kind``:
 
@@ -49,8 +49,8 @@ from designopt.figures.html.model import (
     MAX_TEXT,
     MAX_VALUES,
     PALETTE,
+    PageSection,
     Plot,
-    Section,
     Z,
     esc,
 )
@@ -72,7 +72,7 @@ __all__ = [
     "PALETTE",
     "Z",
     "Plot",
-    "Section",
+    "PageSection",
     "budget",
     "esc",
     "front_objectives",

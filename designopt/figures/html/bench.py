@@ -13,8 +13,8 @@ from designopt.figures.html.model import (
     MAX_CLOUD,
     MAX_LINE_POINTS,
     PALETTE,
+    PageSection,
     Plot,
-    Section,
     _every,
     _f,
     _Ids,
@@ -34,13 +34,13 @@ def _floored(values: list[np.ndarray]) -> tuple[list[np.ndarray], float | None]:
     return values, None
 
 
-def _bench(tree: Mapping[str, Any], ids: _Ids) -> list[Section]:
+def _bench(tree: Mapping[str, Any], ids: _Ids) -> list[PageSection]:
     out = []
     for case, g in tree["bench"].items():
         if case == "attrs" or not isinstance(g, Mapping):
             continue
         ents = {v: e for v, e in g.items() if v != "attrs" and isinstance(e, Mapping)}
-        sec = Section(f"bench-{case}", f"Benchmark: {case}")
+        sec = PageSection(f"bench-{case}", f"Benchmark: {case}")
         fin = [_f(e["best_f"]) if "best_f" in e else _f(e["history"])[:, -1] for e in ents.values()]
         shown, fl = _floored(fin)
         log = _is_log(*shown)
@@ -109,8 +109,8 @@ def _ik_units(text: Any) -> dict[str, str]:
     return out
 
 
-def _ik(tree: Mapping[str, Any], ids: _Ids) -> list[Section]:
-    from designopt import ikreport
+def _ik(tree: Mapping[str, Any], ids: _Ids) -> list[PageSection]:
+    from designopt.results import ik as iktext
 
     ik = tree["ik"]
     ok = np.asarray(ik["success"], bool)
@@ -118,8 +118,8 @@ def _ik(tree: Mapping[str, Any], ids: _Ids) -> list[Section]:
     p = k / max(n, 1)
     lo, hi = style.wilson(np.array([p]), n)
     u = _ik_units(ik.get("attrs", {}).get("units", ""))
-    sec = Section("ik", "Inverse kinematics")
-    sec.items.append("<ul>" + "".join(f"<li>{esc(x)}</li>" for x in ikreport.summary_lines(ik)) + "</ul>")  # fmt: skip
+    sec = PageSection("ik", "Inverse kinematics")
+    sec.items.append("<ul>" + "".join(f"<li>{esc(x)}</li>" for x in iktext.summary_lines(ik)) + "</ul>")  # fmt: skip
     tr = {"type": "bar", "x": ["solved"], "y": [p], "marker": {"color": PALETTE[2]},
           "error_y": {"type": "data", "symmetric": False, "array": [hi[0] - p],
                       "arrayminus": [p - lo[0]], "visible": True},
@@ -156,7 +156,7 @@ def _ik(tree: Mapping[str, Any], ids: _Ids) -> list[Section]:
     return [sec]
 
 
-def _cloud(cloud: Mapping[str, Any], ids: _Ids) -> Section:
+def _cloud(cloud: Mapping[str, Any], ids: _Ids) -> PageSection:
     xyz = np.asarray(cloud["xyz"], np.float64).reshape(-1, 3)
     val = np.asarray(cloud["value"], np.float64).ravel()
     if len(val) != len(xyz):
@@ -193,6 +193,6 @@ def _cloud(cloud: Mapping[str, Any], ids: _Ids) -> Section:
     lay = _layout(esc(title), scene=scene | {"aspectmode": "data"}, height=620)
     if kf.size:  # two traces: the legend top left, clear of the colour bar
         lay["legend"] |= {"x": 0.0, "y": 1.0, "xanchor": "left", "yanchor": "top"}
-    sec = Section("cloud", "Workspace")
+    sec = PageSection("cloud", "Workspace")
     sec.items.append(Plot(ids("cloud"), {"data": data, "layout": lay}, wide=True))
     return sec

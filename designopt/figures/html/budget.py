@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from designopt.figures.html.model import MAX_VALUES, Section, _every
+from designopt.figures.html.model import MAX_VALUES, PageSection, _every
 
 _POINTWISE = ("x", "y", "z", "customdata", "text")
 
@@ -54,7 +54,7 @@ def _thin_trace(tr: dict[str, Any], s: int) -> None:
     cut(tr)
 
 
-def budget(sections: Sequence[Section], max_values: int = MAX_VALUES) -> int:
+def budget(sections: Sequence[PageSection], max_values: int = MAX_VALUES) -> int:
     """Thin the plots of ``sections`` in place until they hold at most ``max_values``
     numbers (scatter and heat-map traces over 500 values, evenly); returns the count."""
     traces = [tr for s in sections for p in s.plots() for tr in p.fig["data"]]

@@ -12,8 +12,8 @@ from designopt.figures import style
 from designopt.figures.html.model import (
     MAX_MARKERS,
     PALETTE,
+    PageSection,
     Plot,
-    Section,
     Z,
     _every,
     _f,
@@ -48,7 +48,7 @@ def front_objectives(fr: Mapping[str, Any]) -> tuple[list[str], list[str]]:
     return names[:m], senses[:m]
 
 
-def _front(tree: Mapping[str, Any], ids: _Ids, units: dict[str, str]) -> list[Section]:
+def _front(tree: Mapping[str, Any], ids: _Ids, units: dict[str, str]) -> list[PageSection]:
     fr = tree["front"]
     F = np.atleast_2d(_f(fr["f"]))
     n, m = F.shape
@@ -91,7 +91,7 @@ def _front(tree: Mapping[str, Any], ids: _Ids, units: dict[str, str]) -> list[Se
     axl = [esc(style.label(f"{k} ({s})", style.unit_of(k, units))) for k, s in zip(names, senses, strict=True)]  # fmt: skip
     title = (f"Pareto front: {n} designs{_thin_note(n, len(keep), 'designs')}; bars ± 2 SE; "
              f"orange diamonds: in a pair whose order is within 2 SE ({len(pairs)} pairs)")  # fmt: skip
-    sec = Section("front", "Pareto front")
+    sec = PageSection("front", "Pareto front")
     pts: dict[str, Any] = {"mode": "markers", "customdata": custom, "hovertemplate": hover,
                            "name": "front", "marker": {"color": colors, "symbol": symbols,
                                                        "size": 8, "line": {"width": 0.5, "color": "#333"}}}  # fmt: skip

@@ -1,4 +1,4 @@
-"""The page model (a :class:`Plot`, a :class:`Section`), the size caps and small
+"""The page model (a :class:`Plot`, a :class:`PageSection`), the size caps and small
 helpers: escaping, even thinning, tables and numbers."""
 
 from __future__ import annotations
@@ -47,7 +47,7 @@ class Plot:
 
 
 @dataclass
-class Section:
+class PageSection:
     """A titled part of the page: plots and HTML fragments (already escaped) in order."""
 
     id: str

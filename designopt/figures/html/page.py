@@ -11,24 +11,26 @@ from typing import Any
 
 import numpy as np
 
+from designopt.figures.hints import NONE, Hints
 from designopt.figures.html.bench import _bench, _cloud, _ik
 from designopt.figures.html.budget import budget
 from designopt.figures.html.front import _front
-from designopt.figures.html.model import CONFIG, MAX_TEXT, Plot, Section, _Ids, _s, _table, esc
+from designopt.figures.html.model import CONFIG, MAX_TEXT, PageSection, Plot, _Ids, _s, _table, esc
 from designopt.figures.html.run import _run_sections
 from designopt.figures.html.scan import _scan, _sweep
 
 
 def sections(tree: Mapping[str, Any], *, cloud: Mapping[str, Any] | None = None,
-             units: Mapping[str, str] | None = None) -> list[Section]:  # fmt: skip
+             units: Mapping[str, str] | None = None, hints: Hints = NONE) -> list[PageSection]:  # fmt: skip
     """The page's sections for an archive (``archive.read``'s nested dict), before the
-    size budget; ``units`` ({name: unit}) adds to or overrides the study's own."""
-    hint_units, mod = _hints(tree)
-    u = {k: v for k, v in hint_units.items() if not k.startswith("__")} | dict(units or {})
+    size budget; ``hints`` the study's (units, rates), which ``units`` ({name: unit})
+    adds to or overrides."""
+    mod = hints
+    u = dict(hints.units) | dict(units or {})
     rates = set(getattr(mod, "RATES", ()))
     ids = _Ids()
     kind = _s(tree.get("attrs", {}).get("kind", ""))
-    out: list[Section] = []
+    out: list[PageSection] = []
     if "front" in tree:
         out += _front(tree, ids, u)
     if kind == "run" or "optimizer" in tree or "teleop" in tree or "checkpoint" in tree:
@@ -50,24 +52,6 @@ def sections(tree: Mapping[str, Any], *, cloud: Mapping[str, Any] | None = None,
     return out
 
 
-def _hints(tree: Mapping[str, Any]) -> tuple[dict[str, str], Any]:
-    """(units, the study's figures module or None) from the registry, for the study and
-    config the archive names; ({}, None) for an unknown study or config."""
-    from designopt.studies import get
-
-    at = tree.get("attrs", {})
-    try:
-        st = get(_s(at.get("study", "")))
-        cfg = at["config_resolved"]
-        cfg = json.loads(cfg) if isinstance(cfg, str | bytes) else cfg
-        units = dict(st.units(st.settings.model_validate(cfg["study"])))
-    except Exception:  # noqa: BLE001 - a report of an unknown study or config still draws
-        return {}, None
-    from designopt.figures.scan import figures_module
-
-    return units, figures_module(st)
-
-
 def _meta(tree: Mapping[str, Any]) -> str:
     at = tree.get("attrs", {})
     rows = []
@@ -83,11 +67,11 @@ def _meta(tree: Mapping[str, Any]) -> str:
     return _table(["attribute", "value"], rows)
 
 
-def _config(tree: Mapping[str, Any]) -> Section | None:
+def _config(tree: Mapping[str, Any]) -> PageSection | None:
     at = tree.get("attrs", {})
     if "config_yaml" not in at and "config_resolved_yaml" not in at:
         return None
-    sec = Section("config", "Config")
+    sec = PageSection("config", "Config")
 
     def pre(text: Any, what: str) -> str:
         t = _s(text)
@@ -106,7 +90,7 @@ def _config(tree: Mapping[str, Any]) -> Section | None:
     return sec
 
 
-def _contents(tree: Mapping[str, Any]) -> Section:
+def _contents(tree: Mapping[str, Any]) -> PageSection:
     rows: list[tuple[str, str, str]] = []
 
     def walk(g: Mapping[str, Any], pre: str) -> None:
@@ -121,7 +105,7 @@ def _contents(tree: Mapping[str, Any]) -> Section:
 
     walk(tree, "")
     body = _table(["dataset", "shape", "dtype"], rows, "contents")
-    return Section("contents", "Archive contents", [f"<details><summary>{len(rows)} datasets"
+    return PageSection("contents", "Archive contents", [f"<details><summary>{len(rows)} datasets"
                                                     f"</summary>{body}</details>"])  # fmt: skip
 
 
@@ -202,12 +186,14 @@ def _plotly_js() -> str:
 
 
 def page(tree: Mapping[str, Any], *, title: str | None = None,
-         cloud: Mapping[str, Any] | None = None, units: Mapping[str, str] | None = None) -> str:  # fmt: skip
+         cloud: Mapping[str, Any] | None = None, units: Mapping[str, str] | None = None,
+         hints: Hints = NONE) -> str:  # fmt: skip
     """One self-contained HTML document showing the archive ``tree`` (as
-    ``designopt.archive.read`` returns it), with plotly.js embedded once; ``cloud``
+    ``designopt.io.archive.read`` returns it), with plotly.js embedded once; ``cloud``
     ({"xyz": (n, 3), "value": (n,), "label": str, "unit": str, optional "xyz_unit"})
-    adds a 3-D point cloud; ``units`` ({name: unit}) labels axes beyond the study's own."""
-    secs = sections(tree, cloud=cloud, units=units)
+    adds a 3-D point cloud; ``hints`` the study's units and rates (``Hints``); ``units``
+    ({name: unit}) labels axes beyond them."""
+    secs = sections(tree, cloud=cloud, units=units, hints=hints)
     n_values = budget(secs)
     at = tree.get("attrs", {})
     kind, study = _s(at.get("kind", "archive")), _s(at.get("study", ""))
@@ -259,8 +245,8 @@ def page(tree: Mapping[str, Any], *, title: str | None = None,
 
 def write(tree: Mapping[str, Any], path: str | Path, **kw: Any) -> Path:
     """Write :func:`page` of ``tree`` to ``path`` atomically through the one writer
-    (``designopt.output``); ``kw`` as for :func:`page`. Returns the path."""
-    from designopt import output
+    (``designopt.io.writer``); ``kw`` as for :func:`page`. Returns the path."""
+    from designopt.io import writer
 
     text = page(tree, **kw)
-    return output.write_file(path, text.encode("utf-8"), "HTML report")
+    return writer.write_file(path, text.encode("utf-8"), "HTML report")

@@ -12,8 +12,8 @@ from designopt.figures import style
 from designopt.figures.html.model import (
     MAX_LINE_POINTS,
     PALETTE,
+    PageSection,
     Plot,
-    Section,
     _every,
     _f,
     _Ids,
@@ -36,7 +36,7 @@ from designopt.figures.html.plots import (
 
 
 def _run_sections(tree: Mapping[str, Any], ids: _Ids, units: dict[str, str],
-                  rates: set[str]) -> list[Section]:  # fmt: skip
+                  rates: set[str]) -> list[PageSection]:  # fmt: skip
     out = []
     opt = tree.get("optimizer", {})
     best = None
@@ -47,7 +47,7 @@ def _run_sections(tree: Mapping[str, Any], ids: _Ids, units: dict[str, str],
         h = _f(opt["history"])
         if best is None and "best_f" in opt:
             best = int(np.argmin(_f(opt["best_f"])))
-        sec = Section("convergence", "Convergence")
+        sec = PageSection("convergence", "Convergence")
         sec.items.append(_convergence(h, best, ids, "best-so-far f per iteration",
                                       style.label("best f", style.unit_of("f", units))))  # fmt: skip
         if "history_v" in opt:
@@ -59,11 +59,11 @@ def _run_sections(tree: Mapping[str, Any], ids: _Ids, units: dict[str, str],
                                           style.label("violation", style.DIMENSIONLESS), "violation"))  # fmt: skip
         out.append(sec)
     if "best_run" in tree:
-        sec = Section("best-run", "The best run's indices")
+        sec = PageSection("best-run", "The best run's indices")
         sec.items += _best_run(tree["best_run"], ids, units, rates)
         out.append(sec)
     if "final" in tree:
-        out.append(Section("final", "Final design", [_final_tables(tree, units)]))
+        out.append(PageSection("final", "Final design", [_final_tables(tree, units)]))
     if "refine" in tree and "f0" in tree["refine"]:
         r = tree["refine"]
         rows = [(int(i), f"{a:.6g}", f"{b:.6g}", f"{a - b:.3g}")
@@ -71,13 +71,13 @@ def _run_sections(tree: Mapping[str, Any], ids: _Ids, units: dict[str, str],
                                    np.atleast_1d(_f(r["f0"])), np.atleast_1d(_f(r["f"])), strict=False)]  # fmt: skip
         at = r.get("attrs", {})
         cap = ", ".join(f"{k} {_s(at[k])}" for k in ("method", "steps", "learning_rate") if k in at)
-        out.append(Section("refine", "Gradient polish", [f"<p class='note'>{esc(cap)}</p>"
+        out.append(PageSection("refine", "Gradient polish", [f"<p class='note'>{esc(cap)}</p>"
                            + _table(["run", "f before", "f after", "gain"], rows)]))  # fmt: skip
     if "teleop" in tree:
         out += _teleop(tree["teleop"], ids)
     ck = tree.get("checkpoint")
     if isinstance(ck, Mapping) and "history" in ck:
-        sec = Section("checkpoint", "Checkpoint (incomplete run)")
+        sec = PageSection("checkpoint", "Checkpoint (incomplete run)")
         sec.items.append(_convergence(_f(ck["history"]), None, ids,
                                       f"best-so-far f, {_s(ck.get('attrs', {}).get('done', '?'))} iterations done",
                                       style.label("best f", style.DIMENSIONLESS)))  # fmt: skip
@@ -139,8 +139,8 @@ def _final_tables(tree: Mapping[str, Any], units: dict[str, str]) -> str:
     return "".join(parts)
 
 
-def _teleop(t: Mapping[str, Any], ids: _Ids) -> list[Section]:
-    sec = Section("teleop", "Replayed trajectory")
+def _teleop(t: Mapping[str, Any], ids: _Ids) -> list[PageSection]:
+    sec = PageSection("teleop", "Replayed trajectory")
     if "tip" in t and "command" in t:
         tip, cmd = np.atleast_2d(_f(t["tip"])), np.atleast_2d(_f(t["command"]))
         k = _every(len(tip), MAX_LINE_POINTS)

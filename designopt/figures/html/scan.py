@@ -16,8 +16,8 @@ from designopt.figures.html.model import (
     MAX_LINE_POINTS,
     MAX_MARKERS,
     PALETTE,
+    PageSection,
     Plot,
-    Section,
     Z,
     _every,
     _f,
@@ -40,7 +40,7 @@ from designopt.figures.html.plots import (
 )
 
 
-def _scan(tree: Mapping[str, Any], ids: _Ids, units: dict[str, str], mod: Any) -> list[Section]:
+def _scan(tree: Mapping[str, Any], ids: _Ids, units: dict[str, str], mod: Any) -> list[PageSection]:
     sc = tree["scan"]
     names = _names(sc["names"])
     varied = _names(sc["varied"])
@@ -52,7 +52,7 @@ def _scan(tree: Mapping[str, Any], ids: _Ids, units: dict[str, str], mod: Any) -
     rates = set(getattr(mod, "RATES", ()))
     bad = _f(sc["violation"]) > 0 if "violation" in sc else np.zeros(n, bool)
     at = sc.get("attrs", {})
-    sec = Section("scan", f"Scan over {', '.join(varied)}")
+    sec = PageSection("scan", f"Scan over {', '.join(varied)}")
     sec.items.append(f"<p class='note'>{n} designs; mode {esc(at.get('mode', '?'))}; "
                      f"{int(bad.sum())} infeasible (violation &gt; 0)</p>")  # fmt: skip
     if len(varied) == 1:
@@ -140,7 +140,7 @@ def _scan(tree: Mapping[str, Any], ids: _Ids, units: dict[str, str], mod: Any) -
     return [sec]
 
 
-def _sweep(tree: Mapping[str, Any], ids: _Ids, units: dict[str, str]) -> list[Section]:
+def _sweep(tree: Mapping[str, Any], ids: _Ids, units: dict[str, str]) -> list[PageSection]:
     mem = {k: v for k, v in tree["members"].items() if k != "attrs" and isinstance(v, Mapping)}
     labels = []
     for k, m in mem.items():
@@ -150,7 +150,7 @@ def _sweep(tree: Mapping[str, Any], ids: _Ids, units: dict[str, str]) -> list[Se
     f = np.array([float(_f(m["final"]["f"])) if "final" in m else np.nan for m in mem.values()])
     se = np.array([float(_f(m["final"]["f_se"])) if "final" in m and "f_se" in m["final"] else np.nan
                    for m in mem.values()])  # fmt: skip
-    sec = Section("sweep", f"Sweep: {len(mem)} members")
+    sec = PageSection("sweep", f"Sweep: {len(mem)} members")
     tr = {"type": "scatter", "mode": "markers", "x": f, "y": [esc(lab) for lab in labels],
           "name": "final f", "marker": {"size": 9, "color": PALETTE[0]},
           "hovertemplate": "%{y}: f = %{x:.6~g}<extra></extra>"}  # fmt: skip

@@ -12,8 +12,8 @@ import jax.numpy as jnp
 import numpy as np
 from matplotlib.ticker import MaxNLocator
 
-from designopt import montecarlo as mc
 from designopt.figures import convergence, save, style
+from designopt.numerics import montecarlo as mc
 from designopt.results import RunRecord
 from designopt.studies.davinci import mechanism as mech
 from designopt.studies.davinci import objective

@@ -33,7 +33,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from designopt.ikcmd import check_poses  # noqa: F401 (the one pose check; re-exported)
+from designopt.kinematics.poses import check_poses  # noqa: F401 (the one pose check; re-exported)
 from designopt.studies.davinci import mechanism as mech
 
 Array = jnp.ndarray

@@ -3,7 +3,7 @@ patient-side arm IK paper, Applied Sciences 2019; docs/davinci.md): the study's
 ``Study.ik`` hook (:data:`IK`) on its own solver (``ik``: damped Newton / LM from database
 seeds, ``--trajectory`` warm starts).
 
-The generic command (``designopt.ikcmd``) reads and checks the poses (CSV ``T00..T33`` or
+The generic command (``designopt.cli.ik``, ``designopt.io.poses``) reads and checks the poses (CSV ``T00..T33`` or
 ``x,y,z,qw,qx,qy,qz`` in mm, HDF5 ``poses`` (N, 4, 4)) and archives ``ik/q`` (N, 6; q1,
 q2, q4, q5, q6 in rad, q3 in mm), ``ik/success``, ``ik/iterations``, ``ik/pos_err`` (mm)
 and ``ik/rot_err`` (rad). ``solve_poses`` is the Python API; ``read_poses`` reads a file
@@ -20,9 +20,12 @@ from typing import Any
 
 import numpy as np
 
-from designopt.errors import ConfigError
-from designopt.ikcmd import MATRIX_COLUMNS, QUAT_COLUMNS, IKHook, IKJob, IKSolution, quat_to_pose
-from designopt.ikcmd import read_targets as _read_targets
+from designopt.core.errors import ConfigError
+from designopt.io.poses import MATRIX_COLUMNS, QUAT_COLUMNS
+from designopt.io.poses import read_targets as _read_targets
+from designopt.kinematics import poses
+from designopt.kinematics.ikjob import IKHook, IKJob, IKSolution
+from designopt.kinematics.poses import quat_to_pose
 from designopt.studies.base import known_lengths
 
 JOINT_NAMES = ["q1", "q2", "q3", "q4", "q5", "q6"]  # archived as ik attr joint_names
@@ -33,7 +36,7 @@ __all__ = ["IK", "JOINT_NAMES", "MATRIX_COLUMNS", "QUAT_COLUMNS", "quat_to_pose"
 
 def read_poses(path: str | Path, tol: float = 1e-6) -> np.ndarray:
     """Poses (N, 4, 4) from a CSV or HDF5 file of full poses, every row checked
-    (``designopt.ikcmd.read_targets``): a ConfigError naming the file and the row."""
+    (``designopt.io.poses.read_targets``): a ConfigError naming the file and the row."""
     t = _read_targets(path, tol)
     if t.R is None:
         raise ConfigError(f"{path}: the arm's IK needs full poses (T00..T33 or "
@@ -62,7 +65,7 @@ def solve_poses(settings: Any, T: np.ndarray, trajectory: bool = False,
     T = np.asarray(T, np.float64)
     if T.ndim != 3 or T.shape[1:] != (4, 4):
         raise ValueError(f"poses must have shape (N, 4, 4), got {T.shape}")
-    bad = ik.check_poses(T, settings.ik.orthonormal_tol)
+    bad = poses.check_poses(T, settings.ik.orthonormal_tol)
     if bad:
         raise ValueError(f"pose {bad[0][0] + 1}: {bad[0][1]}")
     arm = settings.ik_arm()

@@ -28,8 +28,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from designopt import montecarlo as mc
 from designopt.kinematics.conditioning import inv_cond
+from designopt.numerics import montecarlo as mc
 from designopt.problems.base import Problem
 from designopt.studies.davinci import ik
 from designopt.studies.davinci import mechanism as mech

@@ -19,8 +19,8 @@ import jax
 import numpy as np
 from matplotlib.ticker import MaxNLocator
 
-from designopt import montecarlo as mc
 from designopt.figures import MAP_RESOLUTION, save, style
+from designopt.numerics import montecarlo as mc
 from designopt.studies.master9 import indices as ind
 from designopt.studies.master9 import mechanism as m
 

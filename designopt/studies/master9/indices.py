@@ -16,8 +16,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from designopt import montecarlo as mc
 from designopt.kinematics.conditioning import inv_cond
+from designopt.numerics import montecarlo as mc
 from designopt.studies.master9.settings import Indices
 
 Array = jnp.ndarray

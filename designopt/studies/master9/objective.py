@@ -6,7 +6,7 @@ replicate and ``f_se`` is the SD of those values over √R (honest, docs/indices
 one i.i.d. stream, ``f_se`` = Σ |w_i| se_i/(x_max − x_min), an upper bound. The seed does
 not say where x_min/x_max come from: we score a space-filling (Halton) sample of
 ``n_norm`` designs over the design box once, before optimising, and keep the bounds fixed
-(``designopt.normalise``; they are ``problem.norm_bounds`` and archived).
+(``designopt.problems.normalise``; they are ``problem.norm_bounds`` and archived).
 """
 
 from __future__ import annotations
@@ -17,10 +17,10 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-from designopt import montecarlo as mc
-from designopt import normalise
+from designopt.core.keys import streams
+from designopt.numerics import montecarlo as mc
+from designopt.problems import normalise
 from designopt.problems.base import Problem
-from designopt.studies.base import streams
 from designopt.studies.master9 import mechanism as m
 from designopt.studies.master9.indices import reduce_replicates, replicate_indices, swarm_indices
 from designopt.studies.master9.settings import Indices, Master9Settings

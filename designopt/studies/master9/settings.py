@@ -10,7 +10,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 from designopt.studies.base import StudySettings, check_replicates
 
 if TYPE_CHECKING:  # pragma: no cover
-    from designopt.montecarlo import Plan
+    from designopt.numerics.montecarlo import Plan
 
 DESIGN_KEYS: tuple[str, ...] = ("a1", "a3", "d3", "a4", "a5", "d2", "d5", "d6")
 """The master's lengths (mm); mirrors ``mechanism.DESIGN_KEYS`` (kept import-light)."""
@@ -78,7 +78,7 @@ class Indices(BaseModel):
     @property
     def plan(self) -> Plan:
         """The Monte-Carlo layout (replicates, chunks) of ``n_samples``."""
-        from designopt import montecarlo as mc
+        from designopt.numerics import montecarlo as mc
 
         if self.sampler != "rqmc" and self.replicates in (None, 1):  # one stream
             c = min(self.chunk, self.n_samples)

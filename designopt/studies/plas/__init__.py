@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from designopt.studies.base import Cost, Study
-from designopt.studies.plas.settings import MASTER_KEYS, PlasSettings
+from designopt.studies.plas.settings import INDEX_UNITS, MASTER_KEYS, PlasSettings
 
 SUMMARY = ("vel_rel", "vel_reduction", "vel_abs", "pos_mean")
 INDICES = ("f", "vel_rel", "vel_reduction", "vel_abs", "vel_max", "pos_mean", "pos_max",
@@ -36,13 +36,6 @@ def _aliases(s: PlasSettings) -> dict[str, str]:
     out |= {f"objective.{k}": f"study.objective.{k}" for k in ("velocity", "position", "inertia")}
     out |= {f"design.{k}": f"study.fixed.{k}" for k in MASTER_KEYS if k not in s.variables}
     return out
-
-
-INDEX_UNITS = {"f": "-", "vel_rel": "-", "vel_reduction": "-", "vel_abs": "mm/s",
-               "vel_max": "mm/s", "pos_mean": "mm", "pos_max": "mm", "k2_min": "-", "k2_max": "-",
-               "k3_min": "-", "k3_max": "-", "k4": "-", "reach": "mm", "counterweight": "g",
-               "inertia": "g·cm²"}  # fmt: skip
-"""Units of every index (figures label their axes with them)."""
 
 
 def _extra(s: PlasSettings, fin) -> list[str]:

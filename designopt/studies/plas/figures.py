@@ -11,12 +11,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from designopt import montecarlo as mc
 from designopt.figures import convergence, save, style
+from designopt.numerics import montecarlo as mc
 from designopt.results import RunRecord
 from designopt.studies.plas import mechanism as m
 from designopt.studies.plas.objective import pointwise
-from designopt.studies.plas.settings import PlasSettings
+from designopt.studies.plas.settings import INDEX_UNITS, PlasSettings
 
 N_GRID = 81  # default map resolution: each point solves the slave's tip (dearer than 1/k)
 
@@ -59,8 +59,6 @@ def draw_run(rec: RunRecord, folder: Path, resolution: int = N_GRID) -> list[Pat
 
     br = rec.best_run
     inds = [k for k in ("f", "vel_rel", "pos_mean") if k in br]
-    from designopt.studies.plas import INDEX_UNITS
-
     out += convergence(br, inds, folder, "Best run", units=INDEX_UNITS)
 
     designs = np.stack([np.array([m.BUILT[k] for k in m.MASTER_KEYS]), _master(s, names, x)])

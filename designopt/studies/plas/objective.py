@@ -39,7 +39,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from designopt import montecarlo as mc
+from designopt.numerics import montecarlo as mc
 from designopt.problems.base import Problem
 from designopt.studies.plas import mechanism as m
 from designopt.studies.plas.settings import PlasSettings

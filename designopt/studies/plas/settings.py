@@ -66,9 +66,9 @@ class Mismatch(Section):
     _replicates = field_validator("replicates")(check_replicates)
 
     def plan(self):
-        """The sample layout (``designopt.montecarlo.Plan``; one stream unless rqmc or
+        """The sample layout (``designopt.numerics.montecarlo.Plan``; one stream unless rqmc or
         replicates are asked for)."""
-        from designopt import montecarlo as mc
+        from designopt.numerics import montecarlo as mc
 
         if self.sampler != "rqmc" and self.replicates in (None, 1):
             c = min(self.chunk, self.n_samples)
@@ -186,3 +186,10 @@ class PlasSettings(StudySettings):
     def design(self) -> dict[str, float]:
         """The master lengths that are not varied (built values unless ``fixed``)."""
         return {k: float(self.fixed.get(k, BUILT[k])) for k in MASTER_KEYS}
+
+
+INDEX_UNITS = {"f": "-", "vel_rel": "-", "vel_reduction": "-", "vel_abs": "mm/s",
+               "vel_max": "mm/s", "pos_mean": "mm", "pos_max": "mm", "k2_min": "-", "k2_max": "-",
+               "k3_min": "-", "k3_max": "-", "k4": "-", "reach": "mm", "counterweight": "g",
+               "inertia": "g·cm²"}  # fmt: skip
+"""Units of every index (figures label their axes with them)."""

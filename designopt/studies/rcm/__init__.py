@@ -12,15 +12,10 @@ from pathlib import Path
 from typing import Any
 
 from designopt.studies.base import Cost, Study
-from designopt.studies.rcm.settings import RcmSettings, TeleopSettings
+from designopt.studies.rcm.settings import RcmSettings, TeleopSettings, units
 
 SUMMARY = ("eta", "eta_box", "eta_cone", "eta_reach", "reach")
 INDICES = ("f", "eta", "eta_box", "eta_cone", "eta_reach", "reach", "eq19_margin")
-
-
-INDEX_UNITS = {"f": "-", "eta": "-", "eta_box": "-", "eta_cone": "-", "eta_reach": "-",
-               "reach": "-", "eq19_margin": "mm"}  # fmt: skip
-"""Units of every index (figures label their axes with them; reach is a fraction)."""
 
 
 def _problem(settings: RcmSettings, keys, dtype):
@@ -62,7 +57,7 @@ STUDY_RCM = Study(
         "study.n_samples": "study.eta.n_samples",
         **{f"design.{k}": f"study.fixed.{k}" for k in ("a", "b", "c") if k not in s.variables},
     },
-    units=lambda s: dict.fromkeys(s.variables, "mm") | INDEX_UNITS,
+    units=units,
     extra_lines=_extra,
     example_config="configs/rcm.yaml",
     cost=_cost,

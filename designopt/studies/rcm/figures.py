@@ -15,12 +15,12 @@ import jax.numpy as jnp
 import numpy as np
 from matplotlib.ticker import MaxNLocator
 
-from designopt import montecarlo as mc
 from designopt.figures import convergence, save, style
+from designopt.numerics import montecarlo as mc
 from designopt.results import ReplayRecord, RunRecord
 from designopt.studies.rcm import mechanism as m
 from designopt.studies.rcm import objective, workspace
-from designopt.studies.rcm.settings import RcmSettings, TeleopSettings
+from designopt.studies.rcm.settings import RcmSettings, TeleopSettings, units
 
 N_C = 81  # points of the η(c) curves
 N_MAP = 121  # grid of the 1/k maps
@@ -33,9 +33,7 @@ UNDEFINED_WHEN_ZERO = {"eta_reach": "reach"}
 
 
 def _units(s: RcmSettings) -> dict[str, str]:
-    from designopt.studies.rcm import STUDY_RCM
-
-    return STUDY_RCM.units(s)
+    return units(s)
 
 
 def eta_curves(s: RcmSettings, keys, a_val: float, cs: np.ndarray) -> dict[str, np.ndarray]:

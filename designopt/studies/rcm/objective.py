@@ -12,7 +12,7 @@ one becomes the other by the weight |det J|^{±1}: |det J| = |1 − c/r| in the 
 r = |A1C| only, and r = c − d on the cone.
 
 Every estimate is a ratio estimator Σ w g / Σ w with its delta-method standard error, or
-with ``sampler: rqmc`` the mean of R replicate ratios and their SD/√R (designopt.montecarlo); the samples are shared by the whole swarm and what depends on the
+with ``sampler: rqmc`` the mean of R replicate ratios and their SD/√R (designopt.numerics.montecarlo); the samples are shared by the whole swarm and what depends on the
 sample only (depths, directions) is computed once per sample.
 """
 
@@ -25,7 +25,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from designopt import montecarlo as mc
+from designopt.numerics import montecarlo as mc
 from designopt.problems.base import Problem, reads_indices
 from designopt.studies.rcm import mechanism as m
 from designopt.studies.rcm.settings import DESIGN_KEYS, RcmSettings

@@ -162,3 +162,13 @@ class TeleopSettings(StudySettings):
             if not lo <= x <= hi:
                 raise ValueError(f"q0: {name} = {x} lies outside its range [{lo}, {hi}]")
         return self
+
+
+INDEX_UNITS = {"f": "-", "eta": "-", "eta_box": "-", "eta_cone": "-", "eta_reach": "-",
+               "reach": "-", "eq19_margin": "mm"}  # fmt: skip
+"""Units of every index (figures label their axes with them; reach is a fraction)."""
+
+
+def units(s: RcmSettings | TeleopSettings) -> dict[str, str]:
+    """Every design variable's unit (mm) and every index's."""
+    return dict.fromkeys(s.variables, "mm") | INDEX_UNITS

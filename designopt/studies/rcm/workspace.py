@@ -14,7 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from designopt import montecarlo as mc
+from designopt.numerics import montecarlo as mc
 from designopt.studies.rcm import mechanism as m
 
 

@@ -10,7 +10,7 @@ from typing import Any
 from designopt.studies.base import Cost, Study
 from designopt.studies.serial import ikhook
 from designopt.studies.serial.commands import COMMANDS
-from designopt.studies.serial.settings import INDEX_NAMES, TASK_INDEX_NAMES, SerialSettings
+from designopt.studies.serial.settings import INDEX_NAMES, TASK_INDEX_NAMES, SerialSettings, units
 
 
 def _problem(settings: SerialSettings, keys, dtype):
@@ -29,29 +29,6 @@ def _cloud(record: Any) -> dict[str, Any]:
     from designopt.studies.serial import figures
 
     return figures.cloud(record)
-
-
-def _units(s: SerialSettings) -> dict[str, str]:
-    """Angles in deg, lengths in L (the chain's own length unit, e.g. m for the PUMA 560);
-    gci, gcsei dimensionless; the volume ∫|det Jv| dq in L^rows (an area for a planar
-    Jacobian); the manipulability sqrt(det J Jᵀ) in L^(rows in L) for an all-revolute
-    chain with no more rows than joints (angular rows count as L when ``length_scale``
-    scales them), else "mixed" (prismatic columns or more rows than joints mix units).
-    The task indices reach, gci_q05 and joint_margin are dimensionless shares."""
-    ang = s.angle_names()
-    out = {k: "deg" if k in ang else "L" for k in s.variables}
-    rows = s.indices.rows()
-    n_len = sum(r < 3 or s.indices.length_scale != 1.0 for r in rows)
-    all_r = all(j.type == "R" for j in s.chain.joints)
-    if all_r and len(rows) <= len(s.chain.joints):
-        man = "-" if n_len == 0 else ("L" if n_len == 1 else f"L^{n_len}")
-    else:
-        man = "mixed"
-    vol = "L" if len(rows) == 1 else f"L^{len(rows)}"
-    if s.indices.measure == "task":
-        return out | {"reach": "-", "gci": "-", "gci_q05": "-", "manipulability": man,
-                      "joint_margin": "-"}  # fmt: skip
-    return out | {"gci": "-", "gcsei": "-", "manipulability": man, "volume": vol}
 
 
 def _aliases(s: SerialSettings) -> dict[str, str]:
@@ -93,7 +70,7 @@ STUDY = Study(
     indices=lambda s: ("f", *s.index_names()),
     figures=_figures,
     sweep_aliases=_aliases,
-    units=_units,
+    units=units,
     example_config="configs/planar2r.yaml",
     cost=_cost,
     commands=COMMANDS,

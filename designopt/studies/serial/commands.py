@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from designopt.errors import ConfigError
+from designopt.core.errors import ConfigError
 
 N_CHECK = 8
 """Random joint configurations of the import check."""
@@ -80,14 +80,13 @@ def cmd_chain(args: argparse.Namespace, ctx: Any) -> int:
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    from designopt.cli import _parse_design
     from designopt.studies.serial.mechanism import build
     from designopt.studies.serial.settings import UrdfChain
 
     cfg, _ = loaded
     where = args.config
     s = _serial(cfg, where)
-    design = design_values(s, _parse_design(args.design), where)
+    design = design_values(s, ctx.design(args.design), where)
     q = _parse_q(args.q, tuple(j.type for j in s.chain.joints))
     mech = build(s)
     n = mech.n
@@ -195,14 +194,14 @@ def _best(rec: Any, where: str) -> tuple[list[str], np.ndarray]:
     raise ConfigError(f"{where}: a '{rec.kind}' archive; export takes a run or scan archive")
 
 
-def cmd_export(args: argparse.Namespace, ctx: Any = None) -> int:
+def cmd_export(args: argparse.Namespace, ctx: Any) -> int:
     """Write the URDF of a run (final design) or scan (lowest f) archive."""
-    from designopt import archive, output
+    from designopt.io import writer
     from designopt.kinematics import urdf
     from designopt.studies.serial.settings import UrdfChain
 
     where = args.archive
-    rec = archive.load(where)
+    rec = ctx.load_record(where)
     if rec.study != "serial":
         raise ConfigError(f"{where}: not an archive of a serial study")
     s = rec.config.study
@@ -217,8 +216,8 @@ def cmd_export(args: argparse.Namespace, ctx: Any = None) -> int:
     if out.exists() and not getattr(args, "overwrite", False):
         raise ConfigError(f"output '{out}': a file is already there; give --overwrite to "
                           "replace it, or another --urdf")  # fmt: skip
-    output.check(out, overwrite=getattr(args, "overwrite", False), make=True)
-    output.write_file(out, text.encode("utf-8"), "URDF")
+    writer.check(out, overwrite=getattr(args, "overwrite", False), make=True)
+    writer.write_file(out, text.encode("utf-8"), "URDF")
     print(f"{out}: {s.chain.urdf} with " + ", ".join(
         f"{k} = {v:.6g}" for k, v in design.items()))  # fmt: skip
     return 0

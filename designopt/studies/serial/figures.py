@@ -22,22 +22,20 @@ import jax.numpy as jnp
 import numpy as np
 from matplotlib.ticker import MaxNLocator
 
-from designopt import montecarlo as mc
 from designopt.figures import MAP_RESOLUTION, convergence, save, style
+from designopt.numerics import montecarlo as mc
 from designopt.results import RunRecord
 from designopt.studies.serial import taskindex
 from designopt.studies.serial.mechanism import Mechanism, build
 from designopt.studies.serial.objective import measures
-from designopt.studies.serial.settings import ROWS, SerialSettings
+from designopt.studies.serial.settings import ROWS, SerialSettings, units
 
 RATES = ("reach",)
 """Success rates (``reach``, under ``measure: task``): clipped to [0, 1], Wilson band."""
 
 
 def STUDY_UNITS(s: SerialSettings) -> dict[str, str]:  # noqa: N802
-    from designopt.studies.serial import STUDY
-
-    return STUDY.units(s)
+    return units(s)
 
 
 def _full(mech: Mechanism, x: np.ndarray) -> np.ndarray:

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from designopt.ikcmd import IKHook, IKJob, IKSolution
+from designopt.kinematics.ikjob import IKHook, IKJob, IKSolution
 
 BATCH = 1024
 """Targets per compiled call (a smaller file: the next power of two from 64)."""

@@ -6,7 +6,7 @@ Over the joint box Q (samples shared by the whole swarm, streamed in chunks):
 - ``manipulability``: mean of sqrt(det J Jᵀ) (sqrt(det JᵀJ) when rows > joints);
 - ``volume``: ∫_Q sqrt(det Jv Jvᵀ) dq = ∫_Q |det Jv| dq, for a square position Jacobian.
 Means use the joint measure (w = 1) or the Cartesian one (w = |det J|, square J).
-Each comes with its delta-method standard error (``designopt.montecarlo``), or, with the
+Each comes with its delta-method standard error (``designopt.numerics.montecarlo``), or, with the
 ``rqmc`` sampler, the spread of R independently shifted replicates (docs/indices.md). The
 objective is f = Σ w_i index_i (or of the indices normalised over a Halton sample of the
 design box, as in study A); ``f_se`` is the bound Σ |w_i| se_i (the estimates share
@@ -27,9 +27,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from designopt import montecarlo as mc
-from designopt import normalise
 from designopt.kinematics.conditioning import inv_cond
+from designopt.numerics import montecarlo as mc
+from designopt.problems import normalise
 from designopt.problems.base import Problem, reads_indices
 from designopt.studies.serial import taskindex
 from designopt.studies.serial.mechanism import Mechanism, build

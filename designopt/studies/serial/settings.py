@@ -22,9 +22,9 @@ from pydantic import (
     model_validator,
 )
 
-from designopt.errors import ConfigError
+from designopt.core.errors import ConfigError
+from designopt.kinematics.task import Task
 from designopt.studies.base import Section, StudySettings, check_replicates
-from designopt.task import Task
 
 ROWS = ("vx", "vy", "vz", "wx", "wy", "wz")
 INDEX_NAMES = ("gci", "gcsei", "manipulability", "volume")
@@ -461,3 +461,26 @@ def _no_unused_fixed(info: ValidationInfo, used: dict[str, str], where: str) -> 
     unused = sorted(set(info.data.get("fixed", {})) - set(used))
     if unused:
         raise ValueError(f"fixed value(s) {unused} appear in no {where}; use or remove them")
+
+
+def units(s: SerialSettings) -> dict[str, str]:
+    """Angles in deg, lengths in L (the chain's own length unit, e.g. m for the PUMA 560);
+    gci, gcsei dimensionless; the volume ∫|det Jv| dq in L^rows (an area for a planar
+    Jacobian); the manipulability sqrt(det J Jᵀ) in L^(rows in L) for an all-revolute
+    chain with no more rows than joints (angular rows count as L when ``length_scale``
+    scales them), else "mixed" (prismatic columns or more rows than joints mix units).
+    The task indices reach, gci_q05 and joint_margin are dimensionless shares."""
+    ang = s.angle_names()
+    out = {k: "deg" if k in ang else "L" for k in s.variables}
+    rows = s.indices.rows()
+    n_len = sum(r < 3 or s.indices.length_scale != 1.0 for r in rows)
+    all_r = all(j.type == "R" for j in s.chain.joints)
+    if all_r and len(rows) <= len(s.chain.joints):
+        man = "-" if n_len == 0 else ("L" if n_len == 1 else f"L^{n_len}")
+    else:
+        man = "mixed"
+    vol = "L" if len(rows) == 1 else f"L^{len(rows)}"
+    if s.indices.measure == "task":
+        return out | {"reach": "-", "gci": "-", "gci_q05": "-", "manipulability": man,
+                      "joint_margin": "-"}  # fmt: skip
+    return out | {"gci": "-", "gcsei": "-", "manipulability": man, "volume": vol}

@@ -9,7 +9,7 @@ the indices are means (or a quantile) over the targets at the solutions:
 - ``joint_margin``: the mean over targets of min_i min(q_i − lo_i, hi_i − q_i)/((hi_i − lo_i)/2)
   (1 at mid-range, 0 on a limit), 0 where unreached.
 
-The targets are drawn once per run from the ``samples`` stream (``designopt.task``) and
+The targets are drawn once per run from the ``samples`` stream (``designopt.kinematics.task``) and
 travel in ``params``: every design of the swarm is scored on the same targets (common
 random numbers), and one compiled program serves every design and every target set of
 that size. Means carry the i.i.d. standard error sd/√N (reach: the Agresti–Coull one,
@@ -51,7 +51,7 @@ def mode(s: SerialSettings) -> ik.Mode:
 
 def n_targets(s: SerialSettings) -> int:
     """N: the points of a points file, else ``indices.n_samples``."""
-    from designopt.task import Points
+    from designopt.kinematics.task import Points
 
     reg = s.task.region  # type: ignore[union-attr]
     return len(reg.xyz()) if isinstance(reg, Points) else s.indices.n_samples
@@ -67,7 +67,7 @@ def chunk(s: SerialSettings) -> int:
 def targets(s: SerialSettings, key: jax.Array, dtype: Any) -> dict[str, jax.Array]:
     """The task's targets as ``params`` entries: ``target_p`` (N, 3) and, with a tool
     axis, ``target_R`` (N, 3, 3) (its last column is the sampled tool axis)."""
-    from designopt import task as tk
+    from designopt.kinematics import task as tk
 
     p, R = tk.targets(s.task, key, n_targets(s), dtype)  # type: ignore[arg-type]
     return {"target_p": p} | ({} if R is None else {"target_R": R})

@@ -1,0 +1,350 @@
+"""YAML study configs, validated on load with pydantic (docs/configs.md)."""
+
+from __future__ import annotations
+
+import functools
+from pathlib import Path
+from typing import Annotated, Any, ClassVar, Literal, Union
+
+import yaml
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    create_model,
+    field_validator,
+    model_validator,
+)
+
+from designopt.core import validation
+from designopt.core.devices import ParallelSettings
+from designopt.core.errors import ConfigError  # noqa: E402  (re-exported)
+
+
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """PyYAML's safe loader, refusing a key given twice in one mapping (PyYAML would keep
+    the last one silently)."""
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
+        seen: dict[Any, int] = {}
+        for k_node, _ in node.value:
+            k = self.construct_object(k_node, deep=deep)
+            line = k_node.start_mark.line + 1
+            if isinstance(k, (str, int, float, bool)) and k in seen:
+                raise ConfigError(f"key '{k}' is given twice (lines {seen[k]} and {line})")
+            if isinstance(k, (str, int, float, bool)):
+                seen[k] = line
+        return super().construct_mapping(node, deep=deep)
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class Constraints(_Strict):
+    """How optimizers treat a study's constraints g ≤ 0: Deb's feasibility rules
+    (default; docs/optimizers.md) or a quadratic penalty f + weight·Σ max(g, 0)²."""
+
+    method: Literal["deb", "penalty"] = "deb"
+    weight: float = Field(1000.0, gt=0, allow_inf_nan=False)
+
+
+class Optimizer(_Strict):
+    name: str = "ptpso"
+    n_particles: int = Field(50, ge=2)
+    n_iters: int = Field(40, ge=1)
+    n_runs: int = Field(1, ge=1)
+    bounds: Literal["clip", "reflect", "reinit"] = "clip"
+    settings: dict[str, float | str] = {}
+    constraints: Constraints = Constraints()
+
+
+class Refine(_Strict):
+    """Optional gradient polish after PSO (optax), projected onto the design box."""
+
+    method: Literal["adam", "sgd"] = "adam"
+    steps: int = Field(100, ge=1)
+    learning_rate: float = Field(0.01, gt=0)  # step size in units of the box width
+    n_best: int = Field(1, ge=1)  # polish the best design of the n_best best runs
+
+
+class Sweep(_Strict):
+    """Variations of numeric keys: ``grid`` (Cartesian product) or ``list`` (zipped)."""
+
+    mode: Literal["grid", "list"] = "grid"
+    vary: dict[str, list[float]]
+
+    @field_validator("vary")
+    @classmethod
+    def _nonempty(cls, v: dict[str, list[float]]) -> dict[str, list[float]]:
+        if not v:
+            raise ValueError("needs at least one key to vary")
+        for k, vals in v.items():
+            if not vals:
+                raise ValueError(f"{k}: needs at least one value")
+        return v
+
+
+class Range(_Strict):
+    """An evenly spaced list of values: ``{from: a, to: b, num: n}`` (both ends included)."""
+
+    start: float = Field(alias="from")
+    stop: float = Field(alias="to")
+    num: int = Field(ge=1, le=1_000_000)
+
+    def values(self) -> list[float]:
+        import numpy as np
+
+        return np.linspace(self.start, self.stop, self.num).tolist()
+
+
+class Scan(_Strict):
+    """Designs to score without optimising (``designopt scan``): a ``grid`` (Cartesian
+    product) or ``list`` (zipped) over design variables; the other variables take
+    ``design`` or, if absent there, the middle of their box."""
+
+    mode: Literal["grid", "list"] = "grid"
+    vary: dict[str, list[float] | Range]
+    design: dict[str, float] = {}
+    batch: int = Field(256, ge=1)  # designs per vmapped call
+
+    @field_validator("vary")
+    @classmethod
+    def _nonempty(cls, v: dict[str, list[float] | Range]) -> dict[str, list[float] | Range]:
+        if not v:
+            raise ValueError("needs at least one design variable to vary")
+        for k, vals in v.items():
+            if isinstance(vals, list) and not vals:
+                raise ValueError(f"{k}: needs at least one value")
+        return v
+
+    def lists(self) -> dict[str, list[float]]:
+        return {k: (v.values() if isinstance(v, Range) else list(v)) for k, v in self.vary.items()}
+
+
+class Front(_Strict):
+    """How a Pareto front (``study.objective.pareto``) is finished and measured."""
+
+    n_samples: int | None = Field(None, gt=1)
+    """Monte-Carlo samples per design when the final front is re-scored on fresh samples
+    (default: 4 × the study's own)."""
+    reference: list[float] | None = None
+    """The hypervolume's reference point in the indices' own values, one per objective
+    (default: the nadir of the first generation)."""
+    max_points: int = Field(200, ge=2)
+    """At most this many front designs are re-scored and archived (the most crowded are
+    thinned)."""
+
+
+class RunConfigBase(_Strict):
+    """Everything but the ``study`` section, whose model comes from the study registry."""
+
+    optimizer: Optimizer = Optimizer()
+    refine: Refine | None = None
+    sweep: Sweep | None = None
+    scan: Scan | None = None
+    front: Front = Front()
+    precision: Literal["float32", "float64"] = "float64"
+    seed: int = Field(0, ge=0, le=validation.SEED_MAX)
+    output: str | None = None  # default results/<study>/<study>.h5
+    compile_cache: bool = True  # keep compiled programs between runs (CLI; --no-cache)
+    overwrite: bool = False  # replace an existing archive at the output (CLI; --overwrite)
+    max_minutes: float | None = Field(
+        None, gt=0, allow_inf_nan=False
+    )  # stop cleanly (--max-minutes)
+    checkpoint_every_s: float = Field(10.0, ge=0, allow_inf_nan=False)  # checkpoint cadence
+    parallel: ParallelSettings | None = None  # devices and the axis to shard (--devices)
+
+    CONTROL_KEYS: ClassVar[tuple[str, ...]] = (
+        "output",
+        "compile_cache",
+        "overwrite",
+        "max_minutes",
+        "checkpoint_every_s",
+        "parallel",
+    )
+    """Keys that steer how a run is carried out, not what it computes: a resume may change them."""
+
+    @model_validator(mode="after")
+    def _precision(self) -> RunConfigBase:
+        why = self.study.needs_float64()  # type: ignore[attr-defined]
+        if self.precision != "float64" and why:
+            raise ValueError(f"precision: {why}: set precision: float64")
+        return self
+
+    def output_path(self) -> str:
+        name = self.study.name  # type: ignore[attr-defined]
+        return self.output or f"results/{name}/{name}.h5"
+
+
+@functools.cache
+def _run_config(models: tuple[type[BaseModel], ...]) -> type[RunConfigBase]:
+    union = models[0] if len(models) == 1 else Annotated[Union[models], Field(discriminator="name")]  # noqa: UP007
+    return create_model("RunConfig", __base__=RunConfigBase, study=(union, ...))
+
+
+def run_config_model() -> type[RunConfigBase]:
+    """The run-config model: ``study`` is a union of every registered study's settings,
+    discriminated by ``study.name``."""
+    from designopt.studies import STUDIES
+
+    return _run_config(tuple(s.settings for s in STUDIES.values()))
+
+
+def parse(path: str | Path) -> tuple[Any, str]:
+    """Read and parse a config file's YAML (not validated): (raw, the file's text);
+    ConfigError naming the file for a missing, unreadable or malformed one."""
+    p = Path(path)
+    if p.is_dir():
+        raise ConfigError(f"{p}: is a folder, not a config file")
+    if not p.is_file():
+        raise ConfigError(f"{p}: config file not found")
+    try:
+        text = p.read_text(encoding="utf-8")
+    except UnicodeDecodeError as e:
+        raise ConfigError(
+            f"{p}: not a UTF-8 text file (byte {e.start}); a config is YAML text"
+        ) from None
+    except OSError as e:
+        raise ConfigError(f"{p}: cannot read ({e.strerror})") from None
+    try:
+        raw = yaml.load(text, Loader=_UniqueKeyLoader) or {}
+    except ConfigError as e:
+        raise ConfigError(f"{p}: {e}") from None
+    except yaml.YAMLError as e:
+        msg = " ".join(str(e).split()).replace('in "<unicode string>", ', "")
+        raise ConfigError(f"{p}: malformed YAML: {msg}") from None
+    return raw, text
+
+
+def load(path: str | Path, model: type[BaseModel] | None = None) -> tuple[Any, str]:
+    """Parse and validate a config file (a run config unless ``model`` says otherwise);
+    returns (config, the file's text)."""
+    raw, text = parse(path)
+    return validate(raw, str(path), model, folder=Path(path).parent), text
+
+
+def validate(raw: Any, where: str, model: type[BaseModel] | None = None,
+             folder: str | Path | None = None) -> Any:  # fmt: skip
+    """Validate a parsed config (a dict); ConfigError naming ``where`` and the key.
+    Relative paths inside the config (a URDF, a points file) are read from ``folder``:
+    the config file's folder (default: ``where``'s folder when ``where`` is a file, else
+    the working directory); validators get it as the context key ``config_dir``."""
+    if folder is None:
+        folder = Path(where).parent if Path(where).is_file() else Path.cwd()
+    model = run_config_model() if model is None else model
+    if not isinstance(raw, dict):
+        raise ConfigError(f"{where}: top level must be a mapping of keys")
+    if model is not None and issubclass(model, RunConfigBase) and "study" not in raw:
+        from designopt.studies import STUDIES
+
+        raise ConfigError(f"{where}: key 'study': missing; name a study, one of "
+                          f"{sorted(STUDIES)} (`designopt studies` lists them)")  # fmt: skip
+    validation.check_tree(raw, where)  # NaN, inf and huge numbers first: validators assume finite
+    try:
+        cfg = model.model_validate(raw, context={"config_dir": str(folder)})
+    except ValidationError as e:
+        raise ConfigError(f"{where}: {error_text(e, raw)}") from None
+    validation.check_tree(cfg, where)  # numbers pydantic parsed from text ("1e999", "nan")
+    return cfg
+
+
+_MESSAGES = {
+    "greater_than_equal": "must be ≥ {ge}",
+    "greater_than": "must be > {gt}",
+    "less_than_equal": "must be ≤ {le}",
+    "less_than": "must be < {lt}",
+    "int_parsing": "must be an integer",
+    "int_type": "must be an integer",
+    "int_from_float": "must be a whole number",
+    "float_parsing": "must be a number",
+    "float_type": "must be a number",
+    "finite_number": "must be a finite number",
+    "bool_parsing": "must be true or false",
+    "bool_type": "must be true or false",
+    "string_type": "must be text",
+    "list_type": "must be a list",
+    "tuple_type": "must be a list",
+    "dict_type": "must be a mapping of keys",
+    "model_type": "must be a mapping of keys",
+    "model_attributes_type": "must be a mapping of keys",
+    "too_short": "needs at least {min_length} item(s), got {actual_length}",
+    "too_long": "takes at most {max_length} item(s), got {actual_length}",
+    "extra_forbidden": "unknown key",
+    "missing": "missing",
+    "literal_error": "must be one of {expected}",
+}
+"""Pydantic's messages in the words of a config file (no type internals)."""
+
+_STRUCTURE = {"list_type", "tuple_type", "dict_type", "model_type", "model_attributes_type",
+              "float_type", "float_parsing", "int_type", "int_parsing", "string_type"}  # fmt: skip
+"""Error types that say "the input is not of this union member's shape"."""
+
+
+def _input_path(err: dict, raw: Any) -> tuple[list[str], int]:
+    """The parts of a pydantic error's location that are keys of the input (union members
+    and validator tags such as ``list[float]``, ``Range`` or ``function-after[...]``
+    dropped), and how deep into the input they reach."""
+    out, node, depth = [], raw, 0
+    loc = err["loc"]
+    for n, x in enumerate(loc):
+        if isinstance(node, dict) and x in node:
+            node, depth = node[x], depth + 1
+            out.append(str(x))
+        elif isinstance(node, list | tuple) and isinstance(x, int):
+            node, depth = (node[x], depth + 1) if 0 <= x < len(node) else (None, depth)
+            out.append(str(x))
+        elif n == len(loc) - 1 and err["type"] == "missing":
+            out.append(str(x))  # the key that is missing
+    return out, depth
+
+
+def error_text(e: ValidationError, raw: Any = None) -> str:
+    """ "key 'a.b.c': message" for the most telling error: of a union (``list`` or
+    ``{from, to, num}``), the member the input was meant for; study tags, union members
+    and validator names dropped from the path; pydantic's wording rewritten."""
+    from designopt.studies import STUDIES
+
+    errs = e.errors()
+    if raw is not None and len(errs) > 1:
+        # prefer an error inside the input's structure over "not a list"/"not a mapping"
+        # from the union members the input was not meant for
+        def rank(err: dict) -> tuple[int, int]:
+            return (err["type"] not in _STRUCTURE, _input_path(err, raw)[1])
+
+        errs = sorted(errs, key=rank, reverse=True)
+    err = errs[0]
+    if raw is not None:
+        loc, _ = _input_path(err, raw)
+    else:
+        loc = [str(x) for x in err["loc"]]
+    if len(loc) > 1 and loc[0] == "study" and loc[1] in STUDIES:
+        del loc[1]
+    msg = err["msg"].removeprefix("Value error, ")
+    if err["type"] == "missing" and raw is not None and err["loc"] and isinstance(
+            err["loc"][-1], int) and loc and loc[-1] == str(err["loc"][-1]):  # fmt: skip
+        n = err["loc"][-1]
+        loc = loc[:-1]
+        err = {**err, "type": "too_few", "msg": f"needs at least {n + 1} values"}
+        msg = err["msg"]
+    if err["type"] in _MESSAGES and err["type"] not in ("literal_error",):
+        try:
+            msg = _MESSAGES[err["type"]].format(**err.get("ctx", {}))
+        except (KeyError, IndexError):
+            pass
+    elif err["type"] == "literal_error":
+        msg = (
+            _MESSAGES["literal_error"].format(expected=err.get("ctx", {}).get("expected", msg))
+            + f", got {err['input']!r}"
+        )
+    if err["type"] in ("union_tag_invalid", "union_tag_not_found") and loc[:1] == ["study"]:
+        name = err["input"].get("name") if isinstance(err["input"], dict) else None
+        loc = ["study", "name"]
+        msg = (f"unknown study {name!r}" if name is not None else "missing") + (
+            f"; known: {sorted(STUDIES)} (`designopt studies` lists them)"
+        )
+    head, sep, rest = msg.partition(": ")
+    if not loc and sep and head.isidentifier():  # a whole-config check names its key first
+        loc, msg = [head], rest
+    return f"key '{'.'.join(loc) or '(top level)'}': {msg}"

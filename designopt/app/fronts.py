@@ -1,0 +1,225 @@
+"""Pareto fronts of a study's own indices (``study.objective.pareto``; docs/pareto.md).
+
+Any study becomes multi-objective without code of its own: its swarm function already
+returns every index, so the front's objectives are m of them, each minimised or
+maximised (F = ±index, all minimised for the optimizer). A multi-objective optimizer
+(the registry's ``nsga2``) searches the front in one vmapped program; then
+
+1. the final populations of all runs are pooled and their non-dominated designs kept
+   (feasible ones first, Deb's constrained domination);
+2. those designs are re-scored on a fresh, larger sample set (``front.n_samples``, the
+   named stream ``front`` folded from the root key, never seen by the optimizer), so every
+   archived value is unbiased by the selection;
+3. pairs of designs whose order in some objective is within 2 standard errors are marked
+   ambiguous: which of the two is better there is not resolved by the samples.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from designopt.core.errors import ConfigError
+from designopt.problems.base import Problem
+
+FRONT_STREAM = 0x46524F4E  # "FRON"
+"""The re-scoring samples: ``fold_in(key(seed), FRONT_STREAM)``, apart from the named
+streams split from the root key (adding one there would change every other stream)."""
+Z = 2.0  # ambiguity: orders within Z standard errors
+
+
+def check(cfg: Any, where: str) -> None:
+    """A front's config: known indices, a multi-objective optimizer, a reference point of
+    the right length; a multi-objective optimizer without a front is refused too."""
+    from designopt import optim
+    from designopt.studies import get
+
+    front = cfg.study.pareto
+    name = cfg.optimizer.name
+    if front is None:
+        if optim.is_multi_objective(name):
+            raise ConfigError(f"{where}: key 'optimizer.name': '{name}' optimises a Pareto "
+                              "front; name its indices in study.objective.pareto "
+                              "(docs/pareto.md)")  # fmt: skip
+        return
+    known = get(cfg.study.name).indices(cfg.study)
+    for k, w in linear(front).items():
+        for v in w:
+            if v not in cfg.study.variables:
+                raise ConfigError(f"{where}: key 'study.objective.pareto.{k}.{senses(front)[k]}"
+                                  f".{v}': not a design variable; variables: "
+                                  f"{list(cfg.study.variables)}")  # fmt: skip
+    for k in front:
+        if k in linear(front):
+            continue
+        if k not in known:
+            raise ConfigError(f"{where}: key 'study.objective.pareto.{k}': unknown index; "
+                              f"this study's indices: {list(known)}")  # fmt: skip
+    if not optim.is_multi_objective(name):
+        raise ConfigError(f"{where}: key 'optimizer.name': '{name}' is single-objective; a "
+                          "front (study.objective.pareto) needs a multi-objective "
+                          "optimizer: nsga2")  # fmt: skip
+    ref = cfg.front.reference
+    if ref is not None and len(ref) != len(front):
+        raise ConfigError(f"{where}: key 'front.reference': {len(ref)} values for "
+                          f"{len(front)} objectives ({', '.join(front)})")  # fmt: skip
+
+
+def senses(front: Mapping[str, Any]) -> dict[str, str]:
+    """Objective → ``min`` or ``max`` (an index's sense, or a linear objective's key)."""
+    return {k: (next(iter(s)) if isinstance(s, dict) else s) for k, s in front.items()}
+
+
+def linear(front: Mapping[str, Any]) -> dict[str, dict[str, float]]:
+    """The linear objectives of the design variables: name → {variable: weight}."""
+    return {k: dict(next(iter(s.values()))) for k, s in front.items() if isinstance(s, dict)}
+
+
+def signs(front: Mapping[str, Any]) -> np.ndarray:
+    """+1 for a minimised objective, −1 for a maximised one (F = sign × value)."""
+    return np.array([1.0 if s == "min" else -1.0 for s in senses(front).values()])
+
+
+def weights(front: Mapping[str, Any], names: tuple[str, ...]) -> dict[str, np.ndarray]:
+    """Each linear objective's weights as a (D,) vector over the problem's variables."""
+    return {k: np.array([w.get(n, 0.0) for n in names]) for k, w in linear(front).items()}
+
+
+def linear_units(front: Mapping[str, Any], units: Mapping[str, str]) -> dict[str, str]:
+    """A linear objective's unit: its variables' common unit, else ``mixed``."""
+    out = {}
+    for k, w in linear(front).items():
+        us = {units.get(v, "-") for v in w}
+        out[k] = us.pop() if len(us) == 1 else "mixed"
+    return out
+
+
+def objective_problem(problem: Problem, front: Mapping[str, Any]) -> Problem:
+    """The study's problem with F (M, m) = sign × the front's objectives (indices, or
+    linear objectives X·w); the indices stay in aux (f too)."""
+    names, sg = tuple(front), signs(front)
+    lin = weights(front, problem.names)
+    fn0 = problem.fn
+
+    def fn(params, X, key):
+        f, aux = fn0(params, X, key)
+        aux = {"f": f, **aux, **{k: X @ jnp.asarray(w, X.dtype) for k, w in lin.items()}}
+        F = jnp.stack([aux[k] for k in names], -1)
+        return F * jnp.asarray(sg, F.dtype), aux
+
+    return dataclasses.replace(problem, fn=fn, n_objectives=len(names), shard_samples=None)
+
+
+def reference(cfg: Any) -> np.ndarray | None:
+    """The configured reference point in the minimised space (None: the optimizer's)."""
+    ref = cfg.front.reference
+    return None if ref is None else signs(cfg.study.pareto) * np.asarray(ref, np.float64)
+
+
+def candidates(res: Any) -> np.ndarray:
+    """Indices into the pooled final populations (runs × P) of the non-dominated designs:
+    among the feasible ones when there are any, else among the least violating."""
+    from designopt.numerics import pareto
+
+    F = np.asarray(res.front.f, np.float64).reshape(-1, np.shape(res.front.f)[-1])
+    V = np.asarray(res.front.v, np.float64).reshape(-1)
+    pool = np.flatnonzero(V <= 0) if np.any(V <= 0) else np.flatnonzero(V == V.min())
+    keep = pool[pareto.non_dominated(F[pool])]
+    X = np.asarray(res.front.x, np.float64).reshape(len(V), -1)[keep]
+    _, first = np.unique(X, axis=0, return_index=True)  # one copy of a repeated design
+    return keep[np.sort(first)]
+
+
+def thin(F: np.ndarray, n: int) -> np.ndarray:
+    """Indices of at most ``n`` rows of a front F, dropping the most crowded first
+    (the extremes, with infinite crowding distance, always stay)."""
+    from designopt.numerics import pareto
+
+    keep = np.arange(len(F))
+    while len(keep) > n:
+        d = pareto.crowding_distance_np(F[keep], np.zeros(len(keep), np.int32))
+        keep = np.delete(keep, int(np.argmin(d)))
+    return keep
+
+
+def ambiguous(F: np.ndarray, se: np.ndarray, z: float = Z) -> np.ndarray:
+    """(p, 2) pairs (i < j) whose order in some objective is within ``z`` standard errors
+    of their difference (|F_i − F_j| ≤ z √(se_i² + se_j²))."""
+    d = np.abs(F[:, None, :] - F[None, :, :])
+    s = z * np.sqrt(se[:, None, :] ** 2 + se[None, :, :] ** 2)
+    close = np.any(d <= s, axis=-1)
+    i, j = np.nonzero(np.triu(close, 1))
+    return np.stack([i, j], -1).astype(np.int64)
+
+
+def rescoring_problem(cfg: Any, keys: Mapping[str, jax.Array], where: str) -> tuple[Problem, int]:
+    """The study's problem on the fresh ``front`` sample stream with ``front.n_samples``
+    (default 4 × the study's own) samples per design; (problem, samples)."""
+    from designopt.app import sweeps
+    from designopt.app.job import build_problem
+    from designopt.studies import get
+
+    cost = get(cfg.study.name).cost(cfg.study)
+    n = cfg.front.n_samples or 4 * int(cost.samples)
+    c = cfg
+    if cost.samples > 1:
+        try:
+            c = sweeps.apply(cfg, {cost.samples_key: n})
+        except ValueError as e:
+            raise ConfigError(f"{where}: key 'front.n_samples': {e}") from None
+    fresh = dict(keys) | {"samples": jax.random.fold_in(jax.random.key(cfg.seed), FRONT_STREAM)}
+    return build_problem(c, fresh, where), n
+
+
+def groups(cfg: Any, problem: Problem, res: Any, keys: Mapping[str, jax.Array],
+           where: str) -> dict[str, Any]:  # fmt: skip
+    """The groups of a front's record: optimizer (hypervolume history, final
+    populations), front (re-scored designs, objectives ± SE, every index ± SE,
+    ambiguous pairs) and problem."""
+    from designopt.numerics import pareto
+    from designopt.problems.evaluate import score
+    from designopt.app.scoring import check_finite, problem_group
+    from designopt.studies import get
+
+    front = cfg.study.pareto
+    names, sg = list(front), signs(front)
+    m = len(names)
+    pop = res.front
+    D = np.shape(pop.x)[-1]
+    keep = candidates(res)
+    X = np.asarray(pop.x, np.float64).reshape(-1, D)[keep]
+    F_opt = np.asarray(pop.f, np.float64).reshape(-1, m)[keep]
+    X = X[thin(F_opt, cfg.front.max_points)]
+    rescore, n_samples = rescoring_problem(cfg, keys, where)
+    vals = score(rescore, X)
+    for k, w in weights(front, problem.names).items():  # exact: no samples behind them
+        vals[k], vals[k + "_se"] = X @ w, np.zeros(len(X))
+    check_finite(vals, where, "the re-scored front", problem.names, X)
+    F = np.stack([vals[k] for k in names], -1)
+    se = np.stack([vals.get(k + "_se", np.zeros(len(X))) for k in names], -1)
+    order = np.lexsort(F.T[::-1] * sg[::-1, None])
+    X, F, se = X[order], F[order], se[order]
+    vals = {k: v[order] for k, v in vals.items()}
+    ref = np.asarray(res.ref_point, np.float64)  # minimised space
+    Fmin = F * sg
+    rank = pareto.front_ranks_np(Fmin, vals.get("violation"))
+    hv = pareto.hypervolume(Fmin[rank == 0], ref)
+    opt = {"hypervolume": res.history, "final_hypervolume": res.best_f,
+           "converged_at": res.converged_at, "population_x": pop.x, "population_f": pop.f * sg,
+           "population_v": pop.v, "population_rank": pop.rank,
+           "attrs": {"settings": res.settings}}  # fmt: skip
+    if res.history_v is not None and problem.constraints is not None:
+        opt |= {"history_v": res.history_v, "best_v": res.best_v}
+    idx = {k: v for k, v in vals.items() if k not in ("f", "f_se")}  # the weighted f: moot
+    fr = {"x": X, "f": F, "f_se": se, **idx, "rank": rank,
+          "ambiguous": ambiguous(F, se),
+          "attrs": {"objectives": names, "senses": list(senses(front).values()),
+                    "reference": (ref * sg).tolist(), "hypervolume": hv,
+                    "n_samples": n_samples, "n_candidates": int(len(keep)), "z": Z,
+                    "units": linear_units(front, get(cfg.study.name).units(cfg.study))}}  # fmt: skip
+    return {"optimizer": opt, "front": fr, "problem": problem_group(problem)}

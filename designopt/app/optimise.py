@@ -1,0 +1,55 @@
+"""The configured optimizer on a study's Problem: sizes, iteration chunks (so a stop meets
+an iteration boundary soon), devices (``parallel:``), the constraint method, one vmapped
+batch for sweep members, a front's hypervolume reference."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from designopt.core import devices
+from designopt.problems.base import Problem
+from designopt.app.job import dtype_of
+from designopt.app.preflight import DESIGN_SAMPLES_PER_CHUNK, estimate
+
+
+def optimise(cfg: Any, problem: Problem, key: Any, members: list[dict[str, float]] | None = None,
+             progress: Callable[[int], None] | None = None,
+             checkpoint: Callable[[Any], None] | None = None,
+             resume: Any = None, where: str = "config", ref_point: Any = None) -> Any:  # fmt: skip
+    """The configured optimizer on ``problem``; with ``members`` (overrides of optimizer
+    settings) one vmapped batch on common keys. Chunks are small (≤ 5 % of the run and
+    about DESIGN_SAMPLES_PER_CHUNK of work), so a stop meets an iteration boundary soon.
+    A ``parallel:`` section shards the job over devices (designopt.core.devices). The
+    objective runs as a program of its own between each iteration's ask and tell
+    (``optim.run(separate=True)``): one compiled objective for the whole run and its
+    scoring, instead of one inside each of the runner's programs."""
+    from designopt import optim
+    from designopt.problems import penalty
+
+    o = cfg.optimizer
+    plan = devices.plan(cfg.parallel, n_runs=o.n_runs, n_particles=o.n_particles,
+                         members=None if members is None else len(members), problem=problem,
+                         where=where)  # fmt: skip
+    if plan is not None:
+        problem = plan.problem(problem)
+    if o.constraints.method == "penalty":
+        problem = penalty.quadratic(problem, o.constraints.weight)
+    work = estimate(cfg, members=len(members or [None])).work_per_iter
+    chunk = max(1, min(o.n_iters // 20, DESIGN_SAMPLES_PER_CHUNK // max(work, 1)))
+    common = dict(n_particles=o.n_particles, n_iters=o.n_iters, n_runs=o.n_runs, bounds=o.bounds,
+                  dtype=dtype_of(cfg), chunk_iters=chunk,
+                  progress=progress, checkpoint=checkpoint, resume=resume,
+                  checkpoint_at_end=checkpoint is not None,
+                  separate=True)  # fmt: skip
+    if plan is not None:
+        common["plan"] = plan
+    if ref_point is not None:  # a front's hypervolume reference (designopt.app.fronts)
+        common["ref_point"] = ref_point
+    if members is None:
+        res = optim.run(o.name, problem, key, **common, **o.settings)
+    else:
+        res = optim.run_batch(o.name, problem, key, [o.settings | m for m in members], **common)
+    if plan is not None:
+        res.settings["parallel"] = plan.describe()
+    return res

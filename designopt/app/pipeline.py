@@ -1,0 +1,342 @@
+"""What a job does, for any registered study: set-up, optimise (with checkpoints), score,
+write, figures (docs/architecture.md). It only orchestrates: set-up lives in
+``designopt.app.job``, the pre-flight estimate in ``designopt.app.preflight``, scoring in
+``designopt.app.scoring``, design matrices in ``designopt.app.designs``, checkpoints in
+``designopt.app.checkpoint``, and results come back as the typed records of
+``designopt.results``, which the archive stores (``archive.save``) and the summary text
+and figures read.
+
+Studies are reached through their registry, optimizers through ``designopt.optim``; the
+typed config flows down unchanged. One root key ``key(seed)`` is split once into named
+streams (``designopt.studies.STREAMS``), which are archived. ``out=None`` runs in memory:
+nothing is claimed, checkpointed or written.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from designopt.core import devices
+from designopt.core.errors import ConfigError, WriteError
+from designopt.core.keys import streams
+from designopt.core.timing import Stopwatch
+from designopt.io import archive, writer
+from designopt.problems.evaluate import score
+from designopt.results import FrontRecord, Record, ReplayRecord, RunRecord, ScanRecord, SweepRecord
+from designopt.app import checkpoint as ckpt
+from designopt.app import fronts
+from designopt.app.designs import Designs, matrix, scan_designs
+from designopt.app.job import base_attrs, build_problem, check_optimizer, dtype_of, study_of
+from designopt.app.optimise import optimise
+from designopt.app.preflight import Estimate, estimate
+from designopt.app.records import bind
+from designopt.app.reporting import draw_figures, write_html
+from designopt.app.scoring import check_finite, problem_group, run_groups
+
+Progress = Callable[[int, str], contextlib.AbstractContextManager[Callable[[int], None]]]
+
+
+@contextlib.contextmanager
+def no_progress(total: int, desc: str) -> Iterator[Callable[[int], None]]:
+    yield lambda n: None
+
+
+@dataclass
+class Report:
+    """What a command did: the record, where it was written (None: in memory), the lines
+    to print."""
+
+    out: Path | None
+    lines: list[str] = field(default_factory=list)
+    record: Record | None = None
+
+    @property
+    def tree(self) -> dict[str, Any]:
+        return {} if self.record is None else self.record.data()
+
+    @property
+    def attrs(self) -> dict[str, Any]:
+        return {} if self.record is None else self.record.attrs
+
+
+def _dry(out: Path | None, cfg: Any, est: Estimate) -> Report:
+    """A dry run's report: every check passed, nothing written."""
+    if out is not None:
+        writer.check(out, cfg.overwrite, est.disk, make=False)
+    est.warn_if_huge()
+    return Report(out, [f"checks passed; nothing written; {est.lines[0]}"])
+
+
+@contextlib.contextmanager
+def _writing(out: Path | None, cfg: Any, est: Estimate) -> Iterator[writer.Session | None]:
+    """The output session of a job writing ``out`` (claimed: lock, space, overwrite
+    policy); nothing for an in-memory job."""
+    if out is None:
+        est.warn_if_huge()
+        yield None
+        return
+    with writer.session() as ses:
+        if ses.deadline is None:
+            ses.set_deadline(cfg.max_minutes)
+        writer.claim(out, cfg.overwrite, est.disk)
+        est.warn_if_huge()
+        yield ses
+
+
+# ------------------------------------------------------------------------ optimise
+
+
+# ------------------------------------------------------------------------------ run
+
+
+def run(cfg: Any, text: str | None = None, where: str = "config", out: Path | None = None,
+        resume: bool = False, progress: Progress = no_progress, resume_hint: str = "",
+        dry_run: bool = False) -> Report:  # fmt: skip
+    """One study run: problem, optimizer, optional polish, final scoring → RunRecord.
+
+    With ``out``: checkpoints go to ``<out>.partial.h5`` every ``checkpoint_every_s`` and
+    when stopped (under the CLI's session a signal or the time limit stops the loop at the
+    next iteration boundary, ``Interrupted``), the archive is written atomically;
+    ``dry_run`` performs every check and writes nothing. ``out=None``: in memory."""
+    if cfg.sweep is not None:
+        raise ConfigError(f"{where}: key 'sweep': this config declares a sweep; "
+                          "run it with `designopt sweep`")  # fmt: skip
+    if study_of(cfg).replay is not None:
+        if cfg.study.pareto is not None:
+            raise ConfigError(f"{where}: key 'study.objective.pareto': study "
+                              f"'{cfg.study.name}' replays a trajectory; it has no front")  # fmt: skip
+        return _replay(cfg, text, where, out, dry_run)
+    check_optimizer(cfg, where)
+    pareto = cfg.study.pareto
+    fronts.check(cfg, where)
+    dtype_of(cfg)
+    est = estimate(cfg)
+    est.check(where)
+    if dry_run:
+        return _dry(out, cfg, est)
+    o = cfg.optimizer
+    keys = streams(cfg.seed)
+    resolved = ckpt.resume_key(cfg)
+    kind = "run" if pareto is None else "front"
+    attrs = base_attrs(kind, cfg, text, keys, where) | {"resume_key": resolved}
+    with _writing(out, cfg, est) as ses:
+        ck, saver = None, None
+        if ses is not None:
+            ck = ckpt.load(archive.partial_path(out), resolved) if resume else None
+            hint = resume_hint or f"designopt run CONFIG --out {out}"
+            saver = ckpt.Checkpointer(out, attrs, o.n_iters, cfg.checkpoint_every_s, hint, ses, ck)
+        with Stopwatch() as total:
+            with Stopwatch() as setup:
+                problem = build_problem(cfg, keys, where)
+                if pareto is not None:
+                    problem = fronts.objective_problem(problem, pareto)
+            with Stopwatch() as opt, progress(o.n_iters, f"{o.name} on {cfg.study.name}") as bar:
+                try:
+                    res = optimise(cfg, problem, keys["optimizer"], progress=bar,
+                                   checkpoint=saver, resume=ck, where=where,
+                                   ref_point=None if pareto is None else fronts.reference(cfg))  # fmt: skip
+                except KeyboardInterrupt as e:
+                    if saver is None:
+                        raise
+                    saver.stop(e)
+            if ses is not None:
+                ses.set_phase("prompt")
+                saver.stop_if_requested()
+            with Stopwatch() as post:
+                if pareto is None:
+                    groups = run_groups(cfg, problem, res)
+                else:
+                    groups = fronts.groups(cfg, problem, res, keys, where)
+        attrs |= {"wall_time_s": total.wall, "compile_time_s": total.compile,
+                  "run_time_s": total.run, "setup_time_s": setup.wall,
+                  "optimizer_time_s": opt.wall, "post_time_s": post.wall,
+                  "resumed_from": ck.done if ck else -1, "compilations": total.compilations,
+                  "compilations_by_stage": {"setup": setup.compilations,
+                                            "optimizer": opt.compilations,
+                                            "scoring_polish": post.compilations}}  # fmt: skip
+        try:
+            if pareto is None:
+                check_finite(groups["final"], where, "the final design")
+        except ConfigError:
+            if saver is not None:
+                saver.discard()
+            raise
+        rec = bind(RunRecord(attrs, groups, cfg) if pareto is None else FrontRecord(attrs, groups, cfg))
+        if ses is not None:
+            _write_run(out, rec, ses, saver)
+    if pareto is not None:
+        return Report(
+            out, [*rec.summary()[1:], rec.stages_line(groups["front"]["attrs"]["n_samples"])], rec
+        )
+    return Report(out, [*rec.design_lines(), rec.run_line()], rec)
+
+
+def _write_run(out: Path, rec: Record, ses: writer.Session, saver: ckpt.Checkpointer) -> None:
+    """The final archive, atomically; then the checkpoint goes. A disk fault keeps (and
+    names) the checkpoint."""
+    with ses.writing():
+        try:
+            archive.save(out, rec)
+        except WriteError as e:
+            with contextlib.suppress(WriteError):
+                saver.flush()
+            raise WriteError(f"{e}; {saver.kept()}") from None
+        saver.done(out)
+        if ses.stop_requested():  # a stop during the final write: it is done, say so
+            raise ses.interrupted()
+
+
+def _replay(cfg: Any, text: str | None, where: str, out: Path | None,
+            dry_run: bool = False) -> Report:  # fmt: skip
+    """A study whose run is not an optimisation (``Study.replay``): compute, archive."""
+    est = Estimate(0, 1 << 22, 0, "study", ["pre-flight: a replay, no optimizer"])
+    if dry_run:
+        return _dry(out, cfg, est)
+    keys = streams(cfg.seed)
+    attrs = base_attrs("run", cfg, text, keys, where)
+    with _writing(out, cfg, est):
+        with Stopwatch() as total:
+            try:
+                groups, lines = study_of(cfg).replay(cfg.study, keys, dtype_of(cfg), where)
+            except ValueError as e:
+                raise ConfigError(f"{where}: study: {e}") from None
+        attrs |= {"wall_time_s": total.wall, "compile_time_s": total.compile,
+                  "run_time_s": total.run, "compilations": total.compilations}  # fmt: skip
+        rec = bind(ReplayRecord(attrs, groups, cfg))
+        if out is not None:
+            archive.save(out, rec)
+    lines = [*lines, f"wall {total.wall:.1f} s = compile {total.compile:.1f} s + run "
+             f"{total.run:.1f} s; {total.compilations} XLA compilations"]  # fmt: skip
+    return Report(out, lines, rec)
+
+
+# ---------------------------------------------------------------------------- sweep
+
+
+def sweep(cfg: Any, text: str | None = None, where: str = "config", out: Path | None = None,
+          progress: Progress = no_progress, dry_run: bool = False) -> Report:  # fmt: skip
+    """Every member of the config's ``sweep:`` section; members that differ only in
+    optimizer settings run as one vmapped batch on common keys. No checkpoint: a stop
+    writes nothing."""
+    from designopt.app import sweeps as sw
+
+    if cfg.study.pareto is not None:
+        raise ConfigError(f"{where}: key 'sweep': a sweep of Pareto fronts "
+                          "(study.objective.pareto) is not supported; run each front with "
+                          "`designopt run`")  # fmt: skip
+    groups, cfgs, members = sw.groups(cfg, where)
+    ests = []
+    for k, c in cfgs.items():
+        check_optimizer(c, where)
+        fronts.check(c, where)  # a multi-objective optimizer needs a front
+        dtype_of(c)
+        ests.append(estimate(c, members=len(groups[k])))
+    est = max(ests, key=lambda e: e.memory)
+    est.disk = sum(e.disk for e in ests)
+    est.check(where)
+    if dry_run:
+        return _dry(out, cfg, est)
+    with _writing(out, cfg, est):
+        tree: dict = {"members": {}}
+        rows = []
+        total_it = sum(cfgs[k].optimizer.n_iters for k in groups)
+        with Stopwatch() as total, progress(total_it, "sweep") as bar:
+            for k, mem in groups.items():
+                c = cfgs[k]
+                keys = streams(c.seed)
+                problem = build_problem(c, keys, where)
+                opt_sets = [sw.split(m)[1] for _, m in mem]
+                res = optimise(c, problem, keys["optimizer"], members=opt_sets, progress=bar,
+                               where=where)  # fmt: skip
+                for j, (i, m) in enumerate(mem):
+                    t = run_groups(c, problem, res.member(j))
+                    check_finite(t["final"], where, f"sweep member {i} {m}")
+                    t["attrs"] = {"overrides": m,
+                                  "config_resolved_yaml": sw.resolved(cfg, m)}  # fmt: skip
+                    tree["members"][f"{i:03d}"] = t
+                    rows.append((i, m, t["final"]))
+        tree["members"] = dict(sorted(tree["members"].items()))  # the sweep's order
+        attrs = base_attrs("sweep", cfg, text, streams(cfg.seed), where) | {
+            "n_members": len(members), "wall_time_s": total.wall, "compile_time_s": total.compile,
+            "run_time_s": total.run, "vmapped_batches": len(groups)}  # fmt: skip
+        rec = bind(SweepRecord(attrs, tree, cfg))
+        if out is not None:
+            archive.save(out, rec)
+    lines = [f"{len(members)} members in {len(groups)} vmapped batch(es); wall "
+             f"{total.wall:.1f} s (compile {total.compile:.1f} s, run {total.run:.1f} s)"]  # fmt: skip
+    subs = study_of(cfg).summary(cfg.study)[:3]
+    for i, m, fin in sorted(rows, key=lambda r: r[0]):
+        keys_txt = ", ".join(f"{k} = {v:g}" for k, v in m.items())
+        vals = ", ".join(f"{s} = {float(fin[s]):.4f}" for s in subs)
+        lines.append(f"  [{i:3d}] {keys_txt}:  f = {float(fin['f']):.5f}, {vals}")
+    return Report(out, lines, rec)
+
+
+# ------------------------------------------------------------------ evaluate / scan
+
+
+def evaluate(cfg: Any, designs: Designs, where: str = "config") -> dict[str, np.ndarray]:
+    """Every index of the given designs with its standard error, without optimising:
+    {index: (n,), index_se: (n,), ...}, one entry per design (``designs``: a dict of
+    variable → value or array, arrays broadcast; or a list of such dicts; a variable not
+    given takes the middle of its box)."""
+    from designopt.core import validation
+
+    validation.check_seed(cfg.seed, f"{where}: key 'seed'")
+    problem = build_problem(cfg, streams(cfg.seed), where)
+    X = matrix(problem, designs, where)
+    return score(problem, X, batch=cfg.scan.batch if cfg.scan else 256)
+
+
+def scan(cfg: Any, text: str | None = None, where: str = "config", out: Path | None = None,
+         progress: Progress = no_progress, dry_run: bool = False) -> Report:  # fmt: skip
+    """Score the designs of the config's ``scan:`` section in vmapped batches → ScanRecord
+    (``scan/names``, ``scan/x``, ``scan/<index>`` and ``scan/<index>_se``)."""
+    dtype_of(cfg)
+    if cfg.scan is None:
+        raise ConfigError(f"{where}: key 'scan': missing; `designopt scan` needs one "
+                          "(docs/configs.md)")  # fmt: skip
+    sizes = [len(v) for v in cfg.scan.lists().values()]
+    est = estimate(cfg, n_designs=math.prod(sizes) if cfg.scan.mode == "grid" else max(sizes))
+    est.check(where)
+    if dry_run:
+        return _dry(out, cfg, est)
+    keys = streams(cfg.seed)
+    with _writing(out, cfg, est):
+        with Stopwatch() as total:
+            problem = build_problem(cfg, keys, where)
+            varied, X = scan_designs(cfg, problem, where)
+            b = cfg.scan.batch
+            plan = devices.scoring_plan(cfg.parallel, where)
+            parts = []
+            with progress(X.shape[0], "scan") as bar:
+                for i in range(0, X.shape[0], b):
+                    parts.append(score(problem, X[i : i + b], batch=b, plan=plan))
+                    bar(min(b, X.shape[0] - i))
+            res = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+        check_finite(res, where, "scan", problem.names, X)
+        tree = {"scan": {"names": np.array(problem.names, dtype="S"), "x": X,
+                         "varied": np.array(varied, dtype="S"), **res,
+                         "attrs": {"mode": cfg.scan.mode, "shape": sizes}},
+                "problem": problem_group(problem)}  # fmt: skip
+        attrs = base_attrs("scan", cfg, text, keys, where) | {
+            "n_designs": int(X.shape[0]), "wall_time_s": total.wall,
+            "compile_time_s": total.compile, "run_time_s": total.run}  # fmt: skip
+        rec = bind(ScanRecord(attrs, tree, cfg))
+        if out is not None:
+            archive.save(out, rec)
+    lines = [f"{X.shape[0]} designs over {', '.join(varied)} ({cfg.scan.mode}) in batches of "
+             f"{b}; wall {total.wall:.1f} s (compile {total.compile:.1f} s, run {total.run:.1f} s)",
+             *rec.best_lines()]  # fmt: skip
+    return Report(out, lines, rec)
+
+
+__all__ = ["Report", "build_problem", "draw_figures", "evaluate", "optimise", "run", "scan",
+           "score", "sweep", "write_html"]  # fmt: skip

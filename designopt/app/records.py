@@ -1,0 +1,55 @@
+"""Records bound to what the application layer knows: the typed config (validated once, when first
+asked for) and the study's units, summary indices and own summary lines. Records
+(``designopt.results``) are plain data and import no study; every record the application layer
+makes or reads carries this binder, so ``record.config`` and the summaries work."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from designopt.io import archive
+from designopt.results import BenchRecord, Record
+
+
+def binder(rec: Record) -> tuple[Any, dict[str, Any]]:
+    """(typed config, hints) of a record: its own config when it was made with one, else
+    the archived resolved config validated (a ``BenchConfig`` for a benchmark); hints from
+    the study registry (``units``, ``summary``, ``extra_lines`` of the final design) or,
+    for a benchmark, the suite (``case_names``)."""
+    from designopt.app.config import validate
+
+    cfg = rec._config
+    if isinstance(rec, BenchRecord):
+        from designopt.bench.suite import BenchConfig, case_names
+
+        if cfg is None:
+            cfg = validate(rec.raw_config(), f"archive ({rec.kind})", BenchConfig)
+        return cfg, {"case_names": case_names(cfg)}
+    if cfg is None:
+        folder = rec.attrs.get("config_dir") or None
+        cfg = validate(rec.raw_config(), f"archive ({rec.kind})", folder=folder)
+    return cfg, study_hints(cfg, rec.groups.get("final"))
+
+
+def study_hints(cfg: Any, final: Any = None) -> dict[str, Any]:
+    """The study's units and summary indices for ``cfg``, and its own summary lines of a
+    final design (``final``: the record's ``final`` group)."""
+    from designopt.studies import get
+
+    st = get(cfg.study.name)
+    out: dict[str, Any] = {"units": dict(st.units(cfg.study)),
+                           "summary": tuple(st.summary(cfg.study))}  # fmt: skip
+    if final is not None:
+        out["extra_lines"] = list(st.extra_lines(cfg.study, final))
+    return out
+
+
+def bind(rec: Record) -> Record:
+    """``rec`` with the application layer's binder attached."""
+    return rec.bind(binder)
+
+
+def load(path: str | Path) -> Record:
+    """The record an archive holds, bound (``designopt.load``)."""
+    return bind(archive.load(path))

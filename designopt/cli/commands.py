@@ -1,0 +1,367 @@
+"""The ``designopt`` command line: parse arguments, call ``designopt.app.pipeline``, print.
+
+Exit statuses (docs/faults.md): 0 done; 1 a runtime fault (a disk full or unwritable
+while writing), one line naming the path and the OS reason; 2 bad input or an output
+refused before the run, one line; 130 (SIGINT) or 143 (SIGTERM, SIGHUP, --max-minutes)
+interrupted, with the checkpoint kept and the command that resumes printed."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import sys
+from pathlib import Path
+
+from designopt.cli.setup import load_args as _load
+from designopt.cli.setup import out_path as _out
+from designopt.cli.setup import parallel_flags as _parallel
+from designopt.cli.setup import parse_design as _parse_design
+from designopt.cli.setup import progress as _progress
+from designopt.cli.setup import resume_command as _resume_command
+from designopt.cli.setup import use_cache
+from designopt.core.errors import ConfigError, Interrupted, WriteError
+
+WRITERS = ("run", "sweep", "scan", "bench", "report")
+"""Commands that write files: they run in the writer's session with signal handling (a
+study's own commands say so in ``Command.writes``)."""
+
+
+def _finish(rep, args: argparse.Namespace) -> int:
+    """Print the report's lines, the archive path and draw the figures unless --no-figures
+    (a figure write fault: exit 1, the archive kept)."""
+    from designopt.io import writer
+    from designopt.app import pipeline
+
+    if not writer.writes():  # a non-zero process of a multi-process job: process 0 reports
+        return 0
+    for line in rep.lines:
+        print(line)
+    if getattr(args, "dry_run", False):
+        return 0
+    print(f"archive: {rep.out}")
+    if not getattr(args, "no_figures", False):
+        ses = writer.current()
+        kept = f"the archive {rep.out} is complete (`designopt report {rep.out}` draws its figures)"
+        if ses is not None:
+            ses.kept = lambda: kept
+        try:
+            figs = pipeline.draw_figures(rep.out, rep.record)
+        except WriteError as e:
+            raise WriteError(f"{e}; {kept}") from None
+        print(f"figures: {len(figs) // 2} (PNG + PDF) in {figs[0].parent}")
+    return 0
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from designopt.app import pipeline
+
+    cfg, text = _load(args)
+    rep = pipeline.run(cfg, text, args.config, _out(args, cfg), resume=args.resume,
+                       progress=_progress(args.quiet), resume_hint=_resume_command(args, cfg),
+                       dry_run=args.dry_run)  # fmt: skip
+    return _finish(rep, args)
+
+
+def cmd_sweep(args: argparse.Namespace) -> int:
+    from designopt.app import pipeline
+
+    cfg, text = _load(args)
+    rep = pipeline.sweep(cfg, text, args.config, _out(args, cfg), _progress(args.quiet),
+                         dry_run=args.dry_run)  # fmt: skip
+    return _finish(rep, args)
+
+
+def cmd_scan(args: argparse.Namespace) -> int:
+    from designopt.app import pipeline
+
+    cfg, text = _load(args)
+    out = (
+        Path(args.out) if args.out else _out(args, cfg).with_name(f"{_out(args, cfg).stem}_scan.h5")
+    )
+    rep = pipeline.scan(cfg, text, args.config, out, _progress(args.quiet), dry_run=args.dry_run)
+    return _finish(rep, args)
+
+
+def cmd_eval(args: argparse.Namespace) -> int:
+    from designopt.app import pipeline
+
+    cfg, _ = _load(args)
+    design = _parse_design(args.design)
+    res = {k: float(v[0]) for k, v in pipeline.evaluate(cfg, design, where=args.config).items()}
+    feasible = None if "violation" not in res else bool(res["violation"] <= 0)
+    if args.json:
+        print(json.dumps(res | ({} if feasible is None else {"feasible": feasible})))
+        return 0
+    box = cfg.study.variables
+    design = {k: design.get(k, 0.5 * (lo + hi)) for k, (lo, hi) in box.items()}
+    for k, v in res.items():
+        if k.endswith("_se"):
+            continue
+        se = res.get(k + "_se")
+        print(f"{k:>15} = {v:.6g}" + (f" ± {se:.2g}" if se is not None else ""))
+    print("design: " + ", ".join(f"{k} = {v:g}" for k, v in design.items()))
+    if feasible is not None:
+        print("constraints: " + ("feasible" if feasible else
+                                 f"violated by {res['violation']:.3g} (an infeasible design)"))  # fmt: skip
+    return 0
+
+
+def cmd_studies(args: argparse.Namespace) -> int:
+    from designopt.studies import STUDIES
+
+    for name, st in STUDIES.items():
+        print(f"{name}: {st.title}")
+        for k, v in st.meta.items():
+            print(f"  {k}: {v}")
+        if st.example_config:
+            print(f"  example: {st.example_config}")
+    return 0
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    from designopt.app import bench
+
+    return bench.command(args.config, args.seed, args.out, args.quiet, args.overwrite,
+                         _parallel(args))  # fmt: skip
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    from designopt.results import CheckpointRecord
+    from designopt.app import pipeline, records
+
+    p = Path(args.archive)
+    rec = records.load(p)
+    if isinstance(rec, CheckpointRecord):
+        raise ConfigError(f"{p}: archive is marked incomplete (an interrupted run); "
+                          "resume it with `designopt run CONFIG --resume`")  # fmt: skip
+    if getattr(rec.config, "precision", None) == "float64":  # redraw as the run drew
+        import jax
+
+        jax.config.update("jax_enable_x64", True)
+    if not getattr(args, "no_cache", False):
+        use_cache()  # the figure kernels compile once, then load
+    if getattr(args, "html", False):
+        print(pipeline.write_html(p, rec))
+        return 0
+    for f in pipeline.draw_figures(p, rec):
+        print(f)
+    return 0
+
+
+def cmd_show(args: argparse.Namespace) -> int:
+    from designopt.app import records
+
+    p = Path(args.archive)
+    rec = records.load(p)
+    at = rec.attrs
+    print(f"{p}: {at.get('kind', 'run')}, study {at.get('study', '-')}, seed {at.get('seed')}, "
+          f"complete {bool(at.get('complete'))}")  # fmt: skip
+    for line in rec.summary():
+        print(line)
+    return 0
+
+
+class Context:
+    """What a study's own command (``Study.commands``) gets from the CLI."""
+
+    @staticmethod
+    def load(args: argparse.Namespace):
+        """``args.config`` loaded as every command loads it: --seed, --devices, precision
+        (x64), the compilation cache."""
+        return _load(args)
+
+    @staticmethod
+    def progress(quiet: bool):
+        """The progress bar (none with ``--quiet``)."""
+        return _progress(quiet)
+
+    @staticmethod
+    def design(items: list[str]) -> dict[str, float]:
+        """``--design NAME=VALUE`` items as {name: value}, each a usable number."""
+        return _parse_design(items)
+
+    @staticmethod
+    def load_record(path: str | Path):
+        """The record an archive holds, bound to its config (``designopt.load``)."""
+        from designopt.app import records
+
+        return records.load(path)
+
+
+def _positive(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: give a positive integer")
+    return n
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(
+        prog="designopt",
+        description="Vectorized JAX design-space optimizer for surgical-robot mechanisms.",
+    )
+    sub = ap.add_subparsers(dest="command", required=True)
+
+    def common(p, seed=True, out=True, quiet=True, figures=True, dry=True):
+        p.add_argument("config", help="config (YAML), e.g. configs/<study>.yaml")
+        if seed:
+            p.add_argument("--seed", type=int, default=None, help="override the config's seed")
+        if out:
+            p.add_argument("--out", default=None, help="override the archive path")
+            p.add_argument("--overwrite", action="store_true",
+                           help="replace an existing archive (else refused, exit 2)")  # fmt: skip
+        if dry:
+            p.add_argument("--dry-run", action="store_true",
+                           help="perform every check (config, optimizer, memory and disk "
+                                "estimate, output) and write nothing")  # fmt: skip
+        if quiet:
+            p.add_argument("--quiet", action="store_true", help="no progress bar")
+        if figures:
+            p.add_argument("--no-figures", action="store_true", help="write the archive only")
+        p.add_argument("--no-cache", action="store_true",
+                       help="do not read or write the persistent compilation cache")  # fmt: skip
+        g = p.add_argument_group("devices and processes (docs/scaling.md)")
+        g.add_argument("--devices", type=_positive, default=None, metavar="N",
+                       help="use N devices (all processes together; on CPU, N host devices); "
+                            "the axis to shard comes from the config's parallel section")  # fmt: skip
+        g.add_argument("--coordinator", default=None, metavar="HOST:PORT",
+                       help="join a multi-process job (jax.distributed) at this coordinator")  # fmt: skip
+        g.add_argument("--num-processes", type=_positive, default=None, metavar="N")
+        g.add_argument("--process-id", type=int, default=None, metavar="I")
+
+    r = sub.add_parser("run", help="optimise one study from a YAML config")
+    common(r)
+    r.add_argument("--resume", action="store_true",
+                   help="continue the interrupted run kept in <output>.partial.h5")  # fmt: skip
+    r.add_argument("--max-minutes", type=float, default=None, metavar="M",
+                   help="stop cleanly after M minutes, keeping a checkpoint to --resume "
+                        "(exit 143)")  # fmt: skip
+    r.set_defaults(func=cmd_run)
+    w = sub.add_parser("sweep", help="run every member of a config's sweep section")
+    common(w)
+    w.set_defaults(func=cmd_sweep)
+    sc = sub.add_parser("scan", help="score the designs of a config's scan section (no optimiser)")
+    common(sc)
+    sc.set_defaults(func=cmd_scan)
+    e = sub.add_parser("eval", help="print every index of one design with its standard error")
+    common(e, out=False, quiet=False, figures=False, dry=False)
+    e.add_argument("--design", action="append", default=[], metavar="NAME=VALUE",
+                   help="a design variable's value (repeat; others: middle of their box)")  # fmt: skip
+    e.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    e.set_defaults(func=cmd_eval)
+    st = sub.add_parser("studies", help="list the registered studies")
+    st.set_defaults(func=cmd_studies)
+    b = sub.add_parser(
+        "bench",
+        help="run the optimizer benchmark suite (the PTPSO paper, IEEE Access 2019, Fig. 10-11)",
+    )
+    common(b, figures=False, dry=False)
+    b.set_defaults(func=cmd_bench)
+    from designopt.cli import ik
+    from designopt.studies import STUDIES
+
+    ik.add_parser(sub)  # one `ik` for every study with Study.ik
+    for study in STUDIES.values():
+        for c in study.commands:
+            q = sub.add_parser(c.name, help=c.help, description=c.description or None)
+            c.arguments(q)
+            q.set_defaults(func=lambda a, c=c: c.run(a, Context()), writes=c.writes)
+    p = sub.add_parser("report", help="draw the figures of an archive (PNG + PDF beside it)")
+    p.add_argument("archive")
+    p.add_argument("--html", action="store_true",
+                   help="write one self-contained interactive page <archive stem>.html beside "
+                        "it instead (offline, no server; docs/figures.md)")  # fmt: skip
+    p.add_argument("--no-cache", action="store_true", help="do not keep compiled programs")
+    p.set_defaults(func=cmd_report)
+    s = sub.add_parser("show", help="print the summary of an archive")
+    s.add_argument("archive")
+    s.set_defaults(func=cmd_show)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run one command; its exit status (module docstring, docs/faults.md)."""
+    args = build_parser().parse_args(argv)
+    try:
+        writes = args.command in WRITERS or getattr(args, "writes", False)
+        if writes and not getattr(args, "dry_run", False):
+            from designopt.io import writer
+
+            with writer.session(signals=True) as ses:
+                try:
+                    return args.func(args)
+                except KeyboardInterrupt:  # a signal outside the loop: keep what is done
+                    with ses.writing():
+                        if ses.flush is not None:
+                            ses.flush()
+                        raise ses.interrupted() from None
+                except Exception as e:
+                    _peer_lost(e, ses)
+                    raise
+        return args.func(args)
+    except ConfigError as e:
+        print(f"designopt: error: {e}", file=sys.stderr)
+        return 2
+    except WriteError as e:
+        print(f"designopt: error: {e}", file=sys.stderr)
+        return 1
+    except Interrupted as e:
+        print(f"designopt: {e}", file=sys.stderr)
+        return e.code
+    except KeyboardInterrupt:
+        print("designopt: interrupted (SIGINT); nothing written", file=sys.stderr)
+        return 130
+    except BrokenPipeError:  # the reader went away (`designopt show A | head`): stop quietly
+        import os
+
+        with contextlib.suppress(OSError):
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141  # 128 + SIGPIPE, as a shell reports a process killed by it
+
+
+def _peer_lost(e: BaseException, ses) -> None:
+    """A process of a multi-process job died or stopped answering: the newest checkpoint
+    written (process 0), one line, exit 1 at once (``jax.distributed``'s shutdown would
+    wait for the lost peer). Returns when ``e`` is something else."""
+    import os
+
+    from designopt.core import devices
+
+    if "jax" not in sys.modules or (lost := devices.peer_error(e)) is None:
+        return
+    kept = ""
+    with contextlib.suppress(Exception), ses.writing():
+        if ses.flush is not None:
+            ses.flush()
+        kept = "; " + ses.kept()
+    ses.cleanup()
+    print(f"designopt: error: {lost}{kept}", file=sys.stderr)
+    with contextlib.suppress(Exception):
+        sys.stdout.flush()
+        sys.stderr.flush()
+    os._exit(1)
+
+
+def console() -> None:
+    """The ``designopt`` command: :func:`main`, then a prompt exit. Everything is written
+    and closed when main returns; interpreter teardown (freeing JAX's and matplotlib's
+    modules and XLA's client, 0.3-0.8 s after a run on 2 cores) is skipped. A process of a
+    multi-process job exits normally (``jax.distributed``'s shutdown meets its peers)."""
+    rc = main()
+    jax = sys.modules.get("jax")
+    if jax is not None and jax.distributed.is_initialized():
+        sys.exit(rc)
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    import os
+
+    os._exit(int(rc or 0))
+
+
+if __name__ == "__main__":
+    console()

@@ -1,0 +1,183 @@
+"""What every command does before its work: load the config as the command line gives
+it (--seed, --overwrite, --max-minutes, devices and processes, precision, the persistent
+compilation cache), the progress bar, ``--design`` values, and the command that resumes
+an interrupted run. Kept free of JAX at import, so ``designopt --help`` starts fast."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import math
+import sys
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+from designopt.core.errors import ConfigError
+
+
+def load_args(args: argparse.Namespace):
+    from designopt.core.validation import check_seed
+    from designopt.io import writer
+    from designopt.app.config import load
+
+    cfg, text = load(args.config)
+    if getattr(args, "seed", None) is not None:
+        cfg.seed = check_seed(args.seed, f"--seed {args.seed}")
+    if getattr(args, "overwrite", False):
+        cfg.overwrite = True
+    if getattr(args, "max_minutes", None) is not None:
+        if not (math.isfinite(args.max_minutes) and args.max_minutes > 0):
+            raise ConfigError(f"--max-minutes {args.max_minutes}: give a positive number")
+        cfg.max_minutes = args.max_minutes
+    ses = writer.current()
+    if ses is not None and cfg.max_minutes is not None:
+        ses.set_deadline(cfg.max_minutes)
+    parallel_flags(args, cfg)
+    import jax
+
+    if cfg.precision == "float64":  # the CLI is the program: it may switch JAX to 64-bit
+        jax.config.update("jax_enable_x64", True)
+    if cfg.compile_cache and not getattr(args, "no_cache", False):
+        use_cache()
+    return cfg, text
+
+
+def parallel_flags(args: argparse.Namespace, cfg=None):
+    """--devices and the multi-process flags (docs/scaling.md): JAX set up before its
+    backend starts; a non-zero process of a job writes and prints nothing. Returns the
+    parallel settings in force (None: one device, as ever)."""
+    from designopt.core import devices as dev
+    from designopt.io import writer
+
+    devices = getattr(args, "devices", None)
+    coord, n_proc = getattr(args, "coordinator", None), getattr(args, "num_processes", None)
+    multi = dev.requested(coord, n_proc)
+    p = cfg.parallel if cfg is not None else None
+    if devices is not None or multi:
+        p = (p or dev.ParallelSettings()).model_copy(
+            update={"devices": devices if devices else (p.devices if p else None)}
+        )
+        if cfg is not None:
+            cfg.parallel = p
+    timeout = p.timeout_s if p is not None else dev.DEFAULT_TIMEOUT_S
+    dev.configure(p.devices if p is not None else devices, coord, n_proc,
+                       getattr(args, "process_id", None), timeout)  # fmt: skip
+    writer.set_writer(dev.is_writer())
+    return p
+
+
+def use_cache() -> None:
+    """Keep XLA's compiled programs in :func:`cache_dir` (an unwritable folder only costs
+    compile time)."""
+    import jax
+
+    folder = cache_dir()
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return
+    jax.config.update("jax_compilation_cache_dir", str(folder))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+
+
+def cache_dir() -> Path:
+    """Where compiled programs are kept between runs: ``$DESIGNOPT_CACHE_DIR``, else
+    ``$XDG_CACHE_HOME/designopt/jax``, else ``~/.cache/designopt/jax``."""
+    import os
+
+    if os.environ.get("DESIGNOPT_CACHE_DIR"):
+        return Path(os.environ["DESIGNOPT_CACHE_DIR"])
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "designopt" / "jax"
+
+
+ETA_AFTER_S = 60.0
+"""A job whose optimizer is estimated to need longer than this prints its ETA once."""
+
+
+def eta_text(seconds: float) -> str:
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.0f} min"
+    if seconds < 2 * 86400:
+        return f"{seconds / 3600:.1f} h"
+    return f"{seconds / 86400:.3g} days"
+
+
+def progress(quiet: bool):
+    """A tqdm bar (none with --quiet) that prints, once, an estimated time when the job
+    is long: after the first timed chunk (the first one includes compilation)."""
+
+    @contextlib.contextmanager
+    def bar(total: int, desc: str) -> Iterator[Callable[[int], None]]:
+        import time
+
+        from tqdm import tqdm
+
+        seen = {"n": 0, "t": None, "told": False}
+
+        def update(n: int) -> None:
+            t.update(n)
+            now = time.monotonic()
+            if seen["t"] is not None and not seen["told"] and n > 0:
+                left = (now - seen["t"]) / n * (total - seen["n"] - n)
+                seen["told"] = True
+                if left > ETA_AFTER_S:
+                    msg = (f"designopt: {desc}: about {eta_text(left)} left "
+                           f"({total - seen['n'] - n} of {total} iterations at "
+                           f"{eta_text((now - seen['t']) / n)} each); --max-minutes N stops "
+                           "cleanly with a checkpoint")  # fmt: skip
+                    t.write(msg, file=sys.stderr)
+            seen["n"] += n
+            seen["t"] = now
+
+        from designopt.io import writer
+
+        with tqdm(total=total, desc=desc, unit="it", disable=quiet or not writer.writes()) as t:
+            yield update
+
+    return bar
+
+
+def resume_command(args: argparse.Namespace, cfg) -> str:
+    """The exact command that resumes this run: the same config, output, seed and every
+    other option given (without --resume, which the caller appends)."""
+    import shlex
+
+    parts = ["designopt", "run", args.config, "--out", str(out_path(args, cfg)),
+             "--seed", str(cfg.seed)]  # fmt: skip
+    for flag in ("quiet", "no_figures", "no_cache", "overwrite"):
+        if getattr(args, flag, False):
+            parts.append("--" + flag.replace("_", "-"))
+    if args.max_minutes is not None:
+        parts += ["--max-minutes", f"{args.max_minutes:g}"]
+    if getattr(args, "devices", None) is not None:
+        parts += ["--devices", str(args.devices)]
+    return shlex.join(parts)
+
+
+def parse_design(items: list[str]) -> dict[str, float]:
+    """--design NAME=VALUE items as {name: value}: every value a usable number
+    (designopt.core.validation), every name given once."""
+    from designopt.core.validation import check_value
+
+    out: dict[str, float] = {}
+    for it in items:
+        name, sep, val = it.partition("=")
+        name = name.strip()
+        if not sep or not name:
+            raise ConfigError(f"--design '{it}': expected NAME=NUMBER, e.g. --design l1=0.5")
+        if name in out:
+            raise ConfigError(f"--design {name}: given twice ({name}={out[name]:g} and {it}); "
+                              "give each variable once")  # fmt: skip
+        try:
+            out[name] = check_value(f"--design {name}", val)
+        except ConfigError as e:
+            raise ConfigError(f"{e}; expected NAME=NUMBER, e.g. --design l1=0.5") from None
+    return out
+
+
+def out_path(args: argparse.Namespace, cfg) -> Path:
+    return Path(args.out or cfg.output_path())

@@ -1,0 +1,37 @@
+"""The convergence figure every study draws: each index along the best run, ± 2 SE."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+
+from designopt.figures import style
+from designopt.figures.canvas import save
+
+
+def convergence(best_run: dict, indices: list[str], folder: Path, title: str,
+                units: Mapping[str, str] | None = None, rates: Mapping[str, float | None] | None = None
+                ) -> list[Path]:  # fmt: skip
+    """One panel per index along the best run (``best_run/<index>`` of a run archive), with
+    a ± 2 SE band where ``<index>_se`` exists; ``units`` labels the axes; ``rates`` names
+    the success rates (clipped to [0, 1], Wilson band; value: the number of trials, or None
+    to infer it from the SE). Saved as ``convergence``."""
+    units, rates = units or {}, rates or {}
+    n = len(indices)
+    fig, axes = style.subplots(1, n, figsize=(3.4 * n, 3), squeeze=False)
+    it = best_run["iteration"]
+    for ax, k in zip(axes[0], indices, strict=True):
+        y = np.asarray(best_run[k], np.float64)
+        se = best_run.get(k + "_se")
+        if k in rates:
+            style.rate_band(ax, it, y, se, rates[k], marker=".", lw=1)
+        else:
+            style.band(ax, it, y, se, marker=".", lw=1)
+        ax.set_xlabel(style.label("iteration", style.DIMENSIONLESS))
+        ax.set_ylabel(style.label(k, style.unit_of(k, units)))
+        ax.grid(alpha=0.3)
+    fig.suptitle(f"{title} (band: ± 2 SE; rates: Wilson interval)" if rates
+                 else f"{title} (band: ± 2 SE)", fontsize=10)  # fmt: skip
+    return save(fig, folder, "convergence")

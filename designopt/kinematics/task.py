@@ -1,0 +1,314 @@
+"""Task workspaces: the regions a surgical arm must reach, as YAML and as samples.
+
+A task is a region (``cylinder``, ``box``, ``ball``, ``cone``, or a ``points`` file) and,
+optionally, a cone of tool directions (``tool_axis``). :func:`sample` draws n targets
+uniformly in the region's volume (area or length where a size is zero) and, with
+``tool_axis``, tool z axes uniformly on the spherical cap of the given half-angle. The
+draws come from one key (the run's ``samples`` stream), so every design of a swarm is
+scored on the same targets (common random numbers). Lengths are in the chain's unit,
+angles in degrees. docs/task.md explains the regions and the task indices.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from functools import partial
+from pathlib import Path
+from typing import Annotated, Any, Literal, Union
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from pydantic import Discriminator, Field, Tag, ValidationInfo, field_validator, model_validator
+
+from designopt.core import validation
+from designopt.core.settings import Section
+
+Vec3 = tuple[float, float, float]
+
+
+def _unit(v: Vec3, what: str) -> Vec3:
+    n = math.sqrt(sum(x * x for x in v))
+    if not n > 0:
+        raise ValueError(f"{what} must be a non-zero vector, got {list(v)}")
+    return v
+
+
+class Box(Section):
+    """An axis-aligned box; a zero size makes it planar (or a segment, or a point)."""
+
+    shape: Literal["box"]
+    center: Vec3
+    size: Vec3
+
+    @field_validator("size")
+    @classmethod
+    def _size(cls, v: Vec3) -> Vec3:
+        if any(s < 0 for s in v):
+            raise ValueError(f"sizes must be ≥ 0, got {list(v)}")
+        return v
+
+
+class Ball(Section):
+    shape: Literal["ball"]
+    center: Vec3
+    radius: float = Field(gt=0)
+
+
+class Cylinder(Section):
+    """A solid cylinder about ``axis`` through ``center``; height 0 makes it a disk."""
+
+    shape: Literal["cylinder"]
+    center: Vec3
+    axis: Vec3 = (0.0, 0.0, 1.0)
+    radius: float = Field(gt=0)
+    height: float = Field(0.0, ge=0)
+
+    @field_validator("axis")
+    @classmethod
+    def _axis(cls, v: Vec3) -> Vec3:
+        return _unit(v, "axis")
+
+
+class Cone(Section):
+    """The solid cone of half-angle ``half_angle`` (degrees, in (0, 90): at 90° its radius
+    is infinite) about ``axis`` from ``apex`` (e.g. the remote centre of motion at the
+    port), cut by the planes at axial depths ``depth`` = [d0, d1] (0 ≤ d0 < d1): a
+    frustum, or the whole cone to d1."""
+
+    shape: Literal["cone"]
+    apex: Vec3
+    axis: Vec3
+    half_angle: float
+    depth: tuple[float, float]
+
+    @field_validator("axis")
+    @classmethod
+    def _axis(cls, v: Vec3) -> Vec3:
+        return _unit(v, "axis")
+
+    @field_validator("half_angle")
+    @classmethod
+    def _angle(cls, v: float) -> float:
+        if not 0 < v < 90:  # tan 90° = ∞: the region between the cut planes is unbounded
+            raise ValueError(f"must be in (0, 90) degrees (at 90 the cone's radius is "
+                             f"infinite), got {v}")  # fmt: skip
+        return v
+
+    @field_validator("depth")
+    @classmethod
+    def _depth(cls, v: tuple[float, float]) -> tuple[float, float]:
+        if not 0 <= v[0] < v[1]:
+            raise ValueError(f"needs 0 ≤ d0 < d1, got {list(v)}")
+        return v
+
+
+class Points(Section):
+    """Target positions from a CSV file with a header row ``x,y,z`` (more columns are
+    ignored), e.g. a recorded instrument trajectory; a relative path is read from the
+    config file's folder. The points are the task's sample (``n_samples`` is ignored)."""
+
+    points: str
+    _xyz: np.ndarray | None = None
+
+    @model_validator(mode="after")
+    def _read(self, info: ValidationInfo) -> Points:
+        ctx = info.context if isinstance(info.context, dict) else {}
+        p = Path(self.points)
+        if not p.is_absolute() and ctx.get("config_dir") is not None:
+            p = Path(ctx["config_dir"]) / p
+        self._xyz = read_points(p)
+        self.points = str(p)
+        return self
+
+    def xyz(self) -> np.ndarray:
+        if self._xyz is None:
+            self._xyz = read_points(Path(self.points))
+        return self._xyz
+
+
+def read_points(path: Path) -> np.ndarray:
+    """(N, 3) points of a CSV file with columns x, y, z; ValueError naming the file and
+    the row (from 1, after the header) otherwise."""
+    try:
+        with path.open(newline="", encoding="utf-8") as fh:
+            rows = [r for r in csv.reader(fh) if r and any(c.strip() for c in r)]
+    except (OSError, UnicodeDecodeError) as e:
+        raise ValueError(f"points file {path}: cannot read ({e})") from None
+    if not rows:
+        raise ValueError(f"points file {path}: empty; needs a header row x,y,z")
+    head = [c.strip() for c in rows[0]]
+    missing = [c for c in ("x", "y", "z") if c not in head]
+    if missing:
+        raise ValueError(f"points file {path}: header has no column(s) {missing}")
+    idx = [head.index(c) for c in ("x", "y", "z")]
+    out = []
+    for i, r in enumerate(rows[1:], start=1):
+        try:
+            v = [float(r[j]) for j in idx]
+        except (ValueError, IndexError):
+            raise ValueError(f"points file {path}: row {i}: needs three numbers x, y, z") from None
+        bad = validation.first_bad(v)
+        if bad is not None:
+            raise ValueError(f"points file {path}: row {i}: {bad[1]}")
+        out.append(v)
+    if not out:
+        raise ValueError(f"points file {path}: no points after the header")
+    return np.asarray(out, np.float64)
+
+
+def _region_kind(v: Any) -> str:
+    if isinstance(v, dict):
+        return "points" if "points" in v else str(v.get("shape", ""))
+    return "points" if isinstance(v, Points) else getattr(v, "shape", "")
+
+
+Region = Annotated[
+    Union[  # noqa: UP007
+        Annotated[Box, Tag("box")], Annotated[Ball, Tag("ball")],
+        Annotated[Cylinder, Tag("cylinder")], Annotated[Cone, Tag("cone")],
+        Annotated[Points, Tag("points")],
+    ],
+    Discriminator(_region_kind, custom_error_type="region",
+                  custom_error_message="unknown region: give shape box, ball, cylinder or "
+                                       "cone, or points: FILE"),
+]  # fmt: skip
+
+
+class ToolAxis(Section):
+    """The tool z axis drawn uniformly in the cone of half-angle ``cone`` (degrees, in
+    [0, 180]) about ``direction``; 0 fixes it."""
+
+    direction: Vec3
+    cone: float = Field(0.0, ge=0, le=180)
+
+    @field_validator("direction")
+    @classmethod
+    def _dir(cls, v: Vec3) -> Vec3:
+        return _unit(v, "direction")
+
+
+class Task(Section):
+    region: Region
+    tool_axis: ToolAxis | None = None
+
+
+# --------------------------------------------------------------------------- samples
+
+
+def _frame(axis: Vec3) -> np.ndarray:
+    """An orthonormal (3, 3) whose last column is ``axis`` (normalised)."""
+    z = np.asarray(axis, np.float64) / np.linalg.norm(axis)
+    a = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    x = np.cross(a, z)
+    x /= np.linalg.norm(x)
+    return np.stack([x, np.cross(z, x), z], -1)
+
+
+def region_params(region: Any, dtype=jnp.float64) -> dict[str, jax.Array]:
+    """The region's numbers as arrays (so one compiled sampler serves any values)."""
+    if isinstance(region, Box):
+        return {
+            "center": jnp.asarray(region.center, dtype),
+            "size": jnp.asarray(region.size, dtype),
+        }
+    if isinstance(region, Ball):
+        return {
+            "center": jnp.asarray(region.center, dtype),
+            "radius": jnp.asarray(region.radius, dtype),
+        }
+    if isinstance(region, Cylinder):
+        return {
+            "center": jnp.asarray(region.center, dtype),
+            "frame": jnp.asarray(_frame(region.axis), dtype),
+            "radius": jnp.asarray(region.radius, dtype),
+            "height": jnp.asarray(region.height, dtype),
+        }
+    if isinstance(region, Cone):
+        return {
+            "apex": jnp.asarray(region.apex, dtype),
+            "frame": jnp.asarray(_frame(region.axis), dtype),
+            "tan": jnp.asarray(math.tan(math.radians(region.half_angle)), dtype),
+            "depth": jnp.asarray(region.depth, dtype),
+        }
+    if isinstance(region, Points):
+        return {"points": jnp.asarray(region.xyz(), dtype)}
+    raise TypeError(f"unknown region {type(region).__name__}")  # fmt: skip
+
+
+def sample_region(kind: str, params: dict[str, jax.Array], key: jax.Array, n: int) -> jax.Array:
+    """n points uniform in the region's volume (area, length), (n, 3)."""
+    dt = next(iter(params.values())).dtype
+    u = jax.random.uniform(key, (n, 3), dtype=dt)
+    if kind == "box":
+        return params["center"] + (u - 0.5) * params["size"]
+    if kind == "ball":
+        g = jax.random.normal(jax.random.fold_in(key, 1), (n, 3), dtype=dt)
+        d = g / jnp.linalg.norm(g, axis=-1, keepdims=True)
+        return params["center"] + params["radius"] * jnp.cbrt(u[:, :1]) * d
+    if kind == "cylinder":
+        r = params["radius"] * jnp.sqrt(u[:, 0])
+        t = 2 * jnp.pi * u[:, 1]
+        h = (u[:, 2] - 0.5) * params["height"]
+        local = jnp.stack([r * jnp.cos(t), r * jnp.sin(t), h], -1)
+        return params["center"] + local @ params["frame"].T
+    if kind == "cone":
+        d0, d1 = params["depth"][0], params["depth"][1]
+        s = jnp.cbrt(d0**3 + u[:, 0] * (d1**3 - d0**3))  # axial depth, density ∝ s²
+        r = s * params["tan"] * jnp.sqrt(u[:, 1])
+        t = 2 * jnp.pi * u[:, 2]
+        local = jnp.stack([r * jnp.cos(t), r * jnp.sin(t), s], -1)
+        return params["apex"] + local @ params["frame"].T
+    if kind == "points":
+        return params["points"]
+    raise ValueError(f"unknown region kind {kind!r}")
+
+
+def sample_axes(direction: Vec3, cone_deg: float, key: jax.Array, n: int, dtype=jnp.float64):
+    """n unit vectors uniform on the spherical cap of half-angle ``cone_deg`` about
+    ``direction`` (n, 3): cos θ uniform in [cos c, 1], azimuth uniform."""
+    c = jnp.cos(jnp.radians(jnp.asarray(cone_deg, dtype)))
+    return _cap(jnp.asarray(_frame(direction), dtype), c, key, n)
+
+
+def _cap(frame: jax.Array, cos_c: jax.Array, key: jax.Array, n: int) -> jax.Array:
+    u = jax.random.uniform(key, (n, 2), dtype=frame.dtype)
+    ct = 1.0 - u[:, 0] * (1.0 - cos_c)
+    st = jnp.sqrt(jnp.maximum(1.0 - ct * ct, 0.0))
+    t = 2 * jnp.pi * u[:, 1]
+    local = jnp.stack([st * jnp.cos(t), st * jnp.sin(t), ct], -1)
+    return local @ frame.T
+
+
+def kind(region: Any) -> str:
+    """The region's kind: box, ball, cylinder, cone or points."""
+    return _region_kind(region)
+
+
+def targets(task: Task, key: jax.Array, n: int, dtype=jnp.float64):
+    """(positions (N, 3), tool frames (N, 3, 3) or None): the task's samples. A tool
+    frame's last column is the sampled tool axis (its roll is arbitrary: the IK leaves
+    it free)."""
+    ax = task.tool_axis
+    frame = None if ax is None else jnp.asarray(_frame(ax.direction), dtype)
+    cos_c = None if ax is None else jnp.cos(jnp.radians(jnp.asarray(ax.cone, dtype)))
+    # one jitted call (op by op, the sampling compiled some fifteen one-op programs)
+    return _targets(kind(task.region), region_params(task.region, dtype), key, n, frame, cos_c)
+
+
+@partial(jax.jit, static_argnames=("region_kind", "n"))
+def _targets(region_kind: str, rparams: dict[str, jax.Array], key: jax.Array, n: int,
+             frame: jax.Array | None, cos_c: jax.Array | None):  # fmt: skip
+    k_p, k_a = jax.random.split(key)
+    p = sample_region(region_kind, rparams, k_p, n)
+    if frame is None:
+        return p, None
+    z = _cap(frame, cos_c, k_a, p.shape[0])
+    dtype = p.dtype
+    a = jnp.where(
+        jnp.abs(z[:, :1]) < 0.9, jnp.array([1.0, 0, 0], dtype), jnp.array([0, 1.0, 0], dtype)
+    )
+    x = jnp.cross(a, z)
+    x = x / jnp.linalg.norm(x, axis=-1, keepdims=True)
+    return p, jnp.stack([x, jnp.cross(z, x), z], -1)

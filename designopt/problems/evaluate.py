@@ -1,0 +1,94 @@
+"""Scoring designs: f and every index with its standard error for any number of designs,
+in vmapped batches of one size (one compiled program for any count), or in the shape of
+a run's objective calls (``evaluate_batch``: the very program the run compiled)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from designopt.core import devices
+from designopt.problems.base import Problem, evaluate_batch
+
+
+def score(problem: Problem, X: np.ndarray, batch: int | None = None, plan: Any = None,
+          eval_shape: tuple[int, int] | None = None, dtype: Any = None
+          ) -> dict[str, np.ndarray]:  # fmt: skip
+    """f and every index (with standard errors) of designs X (n, D), in vmapped batches of
+    a fixed size (the last one padded), so one compiled program serves any n. ``plan``
+    (``designopt.core.devices.scoring_plan``) splits each batch's designs over its devices.
+    ``eval_shape`` (a run's ``RunResult.eval_shape``) and ``dtype`` (the run's): batches
+    of that shape through the run's own compiled objective (``evaluate_batch``), so
+    scoring a run's designs compiles nothing new."""
+    X = np.asarray(X, np.float64)
+    # the run's program where at least half of its rows are real designs (a sweep's run
+    # shape holds all members' runs: padding a member's few designs to it costs more)
+    if eval_shape is not None and plan is None and 2 * len(X) >= eval_shape[0] * eval_shape[1]:
+        return _score_groups(problem, X, eval_shape, dtype)
+    n = X.shape[0]
+    b = n if batch is None else max(1, min(batch, n))
+    fn = _scorer(problem.fn, problem.constraints)
+    params, key, host, rows = problem.params, jax.random.key(0), np.asarray, jnp.asarray
+    if plan is not None:
+        b = -(-b // plan.n_devices) * plan.n_devices
+        params, key, host = plan.put(params), plan.put(key), plan.host
+        rows = lambda x: devices.shard_rows(plan, x)  # noqa: E731
+    outs = []
+    for i in range(0, n, b):
+        Xi = X[i : i + b]
+        pad = b - Xi.shape[0]
+        if pad:
+            Xi = np.concatenate([Xi, np.repeat(Xi[-1:], pad, 0)])
+        f, sub = fn(params, rows(Xi), key)
+        outs.append({"f": host(f)[: b - pad]} | {k: host(v)[: b - pad] for k, v in sub.items()})
+    return {k: np.concatenate([o[k] for o in outs]) for k in outs[0]}
+
+
+def _score_groups(problem: Problem, X: np.ndarray, shape: tuple[int, int],
+                  dtype: Any) -> dict[str, np.ndarray]:  # fmt: skip
+    """``score`` through ``evaluate_batch`` in batches of G·rows designs (G groups of
+    rows, the last batch padded with its last design), every group with key 0."""
+
+    G, r = shape
+    n, D = X.shape
+    b = G * r
+    keys = jnp.broadcast_to(jax.random.key(0), (G,))
+    dt = X.dtype if dtype is None else np.dtype(dtype)
+    outs = []
+    for i in range(0, n, b):
+        Xi = X[i : i + b]
+        m = Xi.shape[0]
+        if m < b:
+            Xi = np.concatenate([Xi, np.repeat(Xi[-1:], b - m, 0)])
+        f, aux, v = evaluate_batch(problem.params, jnp.asarray(Xi.reshape(G, r, D), dt), keys,
+                                   fn=problem.fn, constraints=problem.constraints)  # fmt: skip
+        if problem.constraints is not None:
+            aux = aux | {"violation": v}
+        flat = lambda a, m=m: np.asarray(a).reshape((b,) + a.shape[2:])[:m]  # noqa: E731
+        outs.append({"f": flat(f)} | {k: flat(a) for k, a in aux.items()})
+    return {k: np.concatenate([o[k] for o in outs]) for k in outs[0]}
+
+
+_SCORERS: dict[Any, Any] = {}
+
+
+def _scorer(fn: Callable, constraints: Callable | None = None) -> Callable:
+    """fn jitted (cached per function); with constraints, ``violation`` (Σ max(g, 0), 0
+    when feasible) joins the indices."""
+    key = (fn, constraints)
+    if key not in _SCORERS:
+        if constraints is None:
+            _SCORERS[key] = jax.jit(fn)
+        else:
+            from designopt.problems.base import scored
+
+            def with_violation(params, X, k):
+                f, sub, v = scored(fn, constraints, params, X, k)
+                return f, sub | {"violation": v}
+
+            _SCORERS[key] = jax.jit(with_violation)
+    return _SCORERS[key]

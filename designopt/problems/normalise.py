@@ -1,0 +1,103 @@
+"""Normalised composite objectives: f = Σ w_i (x_i − min_i)/(max_i − min_i).
+
+The bounds (min_i, max_i) of each weighted index come from scoring a space-filling
+(Halton) sample of the design box once, before optimising (the haptic master paper,
+IEEE Access 2019, eq. 43, does not say where its normalisation bounds come from); they
+stay fixed during the run, travel in ``params["bounds"]`` (k, 2) for the trace and are
+archived (``Problem.norm_bounds``). Studies call :func:`probe_bounds` at set-up and
+:func:`weighted_sum` inside their swarm function. Within :func:`evaluation_shape` (the
+pipeline sets the optimizer's (runs, particles) around building a problem) the probe
+scores its designs in batches of that shape through ``evaluate_batch``: the very program
+the run evaluates its swarm with, so the probe compiles nothing of its own.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import contextvars
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from designopt.numerics import montecarlo as mc
+
+Array = jnp.ndarray
+
+
+_SHAPE: contextvars.ContextVar[tuple[int, int] | None] = contextvars.ContextVar(
+    "designopt_evaluation_shape", default=None
+)
+
+
+@contextlib.contextmanager
+def evaluation_shape(shape: tuple[int, int] | None) -> Iterator[None]:
+    """Within: :func:`probe_bounds` scores in batches of ``shape`` (groups, rows), the
+    shape of the run's objective calls (``RunResult.eval_shape``)."""
+    token = _SHAPE.set(shape)
+    try:
+        yield
+    finally:
+        _SHAPE.reset(token)
+
+
+def unit_bounds(k: int, dtype: Any) -> Array:
+    """(k, 2) bounds [0, 1] per index: the weighted sum of the raw indices."""
+    return jnp.asarray([[0.0, 1.0]] * k, dtype)
+
+
+def probe_bounds(
+    fn: Callable[[Any, Array, jax.Array], tuple[Array, Mapping[str, Array]]],
+    params: Any,
+    names: Sequence[str],
+    lower: np.ndarray,
+    upper: np.ndarray,
+    n_norm: int,
+    keys: Mapping[str, jax.Array],
+    dtype: Any,
+) -> np.ndarray:
+    """(len(names), 2) min and max of the indices ``names`` over ``n_norm`` Halton designs
+    of the box [lower, upper] (shifted by the ``normalisation`` stream), scored once by
+    the swarm function ``fn`` with the Monte-Carlo key ``keys["samples"]`` (within
+    :func:`evaluation_shape`: through ``problems.evaluate.score``, key 0, as the run's scoring; the
+    studies' functions draw their samples from ``params`` and ignore the key). An index
+    that is flat over the sample gets max = min + 1 (no scaling, never a division by 0)."""
+    Xn = mc.box_samples(keys["normalisation"], lower, upper, n_norm, "halton", dtype)
+    shape = _SHAPE.get()
+    if shape is None:
+        _, sub = jax.jit(fn)(params, Xn, keys["samples"])
+        vals = [np.asarray(sub[k]) for k in names]  # on the host: no reduction to compile
+    else:
+        from designopt.problems.base import Problem
+        from designopt.problems.evaluate import score
+
+        box = Problem(tuple(f"x{i}" for i in range(len(lower))), lower, upper, fn, params)
+        sub = score(box, np.asarray(Xn), eval_shape=shape, dtype=dtype)
+        vals = [sub[k] for k in names]
+    b = np.array([[float(v.min()), float(v.max())] for v in vals])
+    b[:, 1] = np.where(b[:, 1] > b[:, 0], b[:, 1], b[:, 0] + 1.0)
+    return b
+
+
+def weighted_sum(
+    values: Sequence[Array],
+    bounds: Array,
+    weights: Sequence[Any],
+    ses: Sequence[Array] | None = None,
+) -> Any:
+    """f = Σ_i w_i (x_i − b_i0)/(b_i1 − b_i0) (values (M,) or per replicate (M, R)).
+
+    With ``ses`` (the indices' standard errors), returns (f, f_se) where f_se =
+    Σ_i |w_i| se_i/|b_i1 − b_i0| bounds f's standard error when the indices share their
+    samples (correlated estimates). The terms are accumulated in index order, f and f_se
+    together (the order fixes the last bit in float32)."""
+    f: Any = 0.0
+    f_se: Any = 0.0
+    for i, (x, w) in enumerate(zip(values, weights, strict=True)):
+        span = bounds[i, 1] - bounds[i, 0]
+        f = f + w * (x - bounds[i, 0]) / span
+        if ses is not None:
+            f_se = f_se + abs(w) * ses[i] / jnp.abs(span)
+    return f if ses is None else (f, f_se)
