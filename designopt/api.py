@@ -30,45 +30,31 @@ Config = Any
 """A validated run config (``load_config``), a config path, or a parsed config dict."""
 
 
-def _set(raw: dict[str, Any], key: str, value: Any) -> None:
-    node = raw
-    *head, last = key.split(".")
-    for i, part in enumerate(head):
-        nxt = node.get(part)
-        if nxt is None:
-            nxt = node[part] = {}
-        if not isinstance(nxt, dict):
-            raise ConfigError(f"override '{key}': '{'.'.join(head[: i + 1])}' is not a section")
-        node = nxt
-    node[last] = value
-
-
 def load_config(path: str | os.PathLike, overrides: Mapping[str, Any] | None = None) -> Any:
     """The validated config of a YAML file; ``overrides`` maps dotted keys to values
     (``{"optimizer.n_iters": 5, "study.indices.n_samples": 4096}``), set in the parsed
     YAML before validation, so they are checked exactly like the file's own keys."""
-    from designopt.app.config import parse, validate
+    from designopt.app.config import load
 
-    raw, _ = parse(path)
-    for k, v in (overrides or {}).items():
-        if not isinstance(k, str) or not k:
-            raise ConfigError(f"{path}: override key {k!r}: give a dotted key, e.g. 'seed'")
-        _set(raw, k, v)
-    return validate(raw, str(path), folder=Path(path).parent)
+    return load(path, overrides=overrides)[0]
 
 
 def _config(config: Config) -> tuple[Any, str]:
-    """(validated config, where) of a path, a parsed dict or a validated config."""
-    from designopt.core import validation
+    """(validated config, where) of a path, a parsed dict or a config object. A config
+    object built or changed in Python is validated again, through the same one entry as a
+    file (``app.config.validate``)."""
     from designopt.app.config import validate
 
     if isinstance(config, str | os.PathLike):
         return load_config(config), str(config)
     if isinstance(config, Mapping):
         return validate(dict(config), "config"), "config"
-    validation.check_tree(config, "config")  # a config built or changed in Python
-    validation.check_seed(config.seed, "config: key 'seed'")
-    return config, "config"
+    try:
+        raw = config.model_dump(by_alias=True)
+    except AttributeError:
+        raise ConfigError(f"config: {type(config).__name__} is not a config; give a path, a "
+                          "dict or designopt.load_config(...)") from None
+    return validate(raw, "config"), "config"
 
 
 @contextlib.contextmanager
@@ -94,7 +80,7 @@ def run(config: Config, out: str | os.PathLike | None = None, progress: bool = F
 
     cfg, where = _config(config)
     if overwrite:
-        cfg = cfg.model_copy(update={"overwrite": True})
+        cfg = cfg.model_copy(update={"overwrite": True})  # a control key: nothing to check
     rep = pipeline.run(cfg, None, where, None if out is None else Path(out),
                        progress=_progress(progress))  # fmt: skip
     return rep.record  # type: ignore[return-value]
@@ -107,7 +93,7 @@ def sweep(config: Config, out: str | os.PathLike | None = None, progress: bool =
 
     cfg, where = _config(config)
     if overwrite:
-        cfg = cfg.model_copy(update={"overwrite": True})
+        cfg = cfg.model_copy(update={"overwrite": True})  # a control key: nothing to check
     rep = pipeline.sweep(cfg, None, where, None if out is None else Path(out),
                          progress=_progress(progress))  # fmt: skip
     return rep.record  # type: ignore[return-value]
@@ -120,7 +106,7 @@ def scan(config: Config, out: str | os.PathLike | None = None, progress: bool = 
 
     cfg, where = _config(config)
     if overwrite:
-        cfg = cfg.model_copy(update={"overwrite": True})
+        cfg = cfg.model_copy(update={"overwrite": True})  # a control key: nothing to check
     rep = pipeline.scan(cfg, None, where, None if out is None else Path(out),
                         progress=_progress(progress))  # fmt: skip
     return rep.record  # type: ignore[return-value]

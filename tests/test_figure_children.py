@@ -12,7 +12,6 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 
-from designopt import figures
 from designopt.figures import canvas
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="fork: Linux")
@@ -51,7 +50,7 @@ def test_a_failing_child_leaves_its_figure_to_the_caller(tmp_path: Path, monkeyp
         calls.append(png.name)
         real(fig, png, pdf, dpi)
 
-    monkeypatch.setattr(figures, "_write", write)
+    monkeypatch.setattr(canvas, "_write", write)
     with canvas.parallel_saves(workers=2):
         out = _draw(tmp_path)
     assert sorted(calls) == ["f0.png", "f1.png", "f2.png"]

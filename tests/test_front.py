@@ -11,10 +11,10 @@ import yaml
 import designopt
 from designopt import results
 from designopt.app import fronts as fr
+from designopt.app.job import Job
 from designopt.cli.commands import main
 from designopt.numerics import pareto
 from designopt.problems.evaluate import score
-from designopt.studies import streams
 
 ROOT = Path(__file__).resolve().parents[1]
 PLANAR = ROOT / "configs" / "planar2r.yaml"
@@ -59,7 +59,7 @@ def test_the_front_matches_a_brute_force_grid(front):
     cfg, rec, _ = front
     g = np.linspace(0.2, 2.0, 41)
     L1, L2 = np.meshgrid(g, g, indexing="ij")
-    problem, _ = fr.rescoring_problem(cfg, streams(cfg.seed), "t")
+    problem, _ = fr.rescoring_problem(Job.build(cfg, "t"))
     vals = score(problem, np.stack([L1.ravel(), L2.ravel()], -1))
     G = np.stack([-vals["gci"], -vals["volume"]], -1)  # minimised
     nd = pareto.non_dominated(G)

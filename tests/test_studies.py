@@ -9,6 +9,7 @@ from figcheck import assert_clean
 
 from designopt.app import pipeline, records
 from designopt.app.config import validate
+from designopt.app.job import Job
 from designopt.figures import canvas
 from designopt.studies import STUDIES, get, streams
 
@@ -113,13 +114,13 @@ float64, seed 3) as the release before the records/pipeline redesign (#23, commi
 def test_run_stays_in_box_resumes_bit_exact_and_round_trips(name, tmp_path):
     cfg = config(name, tmp_path, optimizer={"name": "ptpso", "n_particles": 6, "n_iters": 8,
                                             "n_runs": 2})  # fmt: skip
-    P = pipeline.build_problem(cfg, streams(cfg.seed))
-    key = streams(cfg.seed)["optimizer"]
+    job = Job.build(cfg, "tiny")
+    P = job.problem
     cks = []
-    full = pipeline.optimise(cfg, P, key, checkpoint=cks.append)
+    full = pipeline.optimise(job, P, checkpoint=cks.append)
     assert np.all(full.history_x >= P.lower - 1e-12) and np.all(full.history_x <= P.upper + 1e-12)
     assert cks, "chunked run gave no checkpoint"
-    resumed = pipeline.optimise(cfg, P, key, resume=cks[0])
+    resumed = pipeline.optimise(job, P, resume=cks[0])
     np.testing.assert_array_equal(resumed.history, full.history)
     np.testing.assert_array_equal(resumed.history_x, full.history_x)
     # config round trip through the archive, and the record read back equals the run's

@@ -217,8 +217,8 @@ def test_a_non_finite_result_writes_nothing(tmp_path, capsys, monkeypatch):
     (here injected) exits 2 naming the index, and leaves no archive or checkpoint."""
     real = pipeline.run_groups
 
-    def poisoned(cfg, problem, res):
-        tree = real(cfg, problem, res)
+    def poisoned(cfg, problem, res, dtype):
+        tree = real(cfg, problem, res, dtype)
         tree["final"]["gci"] = np.float64(np.nan)
         return tree
 

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from designopt import optim
+from designopt.app.records import bind
 from designopt.bench import multi
 from designopt.bench.suite import (
     BenchConfig,
@@ -22,7 +23,6 @@ from designopt.core.timing import Stopwatch
 from designopt.figures import bench as bench_figs
 from designopt.io import archive, writer
 from designopt.results import BenchRecord
-from designopt.app.records import bind
 
 
 def command(config_path: str, seed: int | None, out: str | None, quiet: bool,
@@ -31,9 +31,9 @@ def command(config_path: str, seed: int | None, out: str | None, quiet: bool,
     suite, print the tables, write the archive and the figures through the one writer
     (``designopt.io.writer``). ConfigError for bad input (the CLI prints it and exits 2)
     before anything runs or is written; an existing archive needs ``overwrite``."""
+    from designopt.app.config import load
     from designopt.core.validation import check_seed
     from designopt.io import writer
-    from designopt.app.config import load
 
     cfg, text = load(config_path, BenchConfig)
     if cfg.precision == "float64":  # the command is the program: it may switch JAX to 64-bit

@@ -1,15 +1,19 @@
-"""YAML study configs, validated on load with pydantic (docs/configs.md)."""
+"""YAML study configs (docs/configs.md): parsed, overridden by dotted keys
+(:func:`set_key`) and validated once, by :func:`validate`, the one entry of every input
+check: finite numbers, the pydantic models (each study validates its own section), the
+optimizer's settings and a Pareto front's indices. The validated config then flows down
+unchanged."""
 
 from __future__ import annotations
 
 import functools
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Annotated, Any, ClassVar, Literal, Union
 
 import yaml
 from pydantic import (
     BaseModel,
-    ConfigDict,
     Field,
     ValidationError,
     create_model,
@@ -20,6 +24,7 @@ from pydantic import (
 from designopt.core import validation
 from designopt.core.devices import ParallelSettings
 from designopt.core.errors import ConfigError  # noqa: E402  (re-exported)
+from designopt.core.settings import Section
 
 
 class _UniqueKeyLoader(yaml.SafeLoader):
@@ -38,8 +43,7 @@ class _UniqueKeyLoader(yaml.SafeLoader):
         return super().construct_mapping(node, deep=deep)
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+_Strict = Section  # unknown keys are errors
 
 
 class Constraints(_Strict):
@@ -192,6 +196,26 @@ def run_config_model() -> type[RunConfigBase]:
     return _run_config(tuple(s.settings for s in STUDIES.values()))
 
 
+def set_key(raw: dict[str, Any], key: str, value: Any, where: str = "config") -> None:
+    """Set the dotted ``key`` of a parsed config to ``value`` before validation, making the
+    sections on its way: the one way a config is overridden (the API's ``overrides``, the
+    command line's flags, each member of a sweep), so an override is checked exactly like
+    the file's own keys."""
+    if not isinstance(key, str) or not key:
+        raise ConfigError(f"{where}: override key {key!r}: give a dotted key, e.g. 'seed'")
+    node = raw
+    *head, last = key.split(".")
+    for i, part in enumerate(head):
+        nxt = node.get(part)
+        if nxt is None:
+            nxt = node[part] = {}
+        if not isinstance(nxt, dict):
+            raise ConfigError(f"{where}: override '{key}': '{'.'.join(head[: i + 1])}' is not a "
+                              "section")  # fmt: skip
+        node = nxt
+    node[last] = value
+
+
 def parse(path: str | Path) -> tuple[Any, str]:
     """Read and parse a config file's YAML (not validated): (raw, the file's text);
     ConfigError naming the file for a missing, unreadable or malformed one."""
@@ -218,10 +242,14 @@ def parse(path: str | Path) -> tuple[Any, str]:
     return raw, text
 
 
-def load(path: str | Path, model: type[BaseModel] | None = None) -> tuple[Any, str]:
-    """Parse and validate a config file (a run config unless ``model`` says otherwise);
-    returns (config, the file's text)."""
+def load(path: str | Path, model: type[BaseModel] | None = None,
+         overrides: Mapping[str, Any] | None = None) -> tuple[Any, str]:  # fmt: skip
+    """Parse a config file, set ``overrides`` (dotted key → value, :func:`set_key`) and
+    validate it (a run config unless ``model`` says otherwise); returns (config, the
+    file's text)."""
     raw, text = parse(path)
+    for k, v in (overrides or {}).items():
+        set_key(raw, k, v, str(path))
     return validate(raw, str(path), model, folder=Path(path).parent), text
 
 
@@ -247,7 +275,74 @@ def validate(raw: Any, where: str, model: type[BaseModel] | None = None,
     except ValidationError as e:
         raise ConfigError(f"{where}: {error_text(e, raw)}") from None
     validation.check_tree(cfg, where)  # numbers pydantic parsed from text ("1e999", "nan")
+    if isinstance(cfg, RunConfigBase):
+        check_optimizer(cfg, where)
+        check_front(cfg, where)
     return cfg
+
+
+def check_optimizer(cfg: Any, where: str) -> None:
+    """The optimizer's name, settings and swarm size, checked by the optimizer registry."""
+    from designopt import optim
+
+    o = cfg.optimizer
+    for key, args in (("optimizer.name", (o.name, {})),
+                      ("optimizer.settings", (o.name, dict(o.settings))),
+                      ("optimizer.n_particles", (o.name, dict(o.settings), o.n_particles))):  # fmt: skip
+        try:
+            optim.validate(*args)
+        except ValueError as e:
+            raise ConfigError(f"{where}: key '{key}': {e}") from None
+
+
+def check_front(cfg: Any, where: str) -> None:
+    """A front's config: known indices, a multi-objective optimizer, a reference point of
+    the right length; a multi-objective optimizer without a front is refused too."""
+    from designopt import optim
+    from designopt.studies import get
+
+    front = cfg.study.pareto
+    name = cfg.optimizer.name
+    if front is not None and get(cfg.study.name).replay is not None:
+        raise ConfigError(f"{where}: key 'study.objective.pareto': study "
+                          f"'{cfg.study.name}' replays a trajectory; it has no front")  # fmt: skip
+    if front is None:
+        if optim.is_multi_objective(name):
+            raise ConfigError(f"{where}: key 'optimizer.name': '{name}' optimises a Pareto "
+                              "front; name its indices in study.objective.pareto "
+                              "(docs/pareto.md)")  # fmt: skip
+        return
+    known = get(cfg.study.name).indices(cfg.study)
+    for k, w in linear(front).items():
+        for v in w:
+            if v not in cfg.study.variables:
+                raise ConfigError(f"{where}: key 'study.objective.pareto.{k}.{senses(front)[k]}"
+                                  f".{v}': not a design variable; variables: "
+                                  f"{list(cfg.study.variables)}")  # fmt: skip
+    for k in front:
+        if k in linear(front):
+            continue
+        if k not in known:
+            raise ConfigError(f"{where}: key 'study.objective.pareto.{k}': unknown index; "
+                              f"this study's indices: {list(known)}")  # fmt: skip
+    if not optim.is_multi_objective(name):
+        raise ConfigError(f"{where}: key 'optimizer.name': '{name}' is single-objective; a "
+                          "front (study.objective.pareto) needs a multi-objective "
+                          "optimizer: nsga2")  # fmt: skip
+    ref = cfg.front.reference
+    if ref is not None and len(ref) != len(front):
+        raise ConfigError(f"{where}: key 'front.reference': {len(ref)} values for "
+                          f"{len(front)} objectives ({', '.join(front)})")  # fmt: skip
+
+
+def senses(front: Mapping[str, Any]) -> dict[str, str]:
+    """Objective → ``min`` or ``max`` (an index's sense, or a linear objective's key)."""
+    return {k: (next(iter(s)) if isinstance(s, dict) else s) for k, s in front.items()}
+
+
+def linear(front: Mapping[str, Any]) -> dict[str, dict[str, float]]:
+    """The linear objectives of the design variables: name → {variable: weight}."""
+    return {k: dict(next(iter(s.values()))) for k, s in front.items() if isinstance(s, dict)}
 
 
 _MESSAGES = {

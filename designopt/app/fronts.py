@@ -24,6 +24,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from designopt.app.config import linear, senses
 from designopt.core.errors import ConfigError
 from designopt.problems.base import Problem
 
@@ -31,53 +32,6 @@ FRONT_STREAM = 0x46524F4E  # "FRON"
 """The re-scoring samples: ``fold_in(key(seed), FRONT_STREAM)``, apart from the named
 streams split from the root key (adding one there would change every other stream)."""
 Z = 2.0  # ambiguity: orders within Z standard errors
-
-
-def check(cfg: Any, where: str) -> None:
-    """A front's config: known indices, a multi-objective optimizer, a reference point of
-    the right length; a multi-objective optimizer without a front is refused too."""
-    from designopt import optim
-    from designopt.studies import get
-
-    front = cfg.study.pareto
-    name = cfg.optimizer.name
-    if front is None:
-        if optim.is_multi_objective(name):
-            raise ConfigError(f"{where}: key 'optimizer.name': '{name}' optimises a Pareto "
-                              "front; name its indices in study.objective.pareto "
-                              "(docs/pareto.md)")  # fmt: skip
-        return
-    known = get(cfg.study.name).indices(cfg.study)
-    for k, w in linear(front).items():
-        for v in w:
-            if v not in cfg.study.variables:
-                raise ConfigError(f"{where}: key 'study.objective.pareto.{k}.{senses(front)[k]}"
-                                  f".{v}': not a design variable; variables: "
-                                  f"{list(cfg.study.variables)}")  # fmt: skip
-    for k in front:
-        if k in linear(front):
-            continue
-        if k not in known:
-            raise ConfigError(f"{where}: key 'study.objective.pareto.{k}': unknown index; "
-                              f"this study's indices: {list(known)}")  # fmt: skip
-    if not optim.is_multi_objective(name):
-        raise ConfigError(f"{where}: key 'optimizer.name': '{name}' is single-objective; a "
-                          "front (study.objective.pareto) needs a multi-objective "
-                          "optimizer: nsga2")  # fmt: skip
-    ref = cfg.front.reference
-    if ref is not None and len(ref) != len(front):
-        raise ConfigError(f"{where}: key 'front.reference': {len(ref)} values for "
-                          f"{len(front)} objectives ({', '.join(front)})")  # fmt: skip
-
-
-def senses(front: Mapping[str, Any]) -> dict[str, str]:
-    """Objective → ``min`` or ``max`` (an index's sense, or a linear objective's key)."""
-    return {k: (next(iter(s)) if isinstance(s, dict) else s) for k, s in front.items()}
-
-
-def linear(front: Mapping[str, Any]) -> dict[str, dict[str, float]]:
-    """The linear objectives of the design variables: name → {variable: weight}."""
-    return {k: dict(next(iter(s.values()))) for k, s in front.items() if isinstance(s, dict)}
 
 
 def signs(front: Mapping[str, Any]) -> np.ndarray:
@@ -157,35 +111,35 @@ def ambiguous(F: np.ndarray, se: np.ndarray, z: float = Z) -> np.ndarray:
     return np.stack([i, j], -1).astype(np.int64)
 
 
-def rescoring_problem(cfg: Any, keys: Mapping[str, jax.Array], where: str) -> tuple[Problem, int]:
+def rescoring_problem(job: Any) -> tuple[Problem, int]:
     """The study's problem on the fresh ``front`` sample stream with ``front.n_samples``
     (default 4 × the study's own) samples per design; (problem, samples)."""
     from designopt.app import sweeps
     from designopt.app.job import build_problem
-    from designopt.studies import get
 
-    cost = get(cfg.study.name).cost(cfg.study)
+    cfg = job.cfg
+    cost = job.study.cost(cfg.study)
     n = cfg.front.n_samples or 4 * int(cost.samples)
     c = cfg
     if cost.samples > 1:
         try:
-            c = sweeps.apply(cfg, {cost.samples_key: n})
-        except ValueError as e:
-            raise ConfigError(f"{where}: key 'front.n_samples': {e}") from None
-    fresh = dict(keys) | {"samples": jax.random.fold_in(jax.random.key(cfg.seed), FRONT_STREAM)}
-    return build_problem(c, fresh, where), n
+            c = sweeps.apply(cfg, {cost.samples_key: n}, job.where)
+        except (ValueError, ConfigError) as e:
+            why = str(e).removeprefix(job.where + ": ")
+            raise ConfigError(f"{job.where}: key 'front.n_samples': {why}") from None
+    fresh = dict(job.keys) | {"samples": jax.random.fold_in(jax.random.key(cfg.seed), FRONT_STREAM)}
+    return build_problem(c, fresh, job.where, job.dtype), n
 
 
-def groups(cfg: Any, problem: Problem, res: Any, keys: Mapping[str, jax.Array],
-           where: str) -> dict[str, Any]:  # fmt: skip
+def groups(job: Any, problem: Problem, res: Any) -> dict[str, Any]:
     """The groups of a front's record: optimizer (hypervolume history, final
     populations), front (re-scored designs, objectives ± SE, every index ± SE,
     ambiguous pairs) and problem."""
+    from designopt.app.scoring import check_finite, problem_group
     from designopt.numerics import pareto
     from designopt.problems.evaluate import score
-    from designopt.app.scoring import check_finite, problem_group
-    from designopt.studies import get
 
+    cfg, where = job.cfg, job.where
     front = cfg.study.pareto
     names, sg = list(front), signs(front)
     m = len(names)
@@ -195,7 +149,7 @@ def groups(cfg: Any, problem: Problem, res: Any, keys: Mapping[str, jax.Array],
     X = np.asarray(pop.x, np.float64).reshape(-1, D)[keep]
     F_opt = np.asarray(pop.f, np.float64).reshape(-1, m)[keep]
     X = X[thin(F_opt, cfg.front.max_points)]
-    rescore, n_samples = rescoring_problem(cfg, keys, where)
+    rescore, n_samples = rescoring_problem(job)
     vals = score(rescore, X)
     for k, w in weights(front, problem.names).items():  # exact: no samples behind them
         vals[k], vals[k + "_se"] = X @ w, np.zeros(len(X))
@@ -221,5 +175,5 @@ def groups(cfg: Any, problem: Problem, res: Any, keys: Mapping[str, jax.Array],
           "attrs": {"objectives": names, "senses": list(senses(front).values()),
                     "reference": (ref * sg).tolist(), "hypervolume": hv,
                     "n_samples": n_samples, "n_candidates": int(len(keep)), "z": Z,
-                    "units": linear_units(front, get(cfg.study.name).units(cfg.study))}}  # fmt: skip
+                    "units": linear_units(front, job.study.units(cfg.study))}}  # fmt: skip
     return {"optimizer": opt, "front": fr, "problem": problem_group(problem)}

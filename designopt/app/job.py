@@ -1,10 +1,12 @@
-"""Set-up of a job from its typed config: the study (through the registry), the
-precision, the optimizer's settings checked, the Problem (kept for reuse), and the root
-attrs every archive carries (config text, resolved config, seed, the named keys)."""
+"""A job, built once from its validated config (``Job.build``): the study (the registry's
+one look-up), the precision, the named keys, the pre-flight estimate (checked), the
+archive's root attrs and the study's Problem (built on first use, kept for reuse). Every
+later step reads them from the job instead of looking them up again."""
 
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -13,14 +15,11 @@ import jax.numpy as jnp
 import numpy as np
 import yaml
 
+from designopt.app.preflight import Estimate, estimate
 from designopt.core.errors import ConfigError
-from designopt.core.keys import key_data
+from designopt.core.keys import key_data, streams
 from designopt.problems.base import Problem
 from designopt.studies import Study, get
-
-
-def study_of(cfg: Any) -> Study:
-    return get(cfg.study.name)
 
 
 def dtype_of(cfg: Any) -> np.dtype:
@@ -41,13 +40,15 @@ def resolved_yaml(cfg: Any) -> str:
 _PROBLEMS: dict[tuple, Problem] = {}
 
 
-def build_problem(cfg: Any, keys: Mapping[str, jax.Array], where: str = "config") -> Problem:
-    """The study's Problem for this config; a ValueError becomes a ConfigError. The last
-    few are kept: a second run of the same study settings, keys and dtype in one process
-    reuses the Problem, so its compiled programs too (a resume, a test, a notebook)."""
+def build_problem(cfg: Any, keys: Mapping[str, jax.Array], where: str = "config",
+                  dtype: Any = None) -> Problem:  # fmt: skip
+    """The study's Problem for this config (``dtype``: the job's, else the config's); a
+    ValueError becomes a ConfigError. The last few are kept: a second run of the same study
+    settings, keys and dtype in one process reuses the Problem, so its compiled programs
+    too (a resume, a test, a notebook)."""
     from designopt.problems import normalise
 
-    dtype = dtype_of(cfg)
+    dtype = dtype_of(cfg) if dtype is None else dtype
     o = cfg.optimizer
     # the shape of the run's objective calls (optim.run separate): the normalisation probe
     # scores in it, so the study's objective compiles once for probe, run and scoring
@@ -56,7 +57,7 @@ def build_problem(cfg: Any, keys: Mapping[str, jax.Array], where: str = "config"
            repr(key_data(keys)), shape)  # fmt: skip
     if key in _PROBLEMS:
         return _PROBLEMS[key]
-    st = study_of(cfg)
+    st = get(cfg.study.name)
     if st.problem is None:
         raise ConfigError(f"{where}: study '{st.name}' has no design problem (its run is a "
                           "replay); use `designopt run`")  # fmt: skip
@@ -71,20 +72,6 @@ def build_problem(cfg: Any, keys: Mapping[str, jax.Array], where: str = "config"
     return problem
 
 
-def check_optimizer(cfg: Any, where: str) -> None:
-    """The optimizer's name, settings and swarm size, checked by the optimizer registry."""
-    from designopt import optim
-
-    o = cfg.optimizer
-    for key, args in (("optimizer.name", (o.name, {})),
-                      ("optimizer.settings", (o.name, dict(o.settings))),
-                      ("optimizer.n_particles", (o.name, dict(o.settings), o.n_particles))):  # fmt: skip
-        try:
-            optim.validate(*args)
-        except ValueError as e:
-            raise ConfigError(f"{where}: key '{key}': {e}") from None
-
-
 def base_attrs(kind: str, cfg: Any, text: str | None, keys: Mapping[str, jax.Array],
                where: str = "config") -> dict[str, Any]:  # fmt: skip
     """The root attrs of every archive: kind, study, the config as given (``text``; the
@@ -96,3 +83,43 @@ def base_attrs(kind: str, cfg: Any, text: str | None, keys: Mapping[str, jax.Arr
             "config_resolved_yaml": resolved,
             "config_resolved": cfg.model_dump_json(by_alias=True), "seed": cfg.seed,
             "keys": key_data(keys), "config_dir": str(folder.resolve())}  # fmt: skip
+
+
+@dataclass
+class Job:
+    """One job of a validated config, built once (``Job.build``) and handed down: the
+    ``study`` (its one registry look-up), ``dtype``, the named ``keys`` of ``key(seed)``,
+    the checked pre-flight ``estimate``, and the study's ``problem`` (built on first use).
+    ``where`` names the config in messages; ``text`` is the config file's text."""
+
+    cfg: Any
+    study: Study
+    dtype: np.dtype
+    keys: dict[str, jax.Array]
+    estimate: Estimate
+    where: str = "config"
+    text: str | None = None
+    _problem: Problem | None = field(default=None, repr=False)
+
+    @classmethod
+    def build(cls, cfg: Any, where: str = "config", text: str | None = None, *,
+              n_designs: int = 0, members: int = 1) -> Job:  # fmt: skip
+        """The job of ``cfg``: its study, precision (float64 needs JAX's 64-bit mode) and
+        keys, and its pre-flight estimate for ``n_designs`` scored designs (a scan) or
+        ``members`` vmapped sweep members, checked against the memory available."""
+        study = get(cfg.study.name)
+        dtype = dtype_of(cfg)
+        est = estimate(cfg, study, n_designs=n_designs, members=members)
+        est.check(where)
+        return cls(cfg, study, dtype, streams(cfg.seed), est, where, text)
+
+    @property
+    def problem(self) -> Problem:
+        """The study's Problem (built once; a replay study has none: ConfigError)."""
+        if self._problem is None:
+            self._problem = build_problem(self.cfg, self.keys, self.where, self.dtype)
+        return self._problem
+
+    def attrs(self, kind: str) -> dict[str, Any]:
+        """The root attrs of this job's archive of ``kind``."""
+        return base_attrs(kind, self.cfg, self.text, self.keys, self.where)

@@ -7,17 +7,17 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+from designopt.app.preflight import DESIGN_SAMPLES_PER_CHUNK
 from designopt.core import devices
 from designopt.problems.base import Problem
-from designopt.app.job import dtype_of
-from designopt.app.preflight import DESIGN_SAMPLES_PER_CHUNK, estimate
 
 
-def optimise(cfg: Any, problem: Problem, key: Any, members: list[dict[str, float]] | None = None,
+def optimise(job: Any, problem: Problem, members: list[dict[str, float]] | None = None,
              progress: Callable[[int], None] | None = None,
              checkpoint: Callable[[Any], None] | None = None,
-             resume: Any = None, where: str = "config", ref_point: Any = None) -> Any:  # fmt: skip
-    """The configured optimizer on ``problem``; with ``members`` (overrides of optimizer
+             resume: Any = None, ref_point: Any = None) -> Any:  # fmt: skip
+    """The configured optimizer of ``job`` (an ``app.job.Job``) on ``problem``, from the
+    job's ``optimizer`` key stream; with ``members`` (overrides of optimizer
     settings) one vmapped batch on common keys. Chunks are small (≤ 5 % of the run and
     about DESIGN_SAMPLES_PER_CHUNK of work), so a stop meets an iteration boundary soon.
     A ``parallel:`` section shards the job over devices (designopt.core.devices). The
@@ -27,6 +27,7 @@ def optimise(cfg: Any, problem: Problem, key: Any, members: list[dict[str, float
     from designopt import optim
     from designopt.problems import penalty
 
+    cfg, where, key = job.cfg, job.where, job.keys["optimizer"]
     o = cfg.optimizer
     plan = devices.plan(cfg.parallel, n_runs=o.n_runs, n_particles=o.n_particles,
                          members=None if members is None else len(members), problem=problem,
@@ -35,10 +36,10 @@ def optimise(cfg: Any, problem: Problem, key: Any, members: list[dict[str, float
         problem = plan.problem(problem)
     if o.constraints.method == "penalty":
         problem = penalty.quadratic(problem, o.constraints.weight)
-    work = estimate(cfg, members=len(members or [None])).work_per_iter
+    work = job.estimate.work_per_iter
     chunk = max(1, min(o.n_iters // 20, DESIGN_SAMPLES_PER_CHUNK // max(work, 1)))
     common = dict(n_particles=o.n_particles, n_iters=o.n_iters, n_runs=o.n_runs, bounds=o.bounds,
-                  dtype=dtype_of(cfg), chunk_iters=chunk,
+                  dtype=job.dtype, chunk_iters=chunk,
                   progress=progress, checkpoint=checkpoint, resume=resume,
                   checkpoint_at_end=checkpoint is not None,
                   separate=True)  # fmt: skip

@@ -1,6 +1,8 @@
 """What a job does, for any registered study: set-up, optimise (with checkpoints), score,
-write, figures (docs/architecture.md). It only orchestrates: set-up lives in
-``designopt.app.job``, the pre-flight estimate in ``designopt.app.preflight``, scoring in
+write, figures (docs/architecture.md). It only orchestrates: a ``Job`` is built
+once from the validated config (``designopt.app.job``: study, precision, keys, the checked
+estimate, the problem) and handed down; a run's kind is a strategy (``Single``, ``Front``,
+or the study's replay); the pre-flight estimate in ``designopt.app.preflight``, scoring in
 ``designopt.app.scoring``, design matrices in ``designopt.app.designs``, checkpoints in
 ``designopt.app.checkpoint``, and results come back as the typed records of
 ``designopt.results``, which the archive stores (``archive.save``) and the summary text
@@ -8,7 +10,7 @@ and figures read.
 
 Studies are reached through their registry, optimizers through ``designopt.optim``; the
 typed config flows down unchanged. One root key ``key(seed)`` is split once into named
-streams (``designopt.studies.STREAMS``), which are archived. ``out=None`` runs in memory:
+streams (``designopt.core.keys.STREAMS``), which are archived. ``out=None`` runs in memory:
 nothing is claimed, checkpointed or written.
 """
 
@@ -23,6 +25,15 @@ from typing import Any
 
 import numpy as np
 
+from designopt.app import checkpoint as ckpt
+from designopt.app import fronts
+from designopt.app.designs import Designs, matrix, scan_designs
+from designopt.app.job import Job, base_attrs, build_problem
+from designopt.app.optimise import optimise
+from designopt.app.preflight import Estimate
+from designopt.app.records import bind
+from designopt.app.reporting import draw_figures, write_html
+from designopt.app.scoring import check_finite, problem_group, run_groups
 from designopt.core import devices
 from designopt.core.errors import ConfigError, WriteError
 from designopt.core.keys import streams
@@ -30,15 +41,6 @@ from designopt.core.timing import Stopwatch
 from designopt.io import archive, writer
 from designopt.problems.evaluate import score
 from designopt.results import FrontRecord, Record, ReplayRecord, RunRecord, ScanRecord, SweepRecord
-from designopt.app import checkpoint as ckpt
-from designopt.app import fronts
-from designopt.app.designs import Designs, matrix, scan_designs
-from designopt.app.job import base_attrs, build_problem, check_optimizer, dtype_of, study_of
-from designopt.app.optimise import optimise
-from designopt.app.preflight import Estimate, estimate
-from designopt.app.records import bind
-from designopt.app.reporting import draw_figures, write_html
-from designopt.app.scoring import check_finite, problem_group, run_groups
 
 Progress = Callable[[int, str], contextlib.AbstractContextManager[Callable[[int], None]]]
 
@@ -90,7 +92,53 @@ def _writing(out: Path | None, cfg: Any, est: Estimate) -> Iterator[writer.Sessi
         yield ses
 
 
-# ------------------------------------------------------------------------ optimise
+# ----------------------------------------------------------------- run strategies
+
+
+class Single:
+    """A single-objective run: the study's problem, its weighted f optimised, the best
+    run's history and the final design scored → ``RunRecord``."""
+
+    kind = "run"
+    record = RunRecord
+
+    def problem(self, job: Job) -> Any:
+        return job.problem
+
+    def ref_point(self, job: Job) -> Any:
+        return None
+
+    def groups(self, job: Job, problem: Any, res: Any) -> dict[str, Any]:
+        return run_groups(job.cfg, problem, res, job.dtype)
+
+    def check(self, job: Job, groups: dict[str, Any]) -> None:
+        check_finite(groups["final"], job.where, "the final design")
+
+    def lines(self, rec: Any) -> list[str]:
+        return [*rec.design_lines(), rec.run_line()]
+
+
+class Front(Single):
+    """A Pareto front of the study's indices (``study.objective.pareto``): the front's
+    objectives optimised, the front re-scored on fresh samples → ``FrontRecord``."""
+
+    kind = "front"
+    record = FrontRecord
+
+    def problem(self, job: Job) -> Any:
+        return fronts.objective_problem(job.problem, job.cfg.study.pareto)
+
+    def ref_point(self, job: Job) -> Any:
+        return fronts.reference(job.cfg)
+
+    def groups(self, job: Job, problem: Any, res: Any) -> dict[str, Any]:
+        return fronts.groups(job, problem, res)
+
+    def check(self, job: Job, groups: dict[str, Any]) -> None:
+        pass  # the re-scored front is checked by fronts.groups
+
+    def lines(self, rec: Any) -> list[str]:
+        return [*rec.summary()[1:], rec.stages_line(rec.groups["front"]["attrs"]["n_samples"])]
 
 
 # ------------------------------------------------------------------------------ run
@@ -99,7 +147,8 @@ def _writing(out: Path | None, cfg: Any, est: Estimate) -> Iterator[writer.Sessi
 def run(cfg: Any, text: str | None = None, where: str = "config", out: Path | None = None,
         resume: bool = False, progress: Progress = no_progress, resume_hint: str = "",
         dry_run: bool = False) -> Report:  # fmt: skip
-    """One study run: problem, optimizer, optional polish, final scoring → RunRecord.
+    """One study run: problem, optimizer, optional polish, final scoring → RunRecord (a
+    front: FrontRecord; a replay study: ReplayRecord).
 
     With ``out``: checkpoints go to ``<out>.partial.h5`` every ``checkpoint_every_s`` and
     when stopped (under the CLI's session a signal or the time limit stops the loop at the
@@ -108,25 +157,16 @@ def run(cfg: Any, text: str | None = None, where: str = "config", out: Path | No
     if cfg.sweep is not None:
         raise ConfigError(f"{where}: key 'sweep': this config declares a sweep; "
                           "run it with `designopt sweep`")  # fmt: skip
-    if study_of(cfg).replay is not None:
-        if cfg.study.pareto is not None:
-            raise ConfigError(f"{where}: key 'study.objective.pareto': study "
-                              f"'{cfg.study.name}' replays a trajectory; it has no front")  # fmt: skip
-        return _replay(cfg, text, where, out, dry_run)
-    check_optimizer(cfg, where)
-    pareto = cfg.study.pareto
-    fronts.check(cfg, where)
-    dtype_of(cfg)
-    est = estimate(cfg)
-    est.check(where)
+    job = Job.build(cfg, where, text)
+    if job.study.replay is not None:  # a front of a replay study is refused by validation
+        return _replay(job, out, dry_run)
     if dry_run:
-        return _dry(out, cfg, est)
+        return _dry(out, cfg, job.estimate)
+    how = Single() if cfg.study.pareto is None else Front()
     o = cfg.optimizer
-    keys = streams(cfg.seed)
     resolved = ckpt.resume_key(cfg)
-    kind = "run" if pareto is None else "front"
-    attrs = base_attrs(kind, cfg, text, keys, where) | {"resume_key": resolved}
-    with _writing(out, cfg, est) as ses:
+    attrs = job.attrs(how.kind) | {"resume_key": resolved}
+    with _writing(out, cfg, job.estimate) as ses:
         ck, saver = None, None
         if ses is not None:
             ck = ckpt.load(archive.partial_path(out), resolved) if resume else None
@@ -134,14 +174,11 @@ def run(cfg: Any, text: str | None = None, where: str = "config", out: Path | No
             saver = ckpt.Checkpointer(out, attrs, o.n_iters, cfg.checkpoint_every_s, hint, ses, ck)
         with Stopwatch() as total:
             with Stopwatch() as setup:
-                problem = build_problem(cfg, keys, where)
-                if pareto is not None:
-                    problem = fronts.objective_problem(problem, pareto)
+                problem = how.problem(job)
             with Stopwatch() as opt, progress(o.n_iters, f"{o.name} on {cfg.study.name}") as bar:
                 try:
-                    res = optimise(cfg, problem, keys["optimizer"], progress=bar,
-                                   checkpoint=saver, resume=ck, where=where,
-                                   ref_point=None if pareto is None else fronts.reference(cfg))  # fmt: skip
+                    res = optimise(job, problem, progress=bar, checkpoint=saver, resume=ck,
+                                   ref_point=how.ref_point(job))  # fmt: skip
                 except KeyboardInterrupt as e:
                     if saver is None:
                         raise
@@ -150,10 +187,7 @@ def run(cfg: Any, text: str | None = None, where: str = "config", out: Path | No
                 ses.set_phase("prompt")
                 saver.stop_if_requested()
             with Stopwatch() as post:
-                if pareto is None:
-                    groups = run_groups(cfg, problem, res)
-                else:
-                    groups = fronts.groups(cfg, problem, res, keys, where)
+                groups = how.groups(job, problem, res)
         attrs |= {"wall_time_s": total.wall, "compile_time_s": total.compile,
                   "run_time_s": total.run, "setup_time_s": setup.wall,
                   "optimizer_time_s": opt.wall, "post_time_s": post.wall,
@@ -162,20 +196,15 @@ def run(cfg: Any, text: str | None = None, where: str = "config", out: Path | No
                                             "optimizer": opt.compilations,
                                             "scoring_polish": post.compilations}}  # fmt: skip
         try:
-            if pareto is None:
-                check_finite(groups["final"], where, "the final design")
+            how.check(job, groups)
         except ConfigError:
             if saver is not None:
                 saver.discard()
             raise
-        rec = bind(RunRecord(attrs, groups, cfg) if pareto is None else FrontRecord(attrs, groups, cfg))
+        rec = bind(how.record(attrs, groups, cfg))
         if ses is not None:
             _write_run(out, rec, ses, saver)
-    if pareto is not None:
-        return Report(
-            out, [*rec.summary()[1:], rec.stages_line(groups["front"]["attrs"]["n_samples"])], rec
-        )
-    return Report(out, [*rec.design_lines(), rec.run_line()], rec)
+    return Report(out, how.lines(rec), rec)
 
 
 def _write_run(out: Path, rec: Record, ses: writer.Session, saver: ckpt.Checkpointer) -> None:
@@ -193,18 +222,16 @@ def _write_run(out: Path, rec: Record, ses: writer.Session, saver: ckpt.Checkpoi
             raise ses.interrupted()
 
 
-def _replay(cfg: Any, text: str | None, where: str, out: Path | None,
-            dry_run: bool = False) -> Report:  # fmt: skip
+def _replay(job: Job, out: Path | None, dry_run: bool = False) -> Report:
     """A study whose run is not an optimisation (``Study.replay``): compute, archive."""
-    est = Estimate(0, 1 << 22, 0, "study", ["pre-flight: a replay, no optimizer"])
+    cfg, where = job.cfg, job.where
     if dry_run:
-        return _dry(out, cfg, est)
-    keys = streams(cfg.seed)
-    attrs = base_attrs("run", cfg, text, keys, where)
-    with _writing(out, cfg, est):
+        return _dry(out, cfg, job.estimate)
+    attrs = job.attrs("run")
+    with _writing(out, cfg, job.estimate):
         with Stopwatch() as total:
             try:
-                groups, lines = study_of(cfg).replay(cfg.study, keys, dtype_of(cfg), where)
+                groups, lines = job.study.replay(cfg.study, job.keys, job.dtype, where)
             except ValueError as e:
                 raise ConfigError(f"{where}: study: {e}") from None
         attrs |= {"wall_time_s": total.wall, "compile_time_s": total.compile,
@@ -223,8 +250,8 @@ def _replay(cfg: Any, text: str | None, where: str, out: Path | None,
 def sweep(cfg: Any, text: str | None = None, where: str = "config", out: Path | None = None,
           progress: Progress = no_progress, dry_run: bool = False) -> Report:  # fmt: skip
     """Every member of the config's ``sweep:`` section; members that differ only in
-    optimizer settings run as one vmapped batch on common keys. No checkpoint: a stop
-    writes nothing."""
+    optimizer settings run as one vmapped batch on common keys (one job per batch). No
+    checkpoint: a stop writes nothing."""
     from designopt.app import sweeps as sw
 
     if cfg.study.pareto is not None:
@@ -232,14 +259,9 @@ def sweep(cfg: Any, text: str | None = None, where: str = "config", out: Path | 
                           "(study.objective.pareto) is not supported; run each front with "
                           "`designopt run`")  # fmt: skip
     groups, cfgs, members = sw.groups(cfg, where)
-    ests = []
-    for k, c in cfgs.items():
-        check_optimizer(c, where)
-        fronts.check(c, where)  # a multi-objective optimizer needs a front
-        dtype_of(c)
-        ests.append(estimate(c, members=len(groups[k])))
-    est = max(ests, key=lambda e: e.memory)
-    est.disk = sum(e.disk for e in ests)
+    jobs = {k: Job.build(c, where, text, members=len(groups[k])) for k, c in cfgs.items()}
+    est = max((j.estimate for j in jobs.values()), key=lambda e: e.memory)
+    est.disk = sum(j.estimate.disk for j in jobs.values())
     est.check(where)
     if dry_run:
         return _dry(out, cfg, est)
@@ -249,14 +271,11 @@ def sweep(cfg: Any, text: str | None = None, where: str = "config", out: Path | 
         total_it = sum(cfgs[k].optimizer.n_iters for k in groups)
         with Stopwatch() as total, progress(total_it, "sweep") as bar:
             for k, mem in groups.items():
-                c = cfgs[k]
-                keys = streams(c.seed)
-                problem = build_problem(c, keys, where)
+                job = jobs[k]
                 opt_sets = [sw.split(m)[1] for _, m in mem]
-                res = optimise(c, problem, keys["optimizer"], members=opt_sets, progress=bar,
-                               where=where)  # fmt: skip
+                res = optimise(job, job.problem, members=opt_sets, progress=bar)
                 for j, (i, m) in enumerate(mem):
-                    t = run_groups(c, problem, res.member(j))
+                    t = run_groups(job.cfg, job.problem, res.member(j), job.dtype)
                     check_finite(t["final"], where, f"sweep member {i} {m}")
                     t["attrs"] = {"overrides": m,
                                   "config_resolved_yaml": sw.resolved(cfg, m)}  # fmt: skip
@@ -271,7 +290,7 @@ def sweep(cfg: Any, text: str | None = None, where: str = "config", out: Path | 
             archive.save(out, rec)
     lines = [f"{len(members)} members in {len(groups)} vmapped batch(es); wall "
              f"{total.wall:.1f} s (compile {total.compile:.1f} s, run {total.run:.1f} s)"]  # fmt: skip
-    subs = study_of(cfg).summary(cfg.study)[:3]
+    subs = next(iter(jobs.values())).study.summary(cfg.study)[:3]
     for i, m, fin in sorted(rows, key=lambda r: r[0]):
         keys_txt = ", ".join(f"{k} = {v:g}" for k, v in m.items())
         vals = ", ".join(f"{s} = {float(fin[s]):.4f}" for s in subs)
@@ -287,31 +306,26 @@ def evaluate(cfg: Any, designs: Designs, where: str = "config") -> dict[str, np.
     {index: (n,), index_se: (n,), ...}, one entry per design (``designs``: a dict of
     variable → value or array, arrays broadcast; or a list of such dicts; a variable not
     given takes the middle of its box)."""
-    from designopt.core import validation
-
-    validation.check_seed(cfg.seed, f"{where}: key 'seed'")
-    problem = build_problem(cfg, streams(cfg.seed), where)
-    X = matrix(problem, designs, where)
-    return score(problem, X, batch=cfg.scan.batch if cfg.scan else 256)
+    job = Job.build(cfg, where, n_designs=1)
+    X = matrix(job.problem, designs, where)
+    return score(job.problem, X, batch=cfg.scan.batch if cfg.scan else 256)
 
 
 def scan(cfg: Any, text: str | None = None, where: str = "config", out: Path | None = None,
          progress: Progress = no_progress, dry_run: bool = False) -> Report:  # fmt: skip
     """Score the designs of the config's ``scan:`` section in vmapped batches → ScanRecord
     (``scan/names``, ``scan/x``, ``scan/<index>`` and ``scan/<index>_se``)."""
-    dtype_of(cfg)
     if cfg.scan is None:
         raise ConfigError(f"{where}: key 'scan': missing; `designopt scan` needs one "
                           "(docs/configs.md)")  # fmt: skip
     sizes = [len(v) for v in cfg.scan.lists().values()]
-    est = estimate(cfg, n_designs=math.prod(sizes) if cfg.scan.mode == "grid" else max(sizes))
-    est.check(where)
+    job = Job.build(cfg, where, text,
+                    n_designs=math.prod(sizes) if cfg.scan.mode == "grid" else max(sizes))  # fmt: skip
     if dry_run:
-        return _dry(out, cfg, est)
-    keys = streams(cfg.seed)
-    with _writing(out, cfg, est):
+        return _dry(out, cfg, job.estimate)
+    with _writing(out, cfg, job.estimate):
         with Stopwatch() as total:
-            problem = build_problem(cfg, keys, where)
+            problem = job.problem
             varied, X = scan_designs(cfg, problem, where)
             b = cfg.scan.batch
             plan = devices.scoring_plan(cfg.parallel, where)
@@ -326,7 +340,7 @@ def scan(cfg: Any, text: str | None = None, where: str = "config", out: Path | N
                          "varied": np.array(varied, dtype="S"), **res,
                          "attrs": {"mode": cfg.scan.mode, "shape": sizes}},
                 "problem": problem_group(problem)}  # fmt: skip
-        attrs = base_attrs("scan", cfg, text, keys, where) | {
+        attrs = job.attrs("scan") | {
             "n_designs": int(X.shape[0]), "wall_time_s": total.wall,
             "compile_time_s": total.compile, "run_time_s": total.run}  # fmt: skip
         rec = bind(ScanRecord(attrs, tree, cfg))

@@ -13,6 +13,7 @@ from typing import Any
 from designopt.core.errors import ConfigError
 from designopt.core.memory import available_memory
 from designopt.io import writer
+from designopt.studies import Study
 
 BYTES_PER_DESIGN_SAMPLE = 128
 """Peak memory per (design × Monte-Carlo sample in flight), conservative: the 9-DOF master study measures
@@ -58,12 +59,13 @@ class Estimate:
                               f"available; lower {self.lower}")  # fmt: skip
 
 
-def estimate(cfg: Any, n_designs: int = 0, members: int = 1) -> Estimate:
+def estimate(cfg: Any, study: Study, n_designs: int = 0, members: int = 1) -> Estimate:
     """Peak memory and archive size of a run (``n_designs`` > 0: a scan of that many
-    designs; ``members``: a sweep) from the config and the study's ``cost`` hook."""
-    from designopt.studies import get
-
-    cost = get(cfg.study.name).cost(cfg.study)
+    designs; ``members``: a sweep) from the config and the study's ``cost`` hook; a study
+    whose run is a replay costs a fixed small amount."""
+    if study.replay is not None and not n_designs:
+        return Estimate(0, 1 << 22, 0, "study", ["pre-flight: a replay, no optimizer"])
+    cost = study.cost(cfg.study)
     D = max(1, len(cfg.study.variables))
     samples = max(1, int(cost.samples))
     per_chunk = max(1, min(samples, int(cost.chunk)))

@@ -10,6 +10,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from designopt.app import records
 from designopt.core.errors import ConfigError
 from designopt.figures import canvas
 from designopt.figures.hints import NONE, Hints
@@ -23,7 +24,6 @@ from designopt.results import (
     ScanRecord,
     SweepRecord,
 )
-from designopt.app import records
 from designopt.studies import STUDIES, Study
 
 

@@ -12,7 +12,6 @@ import numpy as np
 from designopt.core.errors import ConfigError
 from designopt.problems.base import Problem
 from designopt.problems.evaluate import score
-from designopt.app.job import dtype_of
 
 
 def check_finite(values: Mapping[str, Any], where: str, what: str,
@@ -42,9 +41,9 @@ def problem_group(problem: Problem) -> dict[str, Any]:
     return g
 
 
-def run_groups(cfg: Any, problem: Problem, res: Any) -> dict[str, Any]:
+def run_groups(cfg: Any, problem: Problem, res: Any, dtype: Any) -> dict[str, Any]:
     """The groups of one (unbatched) run's record: optimizer, best_run, problem, final
-    and, with a ``refine`` section, refine (docs/archive.md)."""
+    and, with a ``refine`` section, refine (docs/archive.md); ``dtype`` the run's."""
     from designopt.optim.polish import refine
 
     bv = getattr(res, "best_v", None)
@@ -69,7 +68,7 @@ def run_groups(cfg: Any, problem: Problem, res: Any) -> dict[str, Any]:
         r = cfg.refine
         order = np.argsort(res.best_f)[: r.n_best]
         rr = refine(problem, res.best_x[order], r.steps, r.learning_rate, r.method,
-                    dtype=dtype_of(cfg))  # fmt: skip
+                    dtype=dtype)  # fmt: skip
         tree["refine"] = {
             "run_index": order, "x0": rr.x0, "f0": rr.f0, "x": rr.x, "f": rr.f,
             "history": rr.history, "gain": rr.gain,

@@ -72,21 +72,25 @@ def members(cfg: Any) -> list[dict[str, float]]:
     return [dict(zip(keys, c, strict=True)) for c in combos]
 
 
-def apply(cfg: Any, overrides: dict[str, Any]) -> Any:
-    """A validated copy of ``cfg`` with the overrides set (and no sweep section)."""
+def apply(cfg: Any, overrides: dict[str, Any], where: str = "config") -> Any:
+    """The validated config of ``cfg`` with the overrides set (and no sweep section),
+    through the one override path (``config.set_key``, then ``config.validate``); a whole
+    number key keeps whole numbers."""
+    from designopt.app.config import set_key, validate
+
     d = cfg.model_dump(by_alias=True)
     d["sweep"] = None
     for path, v in overrides.items():
         node = d
-        *head, last = path.split(".")
-        for p in head:
-            node = node.setdefault(p, {})
-        if isinstance(node.get(last), int) and not isinstance(node.get(last), bool):
+        for p in path.split(".")[:-1]:
+            node = node.get(p) if isinstance(node, dict) and isinstance(node.get(p), dict) else {}
+        old = node.get(path.split(".")[-1])
+        if isinstance(old, int) and not isinstance(old, bool):
             if float(v) != int(v):
                 raise ValueError(f"'{path}' takes whole numbers, got {v}")
             v = int(v)
-        node[last] = v
-    return type(cfg).model_validate(d)
+        set_key(d, path, v, where)
+    return validate(d, where)
 
 
 def split(overrides: dict[str, Any]) -> tuple[dict[str, Any], dict[str, float]]:
@@ -100,10 +104,7 @@ def groups(cfg: Any, where: str) -> tuple[dict[str, list[tuple[int, dict]]], dic
     """The sweep's members grouped by what changes the problem or the run shape:
     ({group: [(member index, overrides)]}, {group: its config}, members). ConfigError
     naming ``sweep.vary`` for a bad key or value."""
-    from pydantic import ValidationError
-
     from designopt.core.errors import ConfigError
-    from designopt.app.config import error_text
 
     if cfg.sweep is None:
         raise ConfigError(f"{where}: key 'sweep': missing; `designopt sweep` needs one "
@@ -115,10 +116,11 @@ def groups(cfg: Any, where: str) -> tuple[dict[str, list[tuple[int, dict]]], dic
         for i, m in enumerate(mem):
             rest, _ = split(m)
             k = repr(sorted(rest.items()))
-            cfgs.setdefault(k, apply(cfg, rest))
+            if k not in cfgs:
+                cfgs[k] = apply(cfg, rest, where)
             out.setdefault(k, []).append((i, m))
-    except ValidationError as e:
-        raise ConfigError(f"{where}: key 'sweep.vary' → {error_text(e)}") from None
+    except ConfigError as e:  # a member's config refused: name the sweep's key
+        raise ConfigError(f"{where}: key 'sweep.vary' → {str(e).removeprefix(where + ': ')}") from None
     except ValueError as e:
         raise ConfigError(f"{where}: key 'sweep.vary': {e}") from None
     return out, cfgs, mem

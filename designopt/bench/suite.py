@@ -20,11 +20,12 @@ from typing import Any, Literal
 import jax
 import jax.numpy as jnp
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
 from designopt import optim
 from designopt.bench.table import format_rows, u_tests
 from designopt.core.errors import ConfigError
+from designopt.core.settings import Section
 from designopt.core.timing import Stopwatch
 from designopt.core.validation import SEED_MAX
 from designopt.numerics.statistics import summary
@@ -36,8 +37,7 @@ DEFAULT_SUCCESS = {"griewank": 0.1, "rastrigin": 100.0, "ackley": 0.1, "sphere":
                    "rosenbrock": 100.0, "schwefel226": 3000.0}  # fmt: skip
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+_Strict = Section  # unknown keys are errors
 
 
 class Entry(_Strict):

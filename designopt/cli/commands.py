@@ -30,8 +30,8 @@ study's own commands say so in ``Command.writes``)."""
 def _finish(rep, args: argparse.Namespace) -> int:
     """Print the report's lines, the archive path and draw the figures unless --no-figures
     (a figure write fault: exit 1, the archive kept)."""
-    from designopt.io import writer
     from designopt.app import pipeline
+    from designopt.io import writer
 
     if not writer.writes():  # a non-zero process of a multi-process job: process 0 reports
         return 0
@@ -127,8 +127,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from designopt.results import CheckpointRecord
     from designopt.app import pipeline, records
+    from designopt.results import CheckpointRecord
 
     p = Path(args.archive)
     rec = records.load(p)

@@ -107,14 +107,14 @@ def cmd_ik(args: argparse.Namespace) -> int:
     with the study's hook, archive an IKRecord (``--csv``: the joints too), print."""
     import jax
 
+    from designopt.app.job import base_attrs
+    from designopt.app.records import bind
     from designopt.cli.setup import load_args, parse_design
     from designopt.core.keys import streams
     from designopt.core.timing import Stopwatch
     from designopt.io import archive, writer
     from designopt.results import IKRecord
     from designopt.results import ik as iktext
-    from designopt.app.job import base_attrs
-    from designopt.app.records import bind
     from designopt.studies import STUDIES
 
     cfg, text = load_args(args)

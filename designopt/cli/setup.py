@@ -16,19 +16,31 @@ from designopt.core.errors import ConfigError
 
 
 def load_args(args: argparse.Namespace):
+    """The command's config: the file with the flags that override it (--seed,
+    --overwrite, --max-minutes, --devices and the multi-process flags) set as dotted keys
+    before the one validation (``config.load``); then JAX set up for it (devices, 64-bit
+    mode for ``precision: float64``, the persistent compilation cache)."""
+    from designopt.app.config import load, parse
     from designopt.core.validation import check_seed
     from designopt.io import writer
-    from designopt.app.config import load
 
-    cfg, text = load(args.config)
+    over: dict[str, object] = {}
     if getattr(args, "seed", None) is not None:
-        cfg.seed = check_seed(args.seed, f"--seed {args.seed}")
+        over["seed"] = check_seed(args.seed, f"--seed {args.seed}")
     if getattr(args, "overwrite", False):
-        cfg.overwrite = True
+        over["overwrite"] = True
     if getattr(args, "max_minutes", None) is not None:
         if not (math.isfinite(args.max_minutes) and args.max_minutes > 0):
             raise ConfigError(f"--max-minutes {args.max_minutes}: give a positive number")
-        cfg.max_minutes = args.max_minutes
+        over["max_minutes"] = args.max_minutes
+    devices = getattr(args, "devices", None)
+    if devices is not None or _multi(args):
+        raw, _ = parse(args.config)
+        section = raw.get("parallel") if isinstance(raw.get("parallel"), dict) else {}
+        over["parallel"] = dict(section)  # the flags make a parallel section
+        if devices:
+            over["parallel.devices"] = devices
+    cfg, text = load(args.config, overrides=over)
     ses = writer.current()
     if ses is not None and cfg.max_minutes is not None:
         ses.set_deadline(cfg.max_minutes)
@@ -42,26 +54,31 @@ def load_args(args: argparse.Namespace):
     return cfg, text
 
 
+def _multi(args: argparse.Namespace) -> bool:
+    from designopt.core import devices as dev
+
+    return dev.requested(getattr(args, "coordinator", None), getattr(args, "num_processes", None))
+
+
 def parallel_flags(args: argparse.Namespace, cfg=None):
     """--devices and the multi-process flags (docs/scaling.md): JAX set up before its
-    backend starts; a non-zero process of a job writes and prints nothing. Returns the
+    backend starts; a non-zero process of a job writes and prints nothing. ``cfg``: the
+    validated config (its ``parallel`` section already holds the flags). Returns the
     parallel settings in force (None: one device, as ever)."""
     from designopt.core import devices as dev
     from designopt.io import writer
 
     devices = getattr(args, "devices", None)
     coord, n_proc = getattr(args, "coordinator", None), getattr(args, "num_processes", None)
-    multi = dev.requested(coord, n_proc)
-    p = cfg.parallel if cfg is not None else None
-    if devices is not None or multi:
-        p = (p or dev.ParallelSettings()).model_copy(
-            update={"devices": devices if devices else (p.devices if p else None)}
-        )
-        if cfg is not None:
-            cfg.parallel = p
+    if cfg is not None:
+        p = cfg.parallel
+    elif devices is not None or dev.requested(coord, n_proc):
+        p = dev.ParallelSettings(devices=devices or None)
+    else:
+        p = None
     timeout = p.timeout_s if p is not None else dev.DEFAULT_TIMEOUT_S
     dev.configure(p.devices if p is not None else devices, coord, n_proc,
-                       getattr(args, "process_id", None), timeout)  # fmt: skip
+                  getattr(args, "process_id", None), timeout)  # fmt: skip
     writer.set_writer(dev.is_writer())
     return p
 

@@ -26,9 +26,10 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
 from designopt.core.errors import ConfigError
+from designopt.core.settings import Section
 
 AXES = ("auto", "members", "runs", "particles", "samples")
 MESH_AXIS = "d"
@@ -36,7 +37,7 @@ SAMPLES_AXIS = "samples"
 DEFAULT_TIMEOUT_S = 60
 
 
-class ParallelSettings(BaseModel):
+class ParallelSettings(Section):
     """The ``parallel:`` section of a config (docs/scaling.md).
 
     ``devices``: how many devices the job uses (all processes together); None = every
@@ -44,8 +45,6 @@ class ParallelSettings(BaseModel):
     particles whose size divides over the devices, else samples). ``timeout_s``: how long
     a multi-process job waits for a silent peer before it gives up (exit 1).
     """
-
-    model_config = ConfigDict(extra="forbid")
 
     devices: int | None = Field(None, ge=1)
     axis: Literal["auto", "members", "runs", "particles", "samples"] = "auto"

@@ -1,6 +1,6 @@
-"""The base of every nested settings section (``studies.base`` re-exports it): a module of
-its own, so that shared schemas such as ``designopt.kinematics.task`` need not import the study
-registry."""
+"""The one base of every settings model (the run config's sections, each study's
+settings, the benchmark config, device settings, task regions): a pydantic model whose
+unknown keys are errors."""
 
 from __future__ import annotations
 
@@ -8,6 +8,6 @@ from pydantic import BaseModel, ConfigDict
 
 
 class Section(BaseModel):
-    """A nested section of a study's settings: unknown keys are errors."""
+    """A settings model or section: unknown keys are errors."""
 
     model_config = ConfigDict(extra="forbid")

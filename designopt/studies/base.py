@@ -16,7 +16,7 @@ from typing import Any
 
 import jax
 import numpy as np
-from pydantic import BaseModel, ConfigDict, field_validator, model_validator
+from pydantic import field_validator, model_validator
 
 from designopt.core.keys import STREAMS, archived_keys, key_data, streams  # noqa: F401 (re-exported)
 from designopt.core.settings import Section  # noqa: F401 (re-exported: studies' settings use it)
@@ -24,14 +24,12 @@ from designopt.kinematics.ikjob import IKHook
 from designopt.problems.base import Problem
 
 
-class StudySettings(BaseModel):
+class StudySettings(Section):
     """Base of every study's settings model: unknown keys are errors.
 
     A subclass declares ``name: Literal["<study>"]`` (the config's discriminator),
     ``variables`` {name: (lo, hi)} and whatever else the study needs.
     """
-
-    model_config = ConfigDict(extra="forbid")
 
     name: str
     variables: dict[str, tuple[float, float]]

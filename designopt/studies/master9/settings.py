@@ -5,8 +5,9 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import Field, field_validator
 
+from designopt.core.settings import Section
 from designopt.studies.base import StudySettings, check_replicates
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -16,7 +17,7 @@ DESIGN_KEYS: tuple[str, ...] = ("a1", "a3", "d3", "a4", "a5", "d2", "d5", "d6")
 """The master's lengths (mm); mirrors ``mechanism.DESIGN_KEYS`` (kept import-light)."""
 
 
-class Indices(BaseModel):
+class Indices(Section):
     """How the indices of seed 000 eq. (35)-(43) are estimated: the config's
     ``study.indices`` section and the settings of the index kernel (``indices.py``), one
     model. Every field is recorded in archives (``record``).
@@ -28,8 +29,6 @@ class Indices(BaseModel):
     paper), one number or three; norm/normalized: the condition number convention
     (default raw Frobenius, eq. 51-53); weights: (w_k, w_l, w_p) of eq. (43).
     """
-
-    model_config = ConfigDict(extra="forbid")
 
     n_samples: int = Field(20_000, gt=1)
     chunk: int = Field(8_192, gt=0)  # (50, 8192) arrays stay in cache: 1.3-1.6× faster than 32768
