@@ -13,13 +13,13 @@ import json
 import sys
 from pathlib import Path
 
+from designopt.cli.setup import DESIGN_FLAG, design_argument, use_cache
 from designopt.cli.setup import load_args as _load
 from designopt.cli.setup import out_path as _out
 from designopt.cli.setup import parallel_flags as _parallel
 from designopt.cli.setup import parse_design as _parse_design
 from designopt.cli.setup import progress as _progress
 from designopt.cli.setup import resume_command as _resume_command
-from designopt.cli.setup import use_cache
 from designopt.core.errors import ConfigError, Interrupted, WriteError
 
 WRITERS = ("run", "sweep", "scan", "bench", "report")
@@ -199,12 +199,61 @@ def _positive(text: str) -> int:
     return n
 
 
+class Parser(argparse.ArgumentParser):
+    """argparse with a usage error as one line, ``designopt: error: <argparse's message>;
+    see <prog> --help``, exit 2 (argparse prints the usage block first); ``--help`` as
+    argparse prints it. Every subparser is one too (``parser_class``). ``--design a=1 b=2``
+    (one flag, several NAME=VALUE) stops at the first word without '=', so a CONFIG after
+    it is still the positional."""
+
+    def error(self, message: str):  # type: ignore[override]
+        self.exit(2, f"designopt: error: {message}; see {self.prog} --help\n")
+
+    def parse_args(self, args=None, namespace=None):  # type: ignore[override]
+        ns, extra = self.parse_known_args(args, namespace)
+        if extra:
+            cmd = getattr(ns, "command", None)
+            prog = f"{self.prog} {cmd}" if cmd else self.prog
+            self.exit(2, f"designopt: error: unrecognized arguments: {' '.join(extra)}; "
+                         f"see {prog} --help\n")  # fmt: skip
+        return ns
+
+    def parse_known_args(self, args=None, namespace=None):  # type: ignore[override]
+        if args is not None and DESIGN_FLAG in self._option_string_actions:
+            args = _design_items(list(args))
+        return super().parse_known_args(args, namespace)
+
+
+def _design_items(args: list[str]) -> list[str]:
+    """``--design a=1 b=2`` as ``--design=a=1 --design=b=2``: the values of one flag are
+    the words with '=' after it (not an option), so a positional after them stays one."""
+    out: list[str] = []
+    i = 0
+    while i < len(args):
+        word = args[i]
+        if word == "--":
+            return out + args[i:]
+        if word == DESIGN_FLAG and i + 1 < len(args) and _item(args[i + 1]):
+            i += 1
+            while i < len(args) and _item(args[i]):
+                out.append(f"{DESIGN_FLAG}={args[i]}")
+                i += 1
+            continue
+        out.append(word)
+        i += 1
+    return out
+
+
+def _item(word: str) -> bool:
+    return "=" in word and not word.startswith("-")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(
+    ap = Parser(
         prog="designopt",
         description="Vectorized JAX design-space optimizer for surgical-robot mechanisms.",
     )
-    sub = ap.add_subparsers(dest="command", required=True)
+    sub = ap.add_subparsers(dest="command", required=True, parser_class=Parser)
 
     def common(p, seed=True, out=True, quiet=True, figures=True, dry=True):
         p.add_argument("config", help="config (YAML), e.g. configs/<study>.yaml")
@@ -249,8 +298,11 @@ def build_parser() -> argparse.ArgumentParser:
     sc.set_defaults(func=cmd_scan)
     e = sub.add_parser("eval", help="print every index of one design with its standard error")
     common(e, out=False, quiet=False, figures=False, dry=False)
-    e.add_argument("--design", action="append", default=[], metavar="NAME=VALUE",
-                   help="a design variable's value (repeat; others: middle of their box)")  # fmt: skip
+    design_argument(
+        e,
+        "design variables' values, one or several after one flag or the flag "
+        "repeated (others: middle of their box)",
+    )
     e.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     e.set_defaults(func=cmd_eval)
     st = sub.add_parser("studies", help="list the registered studies")
@@ -284,8 +336,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run one command; its exit status (module docstring, docs/faults.md)."""
-    args = build_parser().parse_args(argv)
+    """Run one command; its exit status (module docstring, docs/faults.md). A usage error
+    is one line and 2, ``--help`` 0 (both returned, not raised)."""
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as e:  # argparse: --help, or a usage error (Parser.error)
+        return e.code if isinstance(e.code, int) else 2
     try:
         writes = args.command in WRITERS or getattr(args, "writes", False)
         if writes and not getattr(args, "dry_run", False):

@@ -175,6 +175,16 @@ def resume_command(args: argparse.Namespace, cfg) -> str:
     return shlex.join(parts)
 
 
+DESIGN_FLAG = "--design"
+
+
+def design_argument(p: argparse.ArgumentParser | argparse._ArgumentGroup, help: str) -> None:
+    """``--design NAME=VALUE [NAME=VALUE ...]``: one flag with several values or the flag
+    repeated, all in one list (:func:`parse_design` reads it)."""
+    p.add_argument(DESIGN_FLAG, action="extend", nargs="+", default=[], metavar="NAME=VALUE",
+                   help=help)  # fmt: skip
+
+
 def parse_design(items: list[str]) -> dict[str, float]:
     """--design NAME=VALUE items as {name: value}: every value a usable number
     (designopt.core.validation), every name given once."""
