@@ -239,7 +239,8 @@ def test_linear_constraints_from_yaml_bind_the_optimum(tmp_path):
 
 
 def test_linear_constraint_names_must_be_design_variables():
-    from designopt.core.errors import ConfigError, validate
+    from designopt.app.config import validate
+    from designopt.core.errors import ConfigError
 
     raw = {"study": {"name": "serial",
                      "chain": {"joints": [{"type": "R", "a": "l1", "limits": [-90, 90]}]},

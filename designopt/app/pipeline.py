@@ -109,7 +109,11 @@ class Single:
         return None
 
     def groups(self, job: Job, problem: Any, res: Any) -> dict[str, Any]:
-        return run_groups(job.cfg, problem, res, job.dtype)
+        groups = run_groups(job.cfg, problem, res, job.dtype)
+        warn = job.study.warnings(job.cfg.study, groups["final"])
+        if warn:  # far from what was asked: archived, printed, shown, marked on figures
+            groups["final"]["attrs"]["warnings"] = list(warn)
+        return groups
 
     def check(self, job: Job, groups: dict[str, Any]) -> None:
         check_finite(groups["final"], job.where, "the final design")

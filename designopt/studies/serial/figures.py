@@ -181,8 +181,8 @@ def _workspace(p: np.ndarray, c: np.ndarray, s: SerialSettings, folder: Path) ->
     ax.set_xlabel(style.label("x", L))
     ax.set_ylabel(style.label("y", L))
     fig.colorbar(sc, ax=ax, label=style.label("1/k", style.DIMENSIONLESS), shrink=0.7, pad=0.1)
-    ax.set_title("final design: tip positions of 4000 uniform joint samples\n"
-                 "(L: the chain's length unit)", fontsize=9)  # fmt: skip
+    ax.set_title("final design: tip positions of 4000 uniform joint samples"
+                 + ("\n(L: the chain's length unit)" if L == "L" else ""), fontsize=9)  # fmt: skip
     return save(fig, folder, "workspace")
 
 
@@ -246,8 +246,9 @@ def _task_caption(rec: RunRecord, sol: dict[str, np.ndarray], L: str) -> str:
     ta = s.task.tool_axis  # type: ignore[union-attr]
     if ta is not None:
         what += f"; tool axis within {ta.cone:g}° of {_vec(np.asarray(ta.direction))}"
+    warn = [ln for w in rec.warnings for ln in textwrap.wrap("WARNING: " + w, 90)]
     return "\n".join(textwrap.wrap("final design: " + des, 90) + [line]
-                     + textwrap.wrap(what, 90))  # fmt: skip
+                     + textwrap.wrap(what, 90) + warn)  # fmt: skip
 
 
 def _task_panel(ax, a: np.ndarray, b: np.ndarray, c: np.ndarray, ok: np.ndarray, size: float):
@@ -303,7 +304,9 @@ def draw_task(rec: RunRecord, folder: Path) -> list[Path]:
     fig.colorbar(scs[0], ax=axes, label=style.label("1/k", style.DIMENSIONLESS), shrink=0.85)
     if (~ok).any():
         axes[-1].legend(loc="lower right", fontsize=8, framealpha=0.85)
-    fig.suptitle(_task_caption(rec, sol, L), fontsize=9)
+    # a design far from what was asked (rec.warnings): the caption says so, in red
+    fig.suptitle(_task_caption(rec, sol, L), fontsize=9,
+                 color="crimson" if rec.warnings else "black")  # fmt: skip
     return save(fig, folder, "task")
 
 
