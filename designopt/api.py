@@ -70,7 +70,10 @@ def _precision(cfg: Any) -> contextlib.AbstractContextManager:
 
 
 @contextlib.contextmanager
-def _bar(total: int, desc: str) -> Iterator[Callable[[int], None]]:
+def _bar(total: int | None, desc: str) -> Iterator[Callable[[int], None]]:
+    if total is None:  # a phase (setting up, scoring): no bar
+        yield lambda n: None
+        return
     from tqdm import tqdm
 
     with tqdm(total=total, desc=desc, unit="it") as t:

@@ -11,6 +11,7 @@ import argparse
 import contextlib
 import json
 import sys
+import time
 from pathlib import Path
 
 from designopt.cli.setup import DESIGN_FLAG, design_argument, use_cache
@@ -22,14 +23,17 @@ from designopt.cli.setup import progress as _progress
 from designopt.cli.setup import resume_command as _resume_command
 from designopt.core.errors import ConfigError, Interrupted, WriteError
 
+_IMPORTED = time.perf_counter()
+
 WRITERS = ("run", "sweep", "scan", "bench", "report")
 """Commands that write files: they run in the writer's session with signal handling (a
 study's own commands say so in ``Command.writes``)."""
 
 
-def _finish(rep, args: argparse.Namespace) -> int:
+def _finish(rep, args: argparse.Namespace, clock=None) -> int:
     """Print the report's lines, the archive path and draw the figures unless --no-figures
-    (a figure write fault: exit 1, the archive kept)."""
+    (a figure write fault: exit 1, the archive kept); with ``clock`` (a run's Stopwatch,
+    started after the config was loaded) the wall time end to end, split by stage."""
     from designopt.app import pipeline
     from designopt.io import writer
 
@@ -40,27 +44,68 @@ def _finish(rep, args: argparse.Namespace) -> int:
     if getattr(args, "dry_run", False):
         return 0
     print(f"archive: {rep.out}")
+    figures_s = 0.0
     if not getattr(args, "no_figures", False):
+        import time
+
         ses = writer.current()
         kept = f"the archive {rep.out} is complete (`designopt report {rep.out}` draws its figures)"
         if ses is not None:
             ses.kept = lambda: kept
+        t0 = time.perf_counter()
         try:
-            figs = pipeline.draw_figures(rep.out, rep.record)
+            with _progress(args.quiet)(None, "drawing figures"):
+                figs = pipeline.draw_figures(rep.out, rep.record)
         except WriteError as e:
             raise WriteError(f"{e}; {kept}") from None
+        figures_s = time.perf_counter() - t0
         print(f"figures: {len(figs) // 2} (PNG + PDF) in {figs[0].parent}")
+    if clock is not None and rep.record is not None:
+        clock.__exit__(None, None, None)
+        print(wall_line(rep.record.attrs, clock, figures_s))
     return 0
+
+
+def wall_line(attrs: dict, clock, figures_s: float) -> str:
+    """The wall time from the process's start to this line, split into start-up (Python,
+    imports, the config), setup, optimizer, scoring, figures and the rest (archive,
+    printing), with the compile time of it all and the XLA programs compiled. The exit
+    after it skips interpreter teardown (``console``)."""
+    startup = max(process_age() - clock.wall, 0.0)
+    a = {k: float(attrs.get(k + "_time_s", 0.0)) for k in ("setup", "optimizer", "post")}
+    total = startup + clock.wall
+    other = max(clock.wall - sum(a.values()) - figures_s, 0.0)
+    return (f"wall {total:.1f} s end to end = start-up {startup:.1f} s + setup "
+            f"{a['setup']:.1f} s + optimizer {a['optimizer']:.1f} s + scoring {a['post']:.1f} s"
+            f" + figures {figures_s:.1f} s + archive and the rest {other:.1f} s; compile "
+            f"{clock.compile:.1f} s of it ({clock.compilations} XLA programs)")
+
+
+def process_age() -> float:
+    """Seconds since this process started (Linux: /proc; elsewhere since designopt's CLI
+    was imported)."""
+    import os
+    import time
+
+    try:
+        with open("/proc/self/stat") as f:
+            start = int(f.read().rsplit(")", 1)[1].split()[19]) / os.sysconf("SC_CLK_TCK")
+        with open("/proc/uptime") as f:
+            return max(float(f.read().split()[0]) - start, 0.0)
+    except (OSError, ValueError, IndexError):
+        return time.perf_counter() - _IMPORTED
 
 
 def cmd_run(args: argparse.Namespace) -> int:
     from designopt.app import pipeline
+    from designopt.core.timing import Stopwatch
 
     cfg, text = _load(args)
+    clock = Stopwatch().__enter__()  # closed by _finish, after the figures
     rep = pipeline.run(cfg, text, args.config, _out(args, cfg), resume=args.resume,
                        progress=_progress(args.quiet), resume_hint=_resume_command(args, cfg),
                        dry_run=args.dry_run)  # fmt: skip
-    return _finish(rep, args)
+    return _finish(rep, args, None if args.dry_run else clock)
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
