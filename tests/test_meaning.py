@@ -269,3 +269,43 @@ def test_overwrite_leaves_nothing_of_the_old_archive(tmp_path, capsys):
     assert not (tmp_path / "p_figures").exists() and not (tmp_path / "p.html").exists()
     assert (tmp_path / "p.h5").is_file()
     capsys.readouterr()
+
+
+@pytest.fixture(scope="module")
+def dh_run(tmp_path_factory):
+    """A tiny DH (planar 2R) run archive."""
+    d = tmp_path_factory.mktemp("dh")
+    raw = yaml.safe_load((ROOT / "configs" / "planar2r.yaml").read_text())
+    raw["study"]["indices"]["n_samples"] = 256
+    raw["optimizer"] = {"name": "ptpso", "n_particles": 4, "n_iters": 2}
+    raw["output"] = str(d / "p.h5")
+    raw.pop("scan", None)
+    (d / "p.yaml").write_text(yaml.safe_dump(raw))
+    assert main(["run", str(d / "p.yaml"), "--quiet", "--no-figures"]) == 0
+    return d / "p.h5"
+
+
+@pytest.fixture(scope="module")
+def urdf_run(tmp_path_factory):
+    """A tiny URDF-chain run archive."""
+    d = tmp_path_factory.mktemp("urdf")
+    assert main(["run", str(urdf_arm(d)), "--quiet", "--no-figures"]) == 0
+    return d / "u.h5"
+
+
+@pytest.mark.parametrize("case", ["dh-chain", "urdf-is-a-folder", "not-an-archive",
+                                  "archive-is-a-folder"])  # fmt: skip
+def test_export_refuses_in_one_line_and_writes_nothing(tmp_path, capsys, dh_run, urdf_run,
+                                                       case):  # fmt: skip
+    capsys.readouterr()
+    (tmp_path / "adir").mkdir()
+    (tmp_path / "text.h5").write_text("not hdf5")
+    archive, out, needles = {
+        "dh-chain": (dh_run, tmp_path / "o.urdf", ["DH table, not a URDF"]),
+        "urdf-is-a-folder": (urdf_run, tmp_path / "adir", ["adir", "is a folder"]),
+        "not-an-archive": (tmp_path / "text.h5", tmp_path / "o.urdf", ["text.h5"]),
+        "archive-is-a-folder": (tmp_path / "adir", tmp_path / "o.urdf", ["adir"]),
+    }[case]
+    one_line_exit_2(capsys, ["export", str(archive), "--urdf", str(out)], *needles)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["adir", "text.h5"]
+    assert list((tmp_path / "adir").iterdir()) == []

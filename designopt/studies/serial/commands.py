@@ -230,6 +230,9 @@ def cmd_export(args: argparse.Namespace, ctx: Any) -> int:
         s.chain.urdf_text or "", set_values(s, design), s.chain.urdf_path or where
     )
     out = Path(args.urdf)
+    if out.is_dir():
+        raise ConfigError(f"--urdf {out}: is a folder, not a file; give a file name such as "
+                          f"{out / 'robot.urdf'}")  # fmt: skip
     if out.exists() and not getattr(args, "overwrite", False):
         raise ConfigError(f"output '{out}': a file is already there; give --overwrite to "
                           "replace it, or another --urdf")  # fmt: skip

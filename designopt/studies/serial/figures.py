@@ -28,7 +28,7 @@ from designopt.results import RunRecord
 from designopt.studies.serial import taskindex
 from designopt.studies.serial.mechanism import Mechanism, build
 from designopt.studies.serial.objective import measures
-from designopt.studies.serial.settings import ROWS, SerialSettings, units
+from designopt.studies.serial.settings import ROWS, SerialSettings, UrdfChain, length_unit, units
 
 RATES = ("reach",)
 """Success rates (``reach``, under ``measure: task``): clipped to [0, 1], Wilson band."""
@@ -64,12 +64,14 @@ def inv_k(mech: Mechanism, s: SerialSettings, x: np.ndarray, q: np.ndarray) -> n
 
 
 def _unit(mech: Mechanism, i: int, s: SerialSettings) -> tuple[float, str]:
-    return (180 / np.pi, "deg") if _revolute(s, i) else (1.0, "L")
+    """(factor, unit) of active joint i on an axis: degrees, or the chain's length unit."""
+    return (180 / np.pi, "deg") if _revolute(s, i) else (1.0, length_unit(s))
 
 
 def _revolute(s: SerialSettings, i: int) -> bool:
-    j = getattr(s.chain, "joints", None)
-    return j[i].type == "R" if j is not None else True
+    if isinstance(s.chain, UrdfChain):
+        return s.chain.imported.types[i] == "R"
+    return s.chain.joints[i].type == "R"
 
 
 def map_joints(n: int) -> tuple[int, int]:
