@@ -86,8 +86,9 @@ def ours(name: str, args, dtype) -> tuple[list[float], float, float, list[float]
         cpus.append(time.process_time() - c0)
     f, v = r.front.f, r.front.v
     hv = [_front_hv(f[i], v[i], ref) for i in range(args.runs)]
-    if m <= 3:  # the in-loop JAX hypervolume of the last generation agrees
-        assert np.allclose(r.best_f, hv, rtol=1e-6, atol=1e-9), (r.best_f, hv)
+    if m <= 3:  # the in-loop JAX hypervolume of the last population agrees
+        last = np.asarray(r.history_population)[:, -1]  # (best_f: the archive's, ≥ it)
+        assert np.allclose(last, hv, rtol=1e-6, atol=1e-9), (last, hv)
     return hv, first - min(walls), statistics.median(walls), walls + cpus
 
 

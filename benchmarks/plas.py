@@ -20,9 +20,8 @@ jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
-from designopt.app import pipeline  # noqa: E402
-from designopt.io import archive
-from designopt.app import config
+from designopt.app import config, pipeline  # noqa: E402
+from designopt.io import archive  # noqa: E402
 from designopt.studies.plas import figures as F  # noqa: E402
 from designopt.studies.plas import mechanism as m  # noqa: E402
 from designopt.studies.plas import paper as P  # noqa: E402

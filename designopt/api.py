@@ -9,8 +9,10 @@ typed records (``designopt.results``) instead of printing.
     designopt.load("results/m9.h5") == rec    # True
     designopt.evaluate(cfg, {"l2": [0.5, 0.7]})["f"]     # one entry per design
 
-Errors in a config or a design raise ``designopt.ConfigError`` naming the key; float64
-configs need ``jax.config.update("jax_enable_x64", True)`` first (the CLI does it).
+Errors in a config or a design raise ``designopt.ConfigError`` naming the key. A float64
+config runs in JAX's 64-bit mode for the extent of the call (``jax.enable_x64``, a
+context: the caller's other JAX code keeps the precision it had); the arrays it returns
+are numpy.
 """
 
 from __future__ import annotations
@@ -57,8 +59,21 @@ def _config(config: Config) -> tuple[Any, str]:
     return validate(raw, "config"), "config"
 
 
+def _precision(cfg: Any) -> contextlib.AbstractContextManager:
+    """JAX's 64-bit mode for the extent of a call of a float64 config (nothing to do when
+    the caller already enabled it); the caller's global setting is left as it was."""
+    import jax
+
+    if cfg.precision == "float64" and not jax.config.jax_enable_x64:
+        return jax.enable_x64(True)
+    return contextlib.nullcontext()
+
+
 @contextlib.contextmanager
-def _bar(total: int, desc: str) -> Iterator[Callable[[int], None]]:
+def _bar(total: int | None, desc: str) -> Iterator[Callable[[int], None]]:
+    if total is None:  # a phase (setting up, scoring): no bar
+        yield lambda n: None
+        return
     from tqdm import tqdm
 
     with tqdm(total=total, desc=desc, unit="it") as t:
@@ -81,8 +96,9 @@ def run(config: Config, out: str | os.PathLike | None = None, progress: bool = F
     cfg, where = _config(config)
     if overwrite:
         cfg = cfg.model_copy(update={"overwrite": True})  # a control key: nothing to check
-    rep = pipeline.run(cfg, None, where, None if out is None else Path(out),
-                       progress=_progress(progress))  # fmt: skip
+    with _precision(cfg):
+        rep = pipeline.run(cfg, None, where, None if out is None else Path(out),
+                           progress=_progress(progress))  # fmt: skip
     return rep.record  # type: ignore[return-value]
 
 
@@ -94,8 +110,9 @@ def sweep(config: Config, out: str | os.PathLike | None = None, progress: bool =
     cfg, where = _config(config)
     if overwrite:
         cfg = cfg.model_copy(update={"overwrite": True})  # a control key: nothing to check
-    rep = pipeline.sweep(cfg, None, where, None if out is None else Path(out),
-                         progress=_progress(progress))  # fmt: skip
+    with _precision(cfg):
+        rep = pipeline.sweep(cfg, None, where, None if out is None else Path(out),
+                             progress=_progress(progress))  # fmt: skip
     return rep.record  # type: ignore[return-value]
 
 
@@ -107,8 +124,9 @@ def scan(config: Config, out: str | os.PathLike | None = None, progress: bool = 
     cfg, where = _config(config)
     if overwrite:
         cfg = cfg.model_copy(update={"overwrite": True})  # a control key: nothing to check
-    rep = pipeline.scan(cfg, None, where, None if out is None else Path(out),
-                        progress=_progress(progress))  # fmt: skip
+    with _precision(cfg):
+        rep = pipeline.scan(cfg, None, where, None if out is None else Path(out),
+                            progress=_progress(progress))  # fmt: skip
     return rep.record  # type: ignore[return-value]
 
 
@@ -121,7 +139,8 @@ def evaluate(config: Config, designs: Any) -> dict[str, np.ndarray]:
     from designopt.app import pipeline
 
     cfg, where = _config(config)
-    return pipeline.evaluate(cfg, designs, where)
+    with _precision(cfg):
+        return pipeline.evaluate(cfg, designs, where)
 
 
 def load(path: str | os.PathLike) -> Record:

@@ -1,5 +1,7 @@
 """designopt run/show end to end, and bad input: one line, exit 2, nothing written."""
 
+import re
+
 import h5py
 import numpy as np
 import pytest
@@ -118,3 +120,52 @@ def test_bad_max_minutes_and_dry_run(tmp_path, capsys):
     assert main(["run", str(cfg), "--dry-run"]) == 0
     assert "checks passed; nothing written" in capsys.readouterr().out
     assert sorted(p.name for p in tmp_path.iterdir()) == ["c.yaml"]
+
+
+def test_a_long_phase_shows_that_it_runs_and_a_short_one_does_not(monkeypatch, capsys):
+    """Not a terminal (a log): one line once the phase has lasted SHOW_AFTER_S."""
+    import time
+
+    from designopt.cli import setup
+
+    monkeypatch.setattr(setup, "SHOW_AFTER_S", 0.05)
+    with setup.progress(False)(None, "re-scoring the front"):
+        time.sleep(0.3)
+    assert capsys.readouterr().err == "designopt: re-scoring the front …\n"
+    with setup.progress(False)(None, "short"):
+        pass
+    with setup.progress(True)(None, "quiet"):
+        time.sleep(0.3)
+    assert capsys.readouterr().err == ""
+
+
+def test_compiling_is_a_phase_apart_from_the_iterations(monkeypatch, capsys):
+    """Until the first chunk is done the line says compiling; the bar starts after it,
+    holding the first chunk's iterations, so its rate counts only iterations."""
+    import time
+
+    from designopt.cli import setup
+
+    monkeypatch.setattr(setup, "SHOW_AFTER_S", 0.05)
+    with setup.progress(False)(10, "ptpso on planar2r") as update:
+        time.sleep(0.3)  # compiling
+        update(4)
+        update(6)
+    err = capsys.readouterr().err.replace("\r", "\n")
+    assert err.splitlines()[0] == "designopt: ptpso on planar2r: compiling …"
+    bars = [ln for ln in err.splitlines() if ln.startswith("ptpso on planar2r:")]
+    assert bars and " 4/10 " in bars[0] and "10/10" in bars[-1]
+
+
+def test_a_run_prints_its_wall_time_end_to_end(tmp_path, capsys):
+    cfg = write(tmp_path, TINY)
+    assert main(["run", str(cfg), "--quiet"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    last = out[-1]
+    assert last.startswith("wall ") and "s end to end = start-up " in last, last
+    for part in ("+ setup", "+ optimizer", "+ scoring", "+ figures", "; compile", "XLA programs"):
+        assert part in last, (part, last)
+    total = float(last.split()[1])
+    parts = [float(x) for x in re.findall(r"(?:start-up|setup|optimizer|scoring|figures|rest) "
+                                          r"([\d.]+) s", last)]  # fmt: skip
+    assert len(parts) == 6 and abs(sum(parts) - total) <= 0.35  # each rounded to 0.1 s

@@ -1,7 +1,11 @@
 """Pareto fronts of a study's indices (study.objective.pareto, docs/pareto.md): the planar
 2R arm's front against its known geometry and a brute-force grid, re-scoring honesty,
-the record's round trip, and the bad inputs (exit 2, one line naming the key)."""
+the record's round trip, the hypervolume history of the best front found so far, every
+index shown beside the objectives, and the bad inputs (exit 2, one line naming the
+key)."""
 
+import dataclasses
+import re
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +19,7 @@ from designopt.app.job import Job
 from designopt.cli.commands import main
 from designopt.numerics import pareto
 from designopt.problems.evaluate import score
+from designopt.results import front as front_record
 
 ROOT = Path(__file__).resolve().parents[1]
 PLANAR = ROOT / "configs" / "planar2r.yaml"
@@ -105,6 +110,73 @@ def test_the_front_record_round_trips_and_shows(front, capsys):
     assert main(["show", str(out)]) == 0
     text = capsys.readouterr().out
     assert "Pareto front of gci (max), volume (max)" in text and "hypervolume" in text
+    # every other index of the study beside the objectives, by name and value ± SE
+    assert back.indices == ["gcsei", "manipulability"]
+    head = next(ln for ln in text.splitlines() if "gcsei" in ln and "manipulability" in ln
+                and "#" in ln)  # fmt: skip
+    # each name with its unit (the planar 2R's lengths in L, volume an area)
+    assert head.split()[:11] == ["#", "l1", "[L]", "l2", "[L]", "gci", "volume", "[L^2]", "gcsei",
+                                 "manipulability", "[L^2]"]  # fmt: skip
+    v, se = back.values["manipulability"], back.values["manipulability_se"]
+    assert f"{v[0]:11.5g} ± {se[0]:7.1e}" in text and f"{v[-1]:11.5g} ± {se[-1]:7.1e}" in text
+    assert "search: hypervolume of the best front found so far" in text
+
+
+def test_the_history_is_the_best_front_found_so_far(front):
+    """optimizer/hypervolume: the hypervolume of the archive of every design evaluated
+    (never decreasing, never below the population's, its last value the archived
+    archive's when nothing was cut from it); the population's is kept beside it."""
+    _, rec, _ = front
+    o = rec.groups["optimizer"]
+    H, pop = rec.history, rec.population_history
+    assert H.shape == pop.shape == (2, 41)
+    assert np.all(np.diff(H, axis=1) >= 0) and np.all(H >= pop)
+    np.testing.assert_array_equal(o["final_hypervolume"], H[:, -1])
+    sg = np.array([1.0 if s == "min" else -1.0 for s in rec.objectives.values()])
+    ref = rec.reference * sg  # minimised
+    assert o["archive_f"].shape == (2, 4 * 40, 2)
+    for i in range(2):
+        A = o["archive_f"][i]
+        A = A[~np.isnan(A).any(1)] * sg
+        assert len(A) and not pareto.dominance_matrix_np(A).any()
+        hv = pareto.hypervolume(A, ref)
+        assert H[i, -1] >= hv * (1 - 1e-12)
+        if o["archive_pruned"][i] == 0:  # exact: the final population adds nothing to it
+            assert H[i, -1] == pytest.approx(hv, rel=1e-12)
+            F = o["population_f"][i] * sg
+            assert pareto.hypervolume(np.concatenate([A, F]), ref) == pytest.approx(hv, rel=1e-12)
+
+
+def test_the_summary_shows_every_index_and_continues_wide_tables(front):
+    """A task front of gci and length must show the reach beside them (low gci at the
+    short end meant: does not reach). With more indices than fit a line, the columns go
+    on in a block below, each row still numbered."""
+    _, rec, _ = front
+    n = len(rec.F)
+    rng = np.random.default_rng(0)
+    extra = {"reach": np.linspace(1.0, 0.0, n), "reach_se": np.full(n, 0.01)}
+    for k in ("joint_margin", "gci_q05", "eta", "zeta", "omega"):
+        extra[k], extra[k + "_se"] = rng.uniform(0, 1, n), rng.uniform(0, 0.01, n)
+    extra["violation"] = np.zeros(n)  # an index without an SE
+    g = {k: dict(v) if isinstance(v, dict) else v for k, v in rec.groups.items()}
+    g["front"] = g["front"] | extra
+    alt = dataclasses.replace(rec, groups=g)
+    assert alt.indices[-1] == "violation" and set(alt.indices) == {
+        "gcsei", "manipulability", "reach", "joint_margin", "gci_q05", "eta", "zeta", "omega",
+        "violation"}  # fmt: skip
+    lines = alt.summary()
+    text = "\n".join(lines)
+    assert "… the same designs, continued:" in text
+    assert max(len(ln) for ln in lines if ln.startswith("  ")) <= front_record.WIDTH + 2
+    heads = [ln.split() for ln in lines if ln.strip().startswith("#")]
+    assert len(heads) >= 2 and all(h[0] == "#" for h in heads)
+    names = [k for h in heads for k in re.sub(r" \[[^\]]*\]", "", " ".join(h[1:])).split()]
+    assert names == alt.names + list(alt.objectives) + alt.indices  # each with its unit
+    for i in (0, n - 1):  # the first and last designs are always shown
+        rows = [ln for ln in lines if ln.split()[:1] == [str(i)]]
+        assert len(rows) == len(heads)
+        assert f"{extra['reach'][i]:11.5g} ± {0.01:7.1e}" in " ".join(rows)
+        assert any(ln.rstrip().endswith(f"{0.0:11.5g}") for ln in rows)  # violation, no SE
 
 
 def _cfg_file(tmp_path, **over):
@@ -123,11 +195,12 @@ def _cfg_file(tmp_path, **over):
 
 
 @pytest.mark.parametrize("over,needle", [
-    ({"study.objective": {"pareto": {"gci": "max"}}}, "a front needs at least 2 indices"),
+    ({"study.objective": {"pareto": {"gci": "max"}}},
+     "key 'study.objective.pareto': a front needs at least 2 indices"),
     ({"study.objective": {"pareto": {"gci": "max", "lenght": "min"}}},
      "key 'study.objective.pareto.lenght': unknown index"),
     ({"study.objective": {"pareto": {"gci": "up", "volume": "max"}}},
-     "objective.pareto.gci: sense must be 'min' or 'max'"),
+     "key 'study.objective.pareto.gci': sense must be 'min' or 'max'"),
     ({"optimizer.name": "ptpso"}, "key 'optimizer.name': 'ptpso' is single-objective"),
     ({"study.objective": {"gci": -1.0}}, "key 'optimizer.name': 'nsga2' optimises a Pareto front"),
     ({"front.reference": [0.1, 2.0, 3.0]}, "key 'front.reference': 3 values for 2 objectives"),

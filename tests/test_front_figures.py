@@ -2,8 +2,10 @@
 NSGA-II front of the planar 2R arm (GCI and workspace area, both maximised; three
 objectives with the manipulability), drawn and read back from the matplotlib artists:
 the points are the archived front in the indices' own values, the bars are ± 2 SE, the
-parallel coordinates lie in [0, 1] and match the box scaling, every figure passes the
-shared figure checks, and ``designopt report`` writes the PNGs."""
+parallel coordinates lie in [0, 1] and match the box scaling, every other index of the
+study is drawn against the first objective, the hypervolume history is that of the best
+front found so far with the populations' beside it, every figure passes the shared
+figure checks, and ``designopt report`` writes the PNGs."""
 
 from __future__ import annotations
 
@@ -86,7 +88,7 @@ def test_two_objective_front_points_bars_pairs_and_labels(front2, record, tmp_pa
     paths = front_figs.draw(rec, tmp_path)
     assert_clean(record)
     assert {p.name for p in paths} == {f"{n}.{e}" for n in ("front", "front_designs",
-                                       "hypervolume") for e in ("png", "pdf")}  # fmt: skip
+                                       "front_indices", "hypervolume") for e in ("png", "pdf")}  # fmt: skip
     assert all(p.stat().st_size > 0 for p in paths)
     # the front is in the indices' own values: a max objective is not negated
     F, se = rec.F, rec.F_se
@@ -154,10 +156,49 @@ def test_hypervolume_runs_median_unit_and_reference(front2, record, tmp_path):
     (med,) = [ln for ln in ax.lines if ln.get_gid() == "median"]
     np.testing.assert_array_equal(med.get_ydata(), np.median(H, 0))
     assert med.get_linewidth() > 2 * runs[0].get_linewidth()
+    # the best front found so far never loses volume; the populations' own is beside it
+    assert np.all(np.diff(H, axis=1) >= 0)
+    pop = rec.population_history
+    assert pop.shape == H.shape and np.all(H >= pop)
+    (pl,) = [ln for ln in ax.lines if ln.get_gid() == "population"]
+    np.testing.assert_array_equal(pl.get_ydata(), np.median(pop, 0))
+    assert "best front found so far" in fig._suptitle.get_text()
     assert ax.get_ylabel() == "hypervolume [L^2]"
     title = fig._suptitle.get_text()
     assert f"gci = {rec.reference[0]:.4g}" in title
     assert f"volume = {rec.reference[1]:.4g}" in title
+
+
+def test_every_other_index_against_the_first_objective(front2, front3, record, tmp_path):
+    """``front_indices``: one panel per index that is not an objective (the planar arm's
+    gcsei and manipulability beside gci and volume), its re-scored values ± 2 SE against
+    the first objective; none when every index is an objective."""
+    _, rec = front2
+    others = rec.indices
+    own = {k for k in rec.values if not k.endswith("_se")}
+    assert set(others) == own - set(rec.objectives) and {"gcsei", "manipulability"} <= set(others)
+    front_figs.indices(rec, tmp_path, rec.units())
+    assert_clean(record)
+    panels = [ax for ax in _fig(record, "front_indices").axes if ax.axison]
+    assert len(panels) == len(others)
+    for ax, k in zip(panels, others, strict=True):
+        assert ax.get_ylabel().split(" [")[0] == k and ax.get_xlabel() == "gci (max) [-]"
+        want = np.stack([rec.F[:, 0], rec.values[k]], -1)
+        np.testing.assert_array_equal(_rows(_points(ax)), _rows(want))
+        centre, hx, hy = _bars(ax)
+        np.testing.assert_array_equal(centre, want)
+        np.testing.assert_allclose(hx, 2 * rec.F_se[:, 0], rtol=1e-9)
+        np.testing.assert_allclose(hy, 2 * rec.values[k + "_se"], rtol=1e-9)
+    _, rec3 = front3  # three objectives: what is left is gcsei alone
+    assert rec3.indices == ["gcsei"]
+    front_figs.indices(rec3, tmp_path, rec3.units())
+    assert_clean(record)
+    # every index an objective: no figure
+    g = {k: dict(v) if isinstance(v, dict) else v for k, v in rec.groups.items()}
+    g["front"] = {k: v for k, v in g["front"].items()
+                  if k.removesuffix("_se") not in others}  # fmt: skip
+    alt = dataclasses.replace(rec, groups=g)
+    assert alt.indices == [] and front_figs.indices(alt, tmp_path, {}) == []
 
 
 def test_three_objectives_pairwise_and_3d(front3, record, tmp_path):
@@ -233,6 +274,6 @@ def test_report_command_draws_the_front_pngs(front2, tmp_path):
     arch.write_bytes(path.read_bytes())
     assert main(["report", str(arch)]) in (0, None)
     folder = tmp_path / "front_figures"
-    for name in ("front", "front_designs", "hypervolume"):
+    for name in ("front", "front_designs", "front_indices", "hypervolume"):
         for ext in ("png", "pdf"):
             assert (folder / f"{name}.{ext}").stat().st_size > 0

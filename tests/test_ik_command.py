@@ -148,10 +148,11 @@ def test_pose_csv_solves_and_archives(case, capsys):
     out = capsys.readouterr().out
     assert f"{N} poses: {int(ok.sum())} solved" in out and "study serial" in out
     assert "matched: pose; design: a2 = 0.45, d4 = 0.45" in out and "1/k (position block)" in out
-    # --csv: the archived joints, exactly, with inv_k
+    # --csv: the archived joints in degrees (their unit in the header), with inv_k
     rows = list(csv.DictReader(case["out"].with_name("m_ik_joints.csv").open()))
-    got = np.array([[float(r[f"q{i}"]) for i in range(1, 7)] for r in rows])
-    np.testing.assert_array_equal(got, ik["q"])
+    got = np.array([[float(r[f"q{i} [deg]"]) for i in range(1, 7)] for r in rows])
+    np.testing.assert_array_equal(got, np.rad2deg(ik["q"]))
+    assert "pos_err [m]" in rows[0] and "rot_err [deg]" in rows[0]
     np.testing.assert_array_equal([float(r["inv_k"]) for r in rows], ik["inv_k"])
 
 

@@ -23,7 +23,9 @@ POP, STEPS, RUNS = 100, 249, 2
 def _check_front(r, P):
     """Every run's final population: in the box, its ranks those of a brute-force
     constrained sort, its rank-0 members mutually non-dominated, and the in-loop JAX
-    hypervolume equal to the numpy one of the feasible non-dominated set."""
+    hypervolume of the population equal to the numpy one of its feasible non-dominated
+    set; the history (of the best front found so far: the archive) never decreasing and
+    never below the population's, its last value the archive's numpy hypervolume."""
     fr = r.front
     assert fr.x.shape == (RUNS, POP, P.dim) and fr.f.shape == (RUNS, POP, P.n_objectives)
     for i in range(fr.x.shape[0]):
@@ -35,9 +37,17 @@ def _check_front(r, P):
         np.testing.assert_allclose(np.asarray(F), fr.f[i], rtol=1e-12)
         feas = fr.v[i] == 0
         if P.n_objectives <= 3:
-            assert r.history[i, -1] == pytest.approx(
+            assert r.history_population[i, -1] == pytest.approx(
                 pa.hypervolume(fr.f[i][feas], r.ref_point), rel=1e-10
             )
+            assert np.all(np.diff(r.history[i]) >= 0)
+            assert np.all(r.history[i] >= r.history_population[i])
+            A = r.archive.f[i][r.archive.v[i] == 0]
+            assert not pa.dominance_matrix_np(A).any()
+            hv_a = pa.hypervolume(A, r.ref_point)
+            assert r.history[i, -1] >= hv_a * (1 - 1e-12)
+            if r.archive_pruned[i] == 0:
+                assert r.history[i, -1] == pytest.approx(hv_a, rel=1e-10)
 
 
 def test_zdt1_reaches_the_optimal_hypervolume():
@@ -103,8 +113,11 @@ def test_contract_seeds_resume_batch():
     resumed = optim.run("nsga2", P, key, resume=saved[0], **kw)
     for a in (again, resumed):
         np.testing.assert_array_equal(a.history, full.history)
+        np.testing.assert_array_equal(a.history_population, full.history_population)
+        np.testing.assert_array_equal(a.archive_pruned, full.archive_pruned)
         for f in ("x", "f", "v", "rank"):
             np.testing.assert_array_equal(getattr(a.front, f), getattr(full.front, f))
+            np.testing.assert_array_equal(getattr(a.archive, f), getattr(full.archive, f))
     other = optim.run("nsga2", P, jax.random.key(10), **kw)
     assert not np.array_equal(other.front.x, full.front.x)
     # the default reference point travels in the checkpoint
@@ -120,10 +133,13 @@ def test_contract_seeds_resume_batch():
     for i, m in enumerate(members):
         one = optim.run("nsga2", P, key, **kb, **m)
         np.testing.assert_allclose(batch.history[i], one.history, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(batch.history_population[i], one.history_population,
+                                   rtol=1e-9, atol=1e-12)  # fmt: skip
     assert batch.settings["eta_c"] == [15.0, 5.0]
     one = batch.member(1)
     assert one.settings["eta_c"] == 5.0 and one.settings["ref_point"] == (1.1, 1.1)
     np.testing.assert_array_equal(one.front.f, batch.front.f[1])
+    np.testing.assert_array_equal(one.archive.f, batch.archive.f[1])
 
 
 def test_operators_equal_pymoos_given_the_same_random_numbers():

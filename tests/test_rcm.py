@@ -322,8 +322,10 @@ def _write(tmp_path, text, name="c.yaml"):
 
 
 @pytest.mark.parametrize("text,needle", [
-    ("study: {name: rcm, variables: {a: [60, 200], c: [-10, 300]}}\n", "c: lengths must be > 0"),
-    ("study: {name: rcm, variables: {a: [60, 200]}, fixed: {c: 0}}\n", "c: lengths must be > 0"),
+    ("study: {name: rcm, variables: {a: [60, 200], c: [-10, 300]}}\n",
+     "key 'study.variables.c': lengths must be > 0"),
+    ("study: {name: rcm, variables: {a: [60, 200]}, fixed: {c: 0}}\n",
+     "key 'study.fixed.c': lengths must be > 0"),
     ("study: {name: rcm, eta: {workspace: sphere}}\n", "study.eta.workspace"),
     ("study: {name: rcm, joints: {d1: [22, 40], d2: [35, 50]}}\n", "joint box reaches at most"),
 ])  # fmt: skip

@@ -246,7 +246,7 @@ def test_linear_constraint_names_must_be_design_variables():
                      "chain": {"joints": [{"type": "R", "a": "l1", "limits": [-90, 90]}]},
                      "variables": {"l1": [0.1, 1.0]},
                      "constraints": [{"terms": {"l9": 1}, "le": 1.0}]}}  # fmt: skip
-    with pytest.raises(ConfigError, match="constraints.0.terms: \\['l9'\\]"):
+    with pytest.raises(ConfigError, match="key 'study.constraints.0.terms': \\['l9'\\]"):
         validate(raw, "t")
     raw["study"]["constraints"] = [{"terms": {"l1": 1}, "le": 1.0, "ge": 0.0}]
     with pytest.raises(ConfigError, match="exactly one of 'le' and 'ge'"):

@@ -324,7 +324,7 @@ NAN = FEATURES.replace('xyz="0.05 0 0.4"', 'xyz="0.05 nan 0.4"')
         (FEATURES, {"base": "nolink", "tip": "tip"}, {}, "chain.base: no link 'nolink'"),
         (FEATURES, {"base": "side", "tip": "tip"}, {}, "no path from base 'side'"),
         (FEATURES, {"tip": "tip", "set": {"nojoint.origin.x": "l_wrist", "j5.origin.z": "l_jaw"}},
-         {}, "set.nojoint.origin.x: no joint 'nojoint'"),
+         {}, "key 'study.chain.set.nojoint.origin.x': no joint 'nojoint'"),
         (FEATURES, {"tip": "tip", "set": {"j5.origin.w": "l_wrist", "j1.origin.z": "l_jaw"}},
          {}, "unknown field 'w'"),
         (FEATURES, {"tip": "tip", "set": {"j5.origin.x": "l_wrist", "j1.origin.z": "nosuch"}},

@@ -274,8 +274,11 @@ def test_ik_csv_holds_the_archived_joints(ik_archive):
         q, ok = h["ik/q"][()], h["ik/success"][()]
     rows = list(csv.DictReader(ik_archive.with_name("p_ik_joints.csv").open()))
     assert [r["row"] for r in rows] == ["1", "2", "3", "4"]
-    got = np.array([[float(r[f"q{i}"]) for i in range(1, 7)] for r in rows])
-    np.testing.assert_array_equal(got, q)  # repr round-trips float64 exactly
+    # angles in degrees, the insertion q3 in mm; each unit in its column's header
+    head = [f"q{i} [{'mm' if i == 3 else 'deg'}]" for i in range(1, 7)]
+    got = np.array([[float(r[h]) for h in head] for r in rows])
+    want = np.where(np.arange(6) == 2, q, np.rad2deg(q))
+    np.testing.assert_array_equal(got, want)  # repr keeps every digit
     assert [r["success"] == "1" for r in rows] == ok.tolist()
 
 

@@ -7,6 +7,7 @@ unchanged."""
 from __future__ import annotations
 
 import functools
+import re
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Annotated, Any, ClassVar, Literal, Union
@@ -278,7 +279,23 @@ def validate(raw: Any, where: str, model: type[BaseModel] | None = None,
     if isinstance(cfg, RunConfigBase):
         check_optimizer(cfg, where)
         check_front(cfg, where)
+        check_study(cfg, where)
     return cfg
+
+
+def check_study(cfg: Any, where: str) -> None:
+    """The study's own checks beyond its settings model (``Study.check``): a
+    ``ValueError("<key>: <why>")`` becomes "<where>: key 'study.<key>': <why>"."""
+    from designopt.studies import get
+
+    check = get(cfg.study.name).check
+    if check is None:
+        return
+    try:
+        check(cfg.study)
+    except ValueError as e:
+        key, sep, why = str(e).partition(": ")
+        raise ConfigError(f"{where}: key 'study.{key}': {why}" if sep else f"{where}: {e}") from None
 
 
 def check_optimizer(cfg: Any, where: str) -> None:
@@ -442,4 +459,28 @@ def error_text(e: ValidationError, raw: Any = None) -> str:
     head, sep, rest = msg.partition(": ")
     if not loc and sep and head.isidentifier():  # a whole-config check names its key first
         loc, msg = [head], rest
+    elif raw is not None and sep and _KEY.match(head):
+        # a section's check that names a key inside it ("limits.j2: ..."): the deepest key
+        # at fault is that key (the location ends at the section, or at its union tag)
+        first = head.split(".")[0]
+        for base in (loc, loc[:-1]):
+            if isinstance(_node(raw, base), dict) and first in _node(raw, base):
+                loc, msg = [*base, *head.split(".", 1)[:1], *head.split(".", 1)[1:]], rest
+                break
     return f"key '{'.'.join(loc) or '(top level)'}': {msg}"
+
+
+_KEY = re.compile(r"^[A-Za-z_][\w\-]*(\.[\w\-]+)*$")
+
+
+def _node(raw: Any, path: list[str]) -> Any:
+    """The part of the parsed config at ``path`` (None when it is not there)."""
+    node = raw
+    for x in path:
+        if isinstance(node, dict) and x in node:
+            node = node[x]
+        elif isinstance(node, list | tuple) and x.isdigit() and int(x) < len(node):
+            node = node[int(x)]
+        else:
+            return None
+    return node

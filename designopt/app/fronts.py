@@ -132,9 +132,9 @@ def rescoring_problem(job: Any) -> tuple[Problem, int]:
 
 
 def groups(job: Any, problem: Problem, res: Any) -> dict[str, Any]:
-    """The groups of a front's record: optimizer (hypervolume history, final
-    populations), front (re-scored designs, objectives ± SE, every index ± SE,
-    ambiguous pairs) and problem."""
+    """The groups of a front's record: optimizer (hypervolume history of the best front
+    found so far, the populations' hypervolume, final populations and archives), front
+    (re-scored designs, objectives ± SE, every index ± SE, ambiguous pairs) and problem."""
     from designopt.app.scoring import check_finite, problem_group
     from designopt.numerics import pareto
     from designopt.problems.evaluate import score
@@ -167,6 +167,13 @@ def groups(job: Any, problem: Problem, res: Any) -> dict[str, Any]:
            "converged_at": res.converged_at, "population_x": pop.x, "population_f": pop.f * sg,
            "population_v": pop.v, "population_rank": pop.rank,
            "attrs": {"settings": res.settings}}  # fmt: skip
+    if res.history_population is not None:
+        opt["population_hypervolume"] = res.history_population
+    if res.archive is not None:  # the best front found (optimizer's samples), NaN: empty slot
+        member = np.asarray(res.archive.v) == 0
+        opt |= {"archive_x": np.where(member[..., None], res.archive.x, np.nan),
+                "archive_f": np.where(member[..., None], res.archive.f * sg, np.nan),
+                "archive_pruned": np.asarray(res.archive_pruned, np.int64)}  # fmt: skip
     if res.history_v is not None and problem.constraints is not None:
         opt |= {"history_v": res.history_v, "best_v": res.best_v}
     idx = {k: v for k, v in vals.items() if k not in ("f", "f_se")}  # the weighted f: moot

@@ -42,7 +42,9 @@ from designopt.io import archive, writer
 from designopt.problems.evaluate import score
 from designopt.results import FrontRecord, Record, ReplayRecord, RunRecord, ScanRecord, SweepRecord
 
-Progress = Callable[[int, str], contextlib.AbstractContextManager[Callable[[int], None]]]
+Progress = Callable[[int | None, str], contextlib.AbstractContextManager[Callable[[int], None]]]
+"""``progress(total, desc)``: a context giving ``update(n)`` for ``total`` iterations, or
+marking a phase of unknown length (``total`` None: setting up, scoring, re-scoring)."""
 
 
 @contextlib.contextmanager
@@ -109,13 +111,21 @@ class Single:
         return None
 
     def groups(self, job: Job, problem: Any, res: Any) -> dict[str, Any]:
-        return run_groups(job.cfg, problem, res, job.dtype)
+        groups = run_groups(job.cfg, problem, res, job.dtype)
+        warn = job.study.warnings(job.cfg.study, groups["final"])
+        if warn:  # far from what was asked: archived, printed, shown, marked on figures
+            groups["final"]["attrs"]["warnings"] = list(warn)
+        return groups
 
     def check(self, job: Job, groups: dict[str, Any]) -> None:
         check_finite(groups["final"], job.where, "the final design")
 
     def lines(self, rec: Any) -> list[str]:
         return [*rec.design_lines(), rec.run_line()]
+
+    def scoring(self, job: Job) -> str:
+        """What the phase after the optimizer does (shown while it runs)."""
+        return "scoring the best run" + (" and polishing" if job.cfg.refine else "")
 
 
 class Front(Single):
@@ -139,6 +149,10 @@ class Front(Single):
 
     def lines(self, rec: Any) -> list[str]:
         return [*rec.summary()[1:], rec.stages_line(rec.groups["front"]["attrs"]["n_samples"])]
+
+    def scoring(self, job: Job) -> str:
+        n = job.cfg.front.n_samples or 4 * int(job.study.cost(job.cfg.study).samples)
+        return f"re-scoring the front on {n} fresh samples per design"
 
 
 # ------------------------------------------------------------------------------ run
@@ -173,7 +187,7 @@ def run(cfg: Any, text: str | None = None, where: str = "config", out: Path | No
             hint = resume_hint or f"designopt run CONFIG --out {out}"
             saver = ckpt.Checkpointer(out, attrs, o.n_iters, cfg.checkpoint_every_s, hint, ses, ck)
         with Stopwatch() as total:
-            with Stopwatch() as setup:
+            with Stopwatch() as setup, progress(None, "setting up"):
                 problem = how.problem(job)
             with Stopwatch() as opt, progress(o.n_iters, f"{o.name} on {cfg.study.name}") as bar:
                 try:
@@ -186,7 +200,7 @@ def run(cfg: Any, text: str | None = None, where: str = "config", out: Path | No
             if ses is not None:
                 ses.set_phase("prompt")
                 saver.stop_if_requested()
-            with Stopwatch() as post:
+            with Stopwatch() as post, progress(None, how.scoring(job)):
                 groups = how.groups(job, problem, res)
         attrs |= {"wall_time_s": total.wall, "compile_time_s": total.compile,
                   "run_time_s": total.run, "setup_time_s": setup.wall,

@@ -4,7 +4,9 @@ DTLZ2 with any number of objectives, and the constrained BNH and SRN
 one vmapped program. Per case and entry: the final hypervolume of every run against the
 reference point (1.1, …, 1.1) unless ``bench.hypervolume_reference`` says otherwise, IGD+
 against the sampled true front, the final fronts (runs, P, m) padded with NaN, the
-hypervolume history. Entries are compared on the hypervolume (larger is better) by
+hypervolume history (of the best front found so far, the optimizer's archive: never
+decreasing; ``designopt.optim.runner``; the final hypervolume above is the final
+population's, as pymoo reports it). Entries are compared on the hypervolume (larger is better) by
 Mann-Whitney U against the reference entry with Holm's correction, as the
 single-objective cases are on the final value."""
 

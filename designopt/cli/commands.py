@@ -11,25 +11,29 @@ import argparse
 import contextlib
 import json
 import sys
+import time
 from pathlib import Path
 
+from designopt.cli.setup import DESIGN_FLAG, design_argument, use_cache
 from designopt.cli.setup import load_args as _load
 from designopt.cli.setup import out_path as _out
 from designopt.cli.setup import parallel_flags as _parallel
 from designopt.cli.setup import parse_design as _parse_design
 from designopt.cli.setup import progress as _progress
 from designopt.cli.setup import resume_command as _resume_command
-from designopt.cli.setup import use_cache
 from designopt.core.errors import ConfigError, Interrupted, WriteError
+
+_IMPORTED = time.perf_counter()
 
 WRITERS = ("run", "sweep", "scan", "bench", "report")
 """Commands that write files: they run in the writer's session with signal handling (a
 study's own commands say so in ``Command.writes``)."""
 
 
-def _finish(rep, args: argparse.Namespace) -> int:
+def _finish(rep, args: argparse.Namespace, clock=None) -> int:
     """Print the report's lines, the archive path and draw the figures unless --no-figures
-    (a figure write fault: exit 1, the archive kept)."""
+    (a figure write fault: exit 1, the archive kept); with ``clock`` (a run's Stopwatch,
+    started after the config was loaded) the wall time end to end, split by stage."""
     from designopt.app import pipeline
     from designopt.io import writer
 
@@ -40,27 +44,68 @@ def _finish(rep, args: argparse.Namespace) -> int:
     if getattr(args, "dry_run", False):
         return 0
     print(f"archive: {rep.out}")
+    figures_s = 0.0
     if not getattr(args, "no_figures", False):
+        import time
+
         ses = writer.current()
         kept = f"the archive {rep.out} is complete (`designopt report {rep.out}` draws its figures)"
         if ses is not None:
             ses.kept = lambda: kept
+        t0 = time.perf_counter()
         try:
-            figs = pipeline.draw_figures(rep.out, rep.record)
+            with _progress(args.quiet)(None, "drawing figures"):
+                figs = pipeline.draw_figures(rep.out, rep.record)
         except WriteError as e:
             raise WriteError(f"{e}; {kept}") from None
+        figures_s = time.perf_counter() - t0
         print(f"figures: {len(figs) // 2} (PNG + PDF) in {figs[0].parent}")
+    if clock is not None and rep.record is not None:
+        clock.__exit__(None, None, None)
+        print(wall_line(rep.record.attrs, clock, figures_s))
     return 0
+
+
+def wall_line(attrs: dict, clock, figures_s: float) -> str:
+    """The wall time from the process's start to this line, split into start-up (Python,
+    imports, the config), setup, optimizer, scoring, figures and the rest (archive,
+    printing), with the compile time of it all and the XLA programs compiled. The exit
+    after it skips interpreter teardown (``console``)."""
+    startup = max(process_age() - clock.wall, 0.0)
+    a = {k: float(attrs.get(k + "_time_s", 0.0)) for k in ("setup", "optimizer", "post")}
+    total = startup + clock.wall
+    other = max(clock.wall - sum(a.values()) - figures_s, 0.0)
+    return (f"wall {total:.1f} s end to end = start-up {startup:.1f} s + setup "
+            f"{a['setup']:.1f} s + optimizer {a['optimizer']:.1f} s + scoring {a['post']:.1f} s"
+            f" + figures {figures_s:.1f} s + archive and the rest {other:.1f} s; compile "
+            f"{clock.compile:.1f} s of it ({clock.compilations} XLA programs)")
+
+
+def process_age() -> float:
+    """Seconds since this process started (Linux: /proc; elsewhere since designopt's CLI
+    was imported)."""
+    import os
+    import time
+
+    try:
+        with open("/proc/self/stat") as f:
+            start = int(f.read().rsplit(")", 1)[1].split()[19]) / os.sysconf("SC_CLK_TCK")
+        with open("/proc/uptime") as f:
+            return max(float(f.read().split()[0]) - start, 0.0)
+    except (OSError, ValueError, IndexError):
+        return time.perf_counter() - _IMPORTED
 
 
 def cmd_run(args: argparse.Namespace) -> int:
     from designopt.app import pipeline
+    from designopt.core.timing import Stopwatch
 
     cfg, text = _load(args)
+    clock = Stopwatch().__enter__()  # closed by _finish, after the figures
     rep = pipeline.run(cfg, text, args.config, _out(args, cfg), resume=args.resume,
                        progress=_progress(args.quiet), resume_hint=_resume_command(args, cfg),
                        dry_run=args.dry_run)  # fmt: skip
-    return _finish(rep, args)
+    return _finish(rep, args, None if args.dry_run else clock)
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
@@ -199,12 +244,61 @@ def _positive(text: str) -> int:
     return n
 
 
+class Parser(argparse.ArgumentParser):
+    """argparse with a usage error as one line, ``designopt: error: <argparse's message>;
+    see <prog> --help``, exit 2 (argparse prints the usage block first); ``--help`` as
+    argparse prints it. Every subparser is one too (``parser_class``). ``--design a=1 b=2``
+    (one flag, several NAME=VALUE) stops at the first word without '=', so a CONFIG after
+    it is still the positional."""
+
+    def error(self, message: str):  # type: ignore[override]
+        self.exit(2, f"designopt: error: {message}; see {self.prog} --help\n")
+
+    def parse_args(self, args=None, namespace=None):  # type: ignore[override]
+        ns, extra = self.parse_known_args(args, namespace)
+        if extra:
+            cmd = getattr(ns, "command", None)
+            prog = f"{self.prog} {cmd}" if cmd else self.prog
+            self.exit(2, f"designopt: error: unrecognized arguments: {' '.join(extra)}; "
+                         f"see {prog} --help\n")  # fmt: skip
+        return ns
+
+    def parse_known_args(self, args=None, namespace=None):  # type: ignore[override]
+        if args is not None and DESIGN_FLAG in self._option_string_actions:
+            args = _design_items(list(args))
+        return super().parse_known_args(args, namespace)
+
+
+def _design_items(args: list[str]) -> list[str]:
+    """``--design a=1 b=2`` as ``--design=a=1 --design=b=2``: the values of one flag are
+    the words with '=' after it (not an option), so a positional after them stays one."""
+    out: list[str] = []
+    i = 0
+    while i < len(args):
+        word = args[i]
+        if word == "--":
+            return out + args[i:]
+        if word == DESIGN_FLAG and i + 1 < len(args) and _item(args[i + 1]):
+            i += 1
+            while i < len(args) and _item(args[i]):
+                out.append(f"{DESIGN_FLAG}={args[i]}")
+                i += 1
+            continue
+        out.append(word)
+        i += 1
+    return out
+
+
+def _item(word: str) -> bool:
+    return "=" in word and not word.startswith("-")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(
+    ap = Parser(
         prog="designopt",
         description="Vectorized JAX design-space optimizer for surgical-robot mechanisms.",
     )
-    sub = ap.add_subparsers(dest="command", required=True)
+    sub = ap.add_subparsers(dest="command", required=True, parser_class=Parser)
 
     def common(p, seed=True, out=True, quiet=True, figures=True, dry=True):
         p.add_argument("config", help="config (YAML), e.g. configs/<study>.yaml")
@@ -249,8 +343,11 @@ def build_parser() -> argparse.ArgumentParser:
     sc.set_defaults(func=cmd_scan)
     e = sub.add_parser("eval", help="print every index of one design with its standard error")
     common(e, out=False, quiet=False, figures=False, dry=False)
-    e.add_argument("--design", action="append", default=[], metavar="NAME=VALUE",
-                   help="a design variable's value (repeat; others: middle of their box)")  # fmt: skip
+    design_argument(
+        e,
+        "design variables' values, one or several after one flag or the flag "
+        "repeated (others: middle of their box)",
+    )
     e.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     e.set_defaults(func=cmd_eval)
     st = sub.add_parser("studies", help="list the registered studies")
@@ -284,8 +381,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run one command; its exit status (module docstring, docs/faults.md)."""
-    args = build_parser().parse_args(argv)
+    """Run one command; its exit status (module docstring, docs/faults.md). A usage error
+    is one line and 2, ``--help`` 0 (both returned, not raised)."""
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as e:  # argparse: --help, or a usage error (Parser.error)
+        return e.code if isinstance(e.code, int) else 2
     try:
         writes = args.command in WRITERS or getattr(args, "writes", False)
         if writes and not getattr(args, "dry_run", False):

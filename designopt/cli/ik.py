@@ -27,6 +27,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from designopt.cli.setup import design_argument
 from designopt.core.errors import ConfigError
 from designopt.io.poses import read_targets
 from designopt.kinematics.ikjob import IKHook, IKJob
@@ -74,8 +75,11 @@ def add_parser(sub: Any) -> None:
     k.add_argument("--mode", choices=MODES, default=None,
                    help="what to match: position, axis (position + tool z axis) or pose; "
                         "default the most the file gives and the study solves")  # fmt: skip
-    k.add_argument("--design", action="append", default=[], metavar="NAME=VALUE",
-                   help="a design value (repeat; others: the config's design)")  # fmt: skip
+    design_argument(
+        k,
+        "design values, one or several after one flag or the flag repeated "
+        "(others: the config's design)",
+    )
     k.add_argument("--out", default=None, metavar="PATH",
                    help="archive path (default results/<study>/<poses name>_ik.h5)")  # fmt: skip
     k.add_argument("--csv", action="store_true",

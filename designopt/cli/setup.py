@@ -123,20 +123,92 @@ def eta_text(seconds: float) -> str:
     return f"{seconds / 86400:.3g} days"
 
 
+SHOW_AFTER_S = 2.0
+"""A phase that lasts longer than this shows that it is running (compiling, re-scoring a
+front, drawing figures)."""
+
+
+class Phase:
+    """Shows on stderr that a phase runs, once it has lasted :data:`SHOW_AFTER_S`: on a
+    terminal its name and the seconds so far, updated each second on one line (cleared
+    when the phase ends); elsewhere (a log) one line. ``show=False``: nothing."""
+
+    def __init__(self, desc: str, show: bool = True) -> None:
+        import threading
+
+        self.desc, self.show = desc, show
+        self.stop = threading.Event()
+        self.thread: threading.Thread | None = None
+        self.shown = False
+
+    def _run(self) -> None:
+        import time
+
+        t0 = time.perf_counter()
+        tty = sys.stderr.isatty()
+        if self.stop.wait(SHOW_AFTER_S):
+            return
+        self.shown = True
+        if not tty:
+            print(f"designopt: {self.desc} …", file=sys.stderr, flush=True)
+            return
+        while True:
+            sys.stderr.write(f"\r{self.desc} … {time.perf_counter() - t0:.0f} s")
+            sys.stderr.flush()
+            if self.stop.wait(1.0):
+                sys.stderr.write("\r\x1b[K")
+                sys.stderr.flush()
+                return
+
+    def __enter__(self) -> Phase:
+        if self.show:
+            import threading
+
+            self.thread = threading.Thread(target=self._run, daemon=True)
+            self.thread.start()
+        return self
+
+    def close(self) -> None:
+        if self.thread is not None:
+            self.stop.set()
+            self.thread.join()
+            self.thread = None
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
 def progress(quiet: bool):
-    """A tqdm bar (none with --quiet) that prints, once, an estimated time when the job
-    is long: after the first timed chunk (the first one includes compilation)."""
+    """The command's progress (none with --quiet): ``bar(total, desc)`` for ``total``
+    iterations, or for a phase of unknown length when ``total`` is None. Compiling is a
+    phase of its own: until the first chunk of iterations is done the line says
+    ``<desc>: compiling``; the tqdm bar starts then, so its rate and ETA count only the
+    iterations. A long job prints, once, its estimated time after the first timed chunk."""
 
     @contextlib.contextmanager
-    def bar(total: int, desc: str) -> Iterator[Callable[[int], None]]:
+    def bar(total: int | None, desc: str) -> Iterator[Callable[[int], None]]:
         import time
 
         from tqdm import tqdm
 
+        from designopt.io import writer
+
+        show = not quiet and writer.writes()
+        if total is None:  # a phase: re-scoring a front, drawing figures
+            with Phase(desc, show):
+                yield lambda n: None
+            return
         seen = {"n": 0, "t": None, "told": False}
+        state: dict = {"bar": None}
+        phase = Phase(f"{desc}: compiling", show).__enter__()
 
         def update(n: int) -> None:
-            t.update(n)
+            if state["bar"] is None:  # compiled: the bar's clock starts with the iterations
+                phase.close()
+                state["bar"] = tqdm(total=total, initial=n, desc=desc, unit="it",
+                                    disable=not show)  # fmt: skip
+            else:
+                state["bar"].update(n)
             now = time.monotonic()
             if seen["t"] is not None and not seen["told"] and n > 0:
                 left = (now - seen["t"]) / n * (total - seen["n"] - n)
@@ -146,14 +218,16 @@ def progress(quiet: bool):
                            f"({total - seen['n'] - n} of {total} iterations at "
                            f"{eta_text((now - seen['t']) / n)} each); --max-minutes N stops "
                            "cleanly with a checkpoint")  # fmt: skip
-                    t.write(msg, file=sys.stderr)
+                    tqdm.write(msg, file=sys.stderr)
             seen["n"] += n
             seen["t"] = now
 
-        from designopt.io import writer
-
-        with tqdm(total=total, desc=desc, unit="it", disable=quiet or not writer.writes()) as t:
+        try:
             yield update
+        finally:
+            phase.close()
+            if state["bar"] is not None:
+                state["bar"].close()
 
     return bar
 
@@ -173,6 +247,16 @@ def resume_command(args: argparse.Namespace, cfg) -> str:
     if getattr(args, "devices", None) is not None:
         parts += ["--devices", str(args.devices)]
     return shlex.join(parts)
+
+
+DESIGN_FLAG = "--design"
+
+
+def design_argument(p: argparse.ArgumentParser | argparse._ArgumentGroup, help: str) -> None:
+    """``--design NAME=VALUE [NAME=VALUE ...]``: one flag with several values or the flag
+    repeated, all in one list (:func:`parse_design` reads it)."""
+    p.add_argument(DESIGN_FLAG, action="extend", nargs="+", default=[], metavar="NAME=VALUE",
+                   help=help)  # fmt: skip
 
 
 def parse_design(items: list[str]) -> dict[str, float]:

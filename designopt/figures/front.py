@@ -7,7 +7,15 @@
   pairwise projections (lower triangle), and for exactly three a 3-D scatter ``front_3d``.
 - ``front_designs``: parallel coordinates of the front's designs, each variable scaled to
   its box and each objective to its range over the front, coloured by the first objective.
-- ``hypervolume``: each run's hypervolume per iteration (thin) and their median (bold).
+- ``front_indices``: every index of the study that is not an objective (the front's group
+  holds them all, re-scored), one panel each against the first objective with ± 2 SE
+  bars, marked as in ``front``: what the trade-off costs in what was not traded (a task
+  front of GCI and length shows where the short arms stop reaching). Absent when every
+  index is an objective.
+- ``hypervolume``: per iteration, the hypervolume of the best front found so far (the
+  non-dominated set of every design evaluated) of each run (thin) and their median
+  (bold), the median of the populations' own hypervolume (dashed) and the re-scored
+  front's.
 """
 
 from __future__ import annotations
@@ -39,6 +47,7 @@ def draw(rec: FrontRecord, folder: Path) -> list[Path]:
     units = rec.units()
     paths = front(rec, folder, units)
     paths += designs(rec, folder, units)
+    paths += indices(rec, folder, units)
     if rec.history.size:
         paths += hypervolume(rec, folder, units)
     return paths
@@ -248,8 +257,40 @@ def designs(rec: FrontRecord, folder: Path, units: Mapping[str, str]) -> list[Pa
     return save(fig, folder, "front_designs")
 
 
+def indices(rec: FrontRecord, folder: Path, units: Mapping[str, str]) -> list[Path]:
+    """``front_indices``: every other index of the study against the first objective."""
+    others = rec.indices
+    if not others:
+        return []
+    vals, F, se = rec.values, rec.F, rec.F_se
+    k0, s0 = next(iter(rec.objectives.items()))
+    n = len(others)
+    ncols = 2 if n == 4 else min(3, n)
+    nrows = -(-n // ncols)
+    fig, axes = style.subplots(nrows, ncols, figsize=(max(6.4, 3.6 * ncols + 0.4),
+                                                      2.7 * nrows + 1.0), squeeze=False)  # fmt: skip
+    masks = _groups(rec)
+    for a, k in enumerate(others):
+        ax = axes[a // ncols, a % ncols]
+        y = np.asarray(vals[k], np.float64)
+        ys = np.asarray(vals.get(k + "_se", np.zeros(len(y))), np.float64)
+        _panel(ax, np.stack([F[:, 0], y], -1), np.stack([se[:, 0], ys], -1), np.zeros((0, 2), int),
+               masks)  # fmt: skip
+        ax.set_ylabel(style.label(k, style.unit_of(k, units)), fontsize=8)
+        ax.set_xlabel(objective_label(k0, s0, units), fontsize=8)
+        ax.tick_params(labelsize=7)
+    for a in range(n, nrows * ncols):
+        axes[a // ncols, a % ncols].axis("off")
+    h = [x for x in _handles(rec, masks) if "ambiguous" not in x.get_label()]
+    fig.legend(handles=h, fontsize=7, loc="outside lower center", ncols=len(h))
+    fig.suptitle(f"The front of {rec.study} ({len(F)} designs) in the study's other indices, "
+                 f"against {k0}\n{_bars_note(rec)}", fontsize=9)  # fmt: skip
+    return save(fig, folder, "front_indices")
+
+
 def hypervolume(rec: FrontRecord, folder: Path, units: Mapping[str, str]) -> list[Path]:
-    """``hypervolume``: every run's hypervolume per iteration and the median."""
+    """``hypervolume``: every run's hypervolume of the best front found so far per
+    iteration, their median, the populations' median and the re-scored front's."""
     H = np.atleast_2d(np.asarray(rec.history, np.float64))
     it = np.arange(H.shape[1])
     obj = list(rec.objectives)
@@ -259,14 +300,20 @@ def hypervolume(rec: FrontRecord, folder: Path, units: Mapping[str, str]) -> lis
         ax.plot(it, h, color="0.6", lw=0.7, alpha=0.8, gid="run")
     ax.plot(it, np.median(H, 0), color="k", lw=2.2, gid="median",
             label=f"median of {len(H)} runs")  # fmt: skip
+    pop = rec.population_history
+    if pop is not None:
+        ax.plot(it, np.median(np.atleast_2d(pop), 0), color="tab:orange", ls=":", lw=1.4,
+                gid="population", label="median of the populations alone")  # fmt: skip
     ax.axhline(rec.hypervolume, color="tab:blue", ls="--", lw=1.0,
                label="front pooled over the runs, re-scored")  # fmt: skip
-    ax.plot([], [], color="0.6", lw=0.7, label="each run's feasible population")
+    own = "each run's feasible population" if pop is None else "each run's best front so far"
+    ax.plot([], [], color="0.6", lw=0.7, label=own)
     ax.set_xlabel(style.label("iteration", style.DIMENSIONLESS))
     ax.set_ylabel(style.label("hypervolume", unit))
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, loc="lower right")
     ref = ", ".join(f"{k} = {v:.4g}" for k, v in zip(obj, rec.reference, strict=True))
-    fig.suptitle(f"Hypervolume of {', '.join(obj)} ({rec.study})\nreference point: {ref}",
+    what = "the best front found so far" if pop is not None else "the populations"
+    fig.suptitle(f"Hypervolume of {', '.join(obj)} ({rec.study}), {what}\nreference point: {ref}",
                  fontsize=9)  # fmt: skip
     return save(fig, folder, "hypervolume")

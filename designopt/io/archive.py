@@ -121,7 +121,21 @@ def save(path: str | Path, record: Any, overwrite: bool = False, complete: bool 
         writer.claim(path, overwrite)
     tree = record.to_tree()
     attrs = tree.pop("attrs")
-    return write(path, tree, attrs, complete)
+    replaced = path.is_file()
+    out = write(path, tree, attrs, complete)
+    if replaced and complete:  # what was derived from the archive it replaced is stale
+        for d in derived(path):
+            writer.discard(d)
+    return out
+
+
+def derived(path: str | Path) -> list[Path]:
+    """The files made from an archive beside it: its figures folder ``<stem>_figures``,
+    its HTML page ``<stem>.html`` and an IK archive's ``<stem>_joints.csv``. Replacing the
+    archive (``--overwrite``) removes them: they described the old one."""
+    path = Path(path)
+    return [path.parent / f"{path.stem}_figures", path.with_suffix(".html"),
+            path.parent / f"{path.stem}_joints.csv"]  # fmt: skip
 
 
 def load(path: str | Path) -> Any:

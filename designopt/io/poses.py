@@ -7,9 +7,9 @@ Rows are counted from 1, the first row after the header:
   (positions and unit quaternions) or ``T00,T01,…,T33`` (row-major 4×4 poses);
 - HDF5 with a dataset ``poses`` (N, 4, 4).
 
-Every row is checked (NaN/inf, a non-unit quaternion or axis, a rotation not
-orthonormal, a reflection, a bad bottom row): one ConfigError naming the file and the
-row, nothing written.
+Every row is checked (NaN/inf, a magnitude above 1e9 (``MAX_MAGNITUDE``), a non-unit
+quaternion or axis, a rotation not orthonormal, a reflection, a bad bottom row): one
+ConfigError naming the file and the row, nothing written.
 """
 
 from __future__ import annotations
@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from designopt.core.errors import ConfigError
+from designopt.core.validation import MAX_MAGNITUDE, problem
 from designopt.kinematics.poses import DEFAULT_TOL, Targets, check_poses, quat_to_pose
 
 POSITION_COLUMNS = ("x", "y", "z")
@@ -29,6 +30,20 @@ MATRIX_COLUMNS = tuple(f"T{i}{j}" for i in range(4) for j in range(4))
 FORMATS = ((MATRIX_COLUMNS, "pose"), (QUAT_COLUMNS, "pose"), (AXIS_COLUMNS, "axis"),
            (POSITION_COLUMNS, "position"))  # fmt: skip
 """The CSV headers (any column order) and what each gives."""
+
+
+def _numbers(vals: np.ndarray, cols: tuple[str, ...], path: Path) -> None:
+    """Every value finite and at most MAX_MAGNITUDE in magnitude (designopt.core.validation:
+    a target at 1e308 is finite, its square is not); a ConfigError naming the first row
+    (from 1) and its column otherwise."""
+    bad = ~np.isfinite(vals) | (np.abs(vals) > MAX_MAGNITUDE)
+    if bad.any():
+        i, k = (int(x) for x in np.argwhere(bad)[0])
+        v = float(vals[i, k])
+        if not np.isfinite(v):
+            raise ConfigError(f"{path}: row {i + 1}: NaN or inf in the target ({cols[k]} = {v})")
+        raise ConfigError(f"{path}: row {i + 1}: {cols[k]} = {problem(v)}")
+
 
 def _unit_rows(v: np.ndarray, tol: float, path: Path, why: str, sym: str) -> None:
     """Every row of v a unit vector to ``tol``; a ConfigError naming the first other."""
@@ -65,9 +80,7 @@ def _read_csv(path: Path, tol: float) -> Targets:
             vals[i] = [float(ln[k]) for k in order]
         except ValueError:
             raise ConfigError(f"{path}: row {i + 1}: a value is not a number: {ln}") from None
-    bad = ~np.all(np.isfinite(vals), -1)
-    if bad.any():
-        raise ConfigError(f"{path}: row {int(np.argmax(bad)) + 1}: NaN or inf in the target")
+    _numbers(vals, cols, path)
     if cols is MATRIX_COLUMNS:
         return _checked(vals.reshape(-1, 4, 4), tol, path)
     if cols is QUAT_COLUMNS:
@@ -91,6 +104,7 @@ def _read_h5(path: Path, tol: float) -> Targets:
         raise ConfigError(f"{path}: cannot read the HDF5 file ({e})") from None
     if T.ndim != 3 or T.shape[1:] != (4, 4) or len(T) == 0:
         raise ConfigError(f"{path}: dataset 'poses' must have shape (N, 4, 4), got {T.shape}")
+    _numbers(T.reshape(len(T), 16), MATRIX_COLUMNS, path)
     return _checked(T, tol, path)
 
 
@@ -107,6 +121,8 @@ def read_targets(path: str | Path, tol: float = DEFAULT_TOL) -> Targets:
     """The targets of a CSV or HDF5 file (module docstring), every row checked: a
     ConfigError naming the file and the first bad row (from 1) otherwise."""
     p = Path(path)
+    if p.is_dir():
+        raise ConfigError(f"{p}: is a folder, not a poses file (--poses)")
     if not p.is_file():
         raise ConfigError(f"{p}: poses file not found")
     return _read_h5(p, tol) if p.suffix.lower() in (".h5", ".hdf5") else _read_csv(p, tol)

@@ -522,6 +522,23 @@ def remove(path: Path) -> None:
         path.unlink(missing_ok=True)
 
 
+def discard(path: Path) -> None:
+    """Remove a file or a folder of files (what was derived from a replaced archive)
+    under the writer's lock; nothing there, nothing done. OSError → WriteError."""
+    path = Path(path)
+    if not writes() or not (path.exists() or path.is_symlink()):
+        return
+    with session() as ses, ses.writing():
+        try:
+            if path.is_dir() and not path.is_symlink():
+                shutil.rmtree(path)
+            else:
+                path.unlink(missing_ok=True)
+        except OSError as e:
+            raise WriteError(f"{e.filename or path}: cannot remove a stale file of the "
+                             f"replaced archive: {reason(e)}") from None
+
+
 def publish_figures(
     draw: Callable[[Path], list[Path]], folder: Path, swap: bool = True
 ) -> list[Path]:

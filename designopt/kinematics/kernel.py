@@ -169,6 +169,32 @@ class SerialModel:
             self.steps, self.joint_types, self.variables, self.coupling, self.offset, False
         )
 
+    def reach_bound(self, x_lower: ArrayLike, x_upper: ArrayLike, q_lower: ArrayLike,
+                    q_upper: ArrayLike) -> float:  # fmt: skip
+        """An upper bound of the tip's distance from the base origin over every design in
+        the box [x_lower, x_upper] (kernel units: rad for angles) and every configuration
+        in [q_lower, q_upper] (active joints): rotations keep lengths, so |p| is at most
+        the sum over translation steps of the largest |value| a step takes, each value
+        being linear in the design and the joints (its largest magnitude over a box is
+        |value at the centre| + Σ |coefficient| · half-width). Exact for a straight chain
+        stretched out; the sum of the link lengths along the chain otherwise."""
+        xl, xu = np.asarray(x_lower, np.float64), np.asarray(x_upper, np.float64)
+        ql, qu = np.asarray(q_lower, np.float64), np.asarray(q_upper, np.float64)
+        xm, xh = (xl + xu) / 2, (xu - xl) / 2
+        C, off = np.asarray(self.coupling, np.float64).reshape(self.n_chain, -1), self.offset
+        total = 0.0
+        for s in self.steps:
+            if s.kind != "T":
+                continue
+            v = s.value
+            mid = v.const + sum(c * xm[k] for k, c in v.xc)
+            half = sum(abs(c) * xh[k] for k, c in v.xc)
+            if s.joint is not None:  # a prismatic joint adds q_chain = C q_active + offset
+                mid += float(C[s.joint] @ ((ql + qu) / 2)) + off[s.joint]
+                half += float(np.abs(C[s.joint]) @ ((qu - ql) / 2))
+            total += abs(mid) + half
+        return float(total)
+
     # ------------------------------------------------------------------ evaluation
     def _walk(self, X: ArrayLike, q: ArrayLike) -> tuple[_Walk, Array, Array, bool]:
         X, q, single = _prep(X, q, len(self.variables), self.n_active)

@@ -47,6 +47,9 @@ class Box(Section):
     def _size(cls, v: Vec3) -> Vec3:
         if any(s < 0 for s in v):
             raise ValueError(f"sizes must be ≥ 0, got {list(v)}")
+        if not any(s > 0 for s in v):
+            raise ValueError(f"a box of size {list(v)} is one point; give a size > 0 in some "
+                             "direction (or a points file for single targets)")  # fmt: skip
         return v
 
 
@@ -279,6 +282,33 @@ def _cap(frame: jax.Array, cos_c: jax.Array, key: jax.Array, n: int) -> jax.Arra
     t = 2 * jnp.pi * u[:, 1]
     local = jnp.stack([st * jnp.cos(t), st * jnp.sin(t), ct], -1)
     return local @ frame.T
+
+
+def nearest_distance(region: Any, origin: Vec3 = (0.0, 0.0, 0.0)) -> float:
+    """The distance from ``origin`` (the chain's base) to the region's nearest point:
+    exact for a box, ball, cylinder and points; for a cone, to the ball that bounds the
+    frustum (a lower bound: the region lies in that ball)."""
+    o = np.asarray(origin, np.float64)
+    if isinstance(region, Box):
+        gap = np.abs(o - np.asarray(region.center)) - np.asarray(region.size) / 2
+        return float(np.linalg.norm(np.maximum(gap, 0.0)))
+    if isinstance(region, Ball):
+        return max(float(np.linalg.norm(o - np.asarray(region.center))) - region.radius, 0.0)
+    if isinstance(region, Cylinder):
+        a = np.asarray(region.axis, np.float64) / np.linalg.norm(region.axis)
+        v = o - np.asarray(region.center)
+        t = float(v @ a)
+        rho = float(np.linalg.norm(v - t * a))
+        return math.hypot(max(abs(t) - region.height / 2, 0.0), max(rho - region.radius, 0.0))
+    if isinstance(region, Cone):
+        a = np.asarray(region.axis, np.float64) / np.linalg.norm(region.axis)
+        d0, d1 = region.depth
+        c = np.asarray(region.apex) + a * (d0 + d1) / 2
+        r = math.hypot((d1 - d0) / 2, d1 * math.tan(math.radians(region.half_angle)))
+        return max(float(np.linalg.norm(o - c)) - r, 0.0)
+    if isinstance(region, Points):
+        return float(np.min(np.linalg.norm(region.xyz() - o, axis=-1)))
+    raise TypeError(f"unknown region {type(region).__name__}")
 
 
 def kind(region: Any) -> str:

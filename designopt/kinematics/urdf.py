@@ -97,15 +97,17 @@ def _finite(where: str, what: str, v: Sequence[float]) -> tuple[float, ...]:
 
 
 def parse(text: str, where: str) -> Robot:
-    """Parse URDF text (yourdfpy, meshes off) and check what the kernel needs:
-    supported joint types, finite numbers, known links, no closed loop."""
+    """Parse URDF text (yourdfpy, meshes off) and check what the kernel needs: a <robot>
+    document with named links and joints, finite numbers, known links, no closed loop,
+    one root link (a tree)."""
     import yourdfpy
     from lxml import etree
 
     try:
-        etree.fromstring(text.encode("utf-8"))  # strict: yourdfpy would recover
+        root = etree.fromstring(text.encode("utf-8"))  # strict: yourdfpy would recover
     except etree.XMLSyntaxError as e:
         raise ConfigError(f"{where}: malformed XML: {e}") from None
+    _is_urdf(root, where)
     try:
         u = yourdfpy.URDF.load(
             io.BytesIO(text.encode("utf-8")),
@@ -156,7 +158,33 @@ def parse(text: str, where: str) -> Robot:
                 f"'{seen[j.child]}' and '{j.name}' (a URDF is a tree)"
             )
         seen[j.child] = j.name
+    roots = [lk for lk in links if lk not in seen]
+    if len(roots) > 1:
+        raise ConfigError(
+            f"{where}: {len(roots)} root links ({', '.join(repr(r) for r in roots)}): a URDF is "
+            "one tree with one root link; join them with a joint or remove the extra links"
+        )
+    if not roots:
+        raise ConfigError(
+            f"{where}: closed loop: every link is the child of a joint (no root link)"
+        )
     return Robot(where, str(rob.name), joints, links)
+
+
+def _is_urdf(root, where: str) -> None:
+    """A ConfigError unless the XML document is a URDF as far as its names go: a <robot>
+    root element, every <robot>, <link> and <joint> with a name (yourdfpy's own message
+    for a missing name is a bare KeyError), at least one <link>."""
+    from lxml import etree
+
+    tag = etree.QName(root).localname
+    if tag != "robot":
+        raise ConfigError(f"{where}: not a URDF: no <robot> element (the root element is <{tag}>)")
+    for el in (root, *root.findall("link"), *root.findall("joint")):
+        if not el.get("name"):
+            raise ConfigError(f"{where}: line {el.sourceline}: <{el.tag}> has no name attribute")
+    if root.find("link") is None:
+        raise ConfigError(f"{where}: not a URDF: <robot> has no <link> element")
 
 
 def _origins(text: str, where: str) -> dict[str, tuple[tuple[float, ...], tuple[float, ...]]]:
@@ -261,8 +289,8 @@ def import_path(
     limits = dict(limits or {})
     unknown = sorted(set(limits) - set(active))
     if unknown:
-        raise ConfigError(f"{where}: chain.limits: {unknown} are not active joints on the path "
-                          f"(active: {', '.join(active)})")  # fmt: skip
+        raise ValueError(f"limits.{unknown[0]}: not an active joint on the path in {where} "
+                         f"(active: {', '.join(active)})")  # fmt: skip
     lo, hi, types = [], [], []
     for n in active:
         j = robot.joints[n]

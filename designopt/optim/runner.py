@@ -10,11 +10,18 @@ after the loop). A checkpoint's ``state`` is a flat dict of numpy arrays named b
 state pytree's paths; resuming from it gives bit-for-bit the uninterrupted run.
 
 A multi-objective entry (``multi_objective``, e.g. NSGA-II) runs on a problem with
-``n_objectives`` > 1 through the same functions. Its per-iteration record is the
-hypervolume of each run's feasible population against one reference point (given as
-``ref_point``, else the componentwise maximum of the first generation's feasible
-objective values over all runs), and its result adds the final populations
-(``RunResult.front``) and the reference point (``RunResult.ref_point``).
+``n_objectives`` > 1 through the same functions. Its per-iteration record is a
+hypervolume against one reference point (given as ``ref_point``, else the componentwise
+maximum of the first generation's feasible objective values over all runs): that of the
+entry's archive (``archive(state) -> (Front, pruned)``: the non-dominated set of every
+feasible point evaluated so far) where it keeps one, so that the history is the
+convergence of the best front found so far and never decreases (an archive cut for room
+can lose volume: then the larger of its and the population's hypervolume, and a running
+maximum on top, a lower bound of the union's), else that of the population; the
+hypervolume of each run's feasible population is recorded beside it
+(``RunResult.history_population``). The result adds the final populations
+(``RunResult.front``), archives (``RunResult.archive``) and the reference point
+(``RunResult.ref_point``).
 """
 
 from __future__ import annotations
@@ -36,12 +43,17 @@ CONVERGENCE_TOL = 1e-6
 
 
 class RunResult(NamedTuple):
-    """Per run (and member). For a multi-objective entry ``history`` is the hypervolume of
-    the feasible population after each iteration against ``ref_point`` (larger is better;
-    NaN for more than 3 objectives: use ``designopt.numerics.pareto.hypervolume`` on ``front``),
-    ``best_f`` the final hypervolume, ``converged_at`` the iteration after which it never
-    grows by > tol, ``history_v``/``best_v`` the least violation in the population,
-    ``history_x``/``best_x`` empty (last axis 0) and ``front`` the final populations."""
+    """Per run (and member). For a multi-objective entry ``history`` is the hypervolume
+    after each iteration against ``ref_point`` of the non-dominated set of every feasible
+    point evaluated so far (the entry's archive; exact while ``archive_pruned`` is 0, a
+    lower bound after; never decreasing), or of the feasible population for an entry
+    without an archive (larger is better; NaN for more than 3 objectives: use
+    ``designopt.numerics.pareto.hypervolume`` on ``front``), ``history_population`` the
+    hypervolume of the feasible population, ``best_f`` the final hypervolume,
+    ``converged_at`` the iteration after which it never grows by > tol,
+    ``history_v``/``best_v`` the least violation in the population, ``history_x``/``best_x``
+    empty (last axis 0), ``front`` the final populations and ``archive`` the final
+    archives (empty slots: v = +inf)."""
 
     history: np.ndarray  # ([B,] n_runs, n_iters + 1) best-so-far value (MO: hypervolume)
     best_f: np.ndarray  # ([B,] n_runs)
@@ -53,6 +65,9 @@ class RunResult(NamedTuple):
     best_v: np.ndarray | None = None  # ([B,] n_runs) 0 = feasible
     front: Front | None = None  # MO: x ([B,] n_runs, P, D), f (…, P, m), v (…, P), rank (…, P)
     ref_point: np.ndarray | None = None  # MO: (m,) the hypervolume's reference point
+    history_population: np.ndarray | None = None  # MO: ([B,] n_runs, n_iters + 1)
+    archive: Front | None = None  # MO with an archive: x ([B,] n_runs, K, D), f, v, rank
+    archive_pruned: np.ndarray | None = None  # ([B,] n_runs) points cut from it for room
     eval_shape: tuple[int, int] | None = None
     """(groups, rows) of the separate objective program's calls (``separate``), which
     ``designopt.problems.evaluate.score`` reuses; None when the objective ran inside the steps."""
@@ -114,15 +129,25 @@ def _init(keys, params, pparams, lower, upper, opt, fn, cons, batched=False):
     return _over_runs(one, batched)(keys, params)
 
 
-def _track(opt: Optimizer, state, ref) -> tuple[jax.Array, jax.Array, jax.Array]:
+def _archive(opt: Optimizer, state) -> tuple[Front, jax.Array] | None:
+    """A multi-objective entry's archive (Front, points pruned), None if it keeps none."""
+    get = getattr(opt, "archive", None)
+    return None if get is None else get(state)
+
+
+def _track(opt: Optimizer, state, ref) -> tuple[jax.Array, ...]:
     """What the runner keeps per iteration: the best so far (x, f, v), or for a
-    multi-objective entry (an empty x, the feasible population's hypervolume, the least
-    violation)."""
+    multi-objective entry (an empty x, the hypervolume of the archive (else of the
+    feasible population), the least violation, the feasible population's hypervolume)."""
     if not opt.multi_objective:
         return tuple(opt.best(state))
     fr = opt.front(state)
-    hv = hypervolume_jax(fr.f, ref, fr.v == 0).astype(fr.x.dtype)
-    return jnp.zeros((0,), fr.x.dtype), hv, jnp.min(fr.v)
+    hv_pop = hypervolume_jax(fr.f, ref, fr.v == 0).astype(fr.x.dtype)
+    arch = _archive(opt, state)
+    hv = hv_pop
+    if arch is not None:  # a cut archive may have lost volume the population still holds
+        hv = jnp.maximum(hypervolume_jax(arch[0].f, ref, arch[0].v == 0).astype(hv.dtype), hv)
+    return jnp.zeros((0,), fr.x.dtype), hv, jnp.min(fr.v), hv_pop
 
 
 @partial(jax.jit, static_argnames=("opt", "fn", "cons", "length", "batched"))
@@ -234,6 +259,16 @@ def _fronts(carry, opt, batched) -> Front:
     return Front(*_over_runs(f, batched)(carry, None))
 
 
+@partial(jax.jit, static_argnames=("opt", "batched"))
+def _archives(carry, opt, batched) -> tuple[Front, jax.Array]:
+    def f(c, _):
+        fr, pruned = _archive(opt, c[1])
+        return tuple(fr), pruned
+
+    fr, pruned = _over_runs(f, batched)(carry, None)
+    return Front(*fr), pruned
+
+
 def first_nadir(f: np.ndarray, v: np.ndarray) -> np.ndarray:
     """The default reference point: per objective the largest finite value among the
     feasible points of f (…, P, m) (among all points when none is feasible)."""
@@ -317,12 +352,13 @@ def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress
             ref = jnp.asarray(first_nadir(host(fr.f), host(fr.v)), dtype)
         if plan is not None and ref is not None:
             ref = plan.put(ref)
-        bx, bf, bv = _records(carry, ref, opt, batched)
+        bx, bf, bv, *bp = _records(carry, ref, opt, batched)
         hf, hx, hv = (
             [host(bf)[..., None]],
             [host(bx)[..., None, :]],
             [host(bv)[..., None]],
         )
+        hp = [host(b)[..., None] for b in bp]  # MO: the population's hypervolume
         done = 0
     else:
         template = jax.eval_shape(lambda: _template(keys, params, lower, upper, opt, batched,
@@ -331,6 +367,7 @@ def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress
                                                          **statics))  # fmt: skip
         st = dict(resume.state)
         hv0 = st.pop("runner.history_v", None)
+        hp0 = st.pop("runner.history_population", None)
         ref0 = st.pop("runner.ref_point", None)
         if mo:
             if ref0 is None:
@@ -342,6 +379,7 @@ def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress
         done = resume.done
         hf, hx = [np.asarray(resume.history)], [np.asarray(resume.history_x)]
         hv = [np.zeros_like(hf[0]) if hv0 is None else np.asarray(hv0)]
+        hp = [] if not mo else [np.full_like(hf[0], np.nan) if hp0 is None else np.asarray(hp0)]
         if hf[0].shape[-1] != done + 1:
             raise ValueError("checkpoint history does not match its iteration count")
         if progress is not None:
@@ -359,9 +397,10 @@ def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress
                 carry = place(carry)  # the same placement every iteration: one program
                 tracks.append(tr)
             axis = 2 if batched else 1  # (…runs, iterations, …) as _advance's scan gives
-            x, f, v = (np.stack([host(t[i]) for t in tracks], axis=axis) for i in range(3))
+            x, f, v, *p = (np.stack([host(t[i]) for t in tracks], axis=axis)
+                           for i in range(len(tracks[0])))  # fmt: skip
         else:
-            carry, (x, f, v) = _advance(
+            carry, (x, f, v, *p) = _advance(
                 carry, params, pparams, lower, upper, length=length, ref=ref, **statics
             )
         if plan is not None:
@@ -369,6 +408,7 @@ def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress
         hf.append(host(f))
         hx.append(host(x))
         hv.append(host(v))
+        hp += [host(a) for a in p]
         done += length
         if progress is not None:
             progress(length)
@@ -378,12 +418,20 @@ def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress
             hv = [np.concatenate(hv, axis=-1)]
             state = _to_numpy(carry, host) | {"runner.history_v": hv[0]}
             if mo:
+                hp = [np.concatenate(hp, axis=-1)]
                 state["runner.ref_point"] = host(ref)
+                state["runner.history_population"] = hp[0]
             checkpoint(Checkpoint(state, hf[0], hx[0], done))
     history = np.concatenate(hf, axis=-1)
     history_x = np.concatenate(hx, axis=-2)
     history_v = np.concatenate(hv, axis=-1)
     front = Front(*(host(a) for a in _fronts(carry, opt, batched))) if mo else None
+    arch, pruned = None, None
+    if mo and getattr(opt, "archive", None) is not None:
+        fa, pa = _archives(carry, opt, batched)
+        arch, pruned = Front(*(host(a) for a in fa)), host(pa)
+        with np.errstate(invalid="ignore"):  # NaN (m > 3) stays NaN
+            history = np.maximum.accumulate(history, axis=-1)  # a cut archive can lose volume
     return RunResult(
         history=history,
         best_f=history[..., -1],
@@ -395,6 +443,9 @@ def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress
         best_v=history_v[..., -1],
         front=front,
         ref_point=host(ref) if mo else None,
+        history_population=np.concatenate(hp, axis=-1) if mo else None,
+        archive=arch,
+        archive_pruned=pruned,
         eval_shape=(int(np.prod(keys.shape[: 2 if batched else 1])), rows) if separate else None,
     )
 

@@ -11,14 +11,18 @@ from designopt.results.base import Record, names
 
 SHOWN = 12
 """Front designs printed by the summary (the archive holds them all)."""
+WIDTH = 150
+"""Characters per summary line before the index columns continue in a block below."""
+_PM = 21  # a value ± SE column: 11 + " ± " + 7
 
 
 @dataclass(eq=False)
 class FrontRecord(Record):
-    """Groups ``optimizer`` (hypervolume (runs, T+1), the final populations), ``front``
-    (x (n, D), f and f_se (n, m) in the indices' own values, every index ± SE, rank,
-    ambiguous pairs (p, 2); attrs objectives, senses, reference, hypervolume, n_samples)
-    and ``problem``."""
+    """Groups ``optimizer`` (hypervolume (runs, T+1) of the best front found so far,
+    population_hypervolume, the final populations and archives), ``front`` (x (n, D), f
+    and f_se (n, m) in the indices' own values, every index ± SE, rank, ambiguous pairs
+    (p, 2); attrs objectives, senses, reference, hypervolume, n_samples) and
+    ``problem``."""
 
     KIND: ClassVar[str] = "front"
     GROUPS: ClassVar[tuple[str, ...]] = ("optimizer", "front", "problem")
@@ -55,6 +59,18 @@ class FrontRecord(Record):
         return {k: np.asarray(v) for k, v in self.groups["front"].items() if k not in skip}
 
     @property
+    def indices(self) -> list[str]:
+        """The study's indices archived beside the objectives (not traded, but computed
+        for every front design: e.g. the reach of a task front of gci and length), the
+        study's summary indices first, then the rest by name, the violation last."""
+        vals = self.values
+        own = [k for k in vals if not (k.endswith("_se") and k[:-3] in vals)]
+        rest = [k for k in own if k not in self.objectives]
+        first = [k for k in self.hint("summary", ()) if k in rest and k != "violation"]
+        later = sorted((k for k in rest if k not in first), key=lambda k: (k == "violation", k))
+        return first + later
+
+    @property
     def ambiguous(self) -> np.ndarray:
         """(p, 2) pairs whose order in some objective is within 2 SE."""
         return np.asarray(self.groups["front"]["ambiguous"], np.int64).reshape(-1, 2)
@@ -70,13 +86,80 @@ class FrontRecord(Record):
 
     @property
     def history(self) -> np.ndarray:
-        """Hypervolume of each run's feasible population per iteration (runs, T+1)."""
+        """Hypervolume per run and iteration (runs, T+1) of the non-dominated set of every
+        feasible design evaluated so far (the optimizer's archive; never decreasing). In
+        archives written before the optimizer kept one: the feasible population's."""
         return np.asarray(self.groups["optimizer"]["hypervolume"])
+
+    @property
+    def population_history(self) -> np.ndarray | None:
+        """Hypervolume of each run's feasible population per iteration (runs, T+1); it
+        may fall when survival drops a non-dominated design. None in older archives."""
+        h = self.groups["optimizer"].get("population_hypervolume")
+        return None if h is None else np.asarray(h)
+
+    def _history_line(self) -> list[str]:
+        H = np.atleast_2d(np.asarray(self.history, np.float64))
+        if not H.size or not np.isfinite(H[:, -1]).all():
+            return []
+        P = self.population_history
+        what = "the final populations" if P is None else "the best front found so far"
+        line = (f"search: hypervolume of {what} {np.median(H[:, -1]):.6g} (median of {len(H)} "
+                f"runs, the optimizer's samples)")  # fmt: skip
+        if P is not None:
+            line += f"; of the final populations {np.median(np.atleast_2d(P)[:, -1]):.6g}"
+        cut = self.groups["optimizer"].get("archive_pruned")
+        if cut is not None and np.any(np.asarray(cut) > 0):
+            line += "; archive full: a lower bound"
+        return [line]
+
+    def _table(self, rows: np.ndarray) -> list[str]:
+        """The shown designs: number, variables, objectives ± SE, then every other index
+        ± SE (continued in blocks below when a line would pass ``WIDTH``)."""
+        vals = self.values
+        units = self.units()
+
+        def head(k: str, w: int) -> str:  # the name with its unit (none for "-")
+            u = units.get(k, "-")
+            return f"{k if u in ('-', '') else f'{k} [{u}]':>{w}}"
+
+        def pm(v: np.ndarray, se: np.ndarray | None):
+            if se is None:
+                return lambda i: f"{v[i]:11.5g}".ljust(_PM)
+            return lambda i: f"{v[i]:11.5g} ± {se[i]:7.1e}"
+
+        cols = [
+            (head(n, 10), lambda i, a=a: f"{self.X[i, a]:10.4g}") for a, n in enumerate(self.names)
+        ]
+        cols += [(head(k, _PM), pm(self.F[:, j], self.F_se[:, j]))
+                 for j, k in enumerate(self.objectives)]  # fmt: skip
+        first = len(cols)
+        for k in self.indices:
+            se = vals.get(k + "_se")
+            se = None if se is None else np.asarray(se, np.float64)
+            cols.append((head(k, _PM), pm(np.asarray(vals[k], np.float64), se)))
+        num = ("  #", lambda i: f"{i:3d}")
+        blocks, cur, width = [], [num], 3
+        for c, col in enumerate(cols):
+            w = len(col[0]) + 2
+            if c >= first and width + w > WIDTH and len(cur) > 1:
+                blocks.append(cur)
+                cur, width = [num], 3
+            cur.append(col)
+            width += w
+        blocks.append(cur)
+        out = []
+        for b, block in enumerate(blocks):
+            if b == 1:
+                out.append("  … the same designs, continued:")
+            out.append("  " + "  ".join(h for h, _ in block))
+            out += [("  " + "  ".join(f(i).rjust(len(h)) for h, f in block)).rstrip() for i in rows]
+        return out
 
     def summary(self) -> list[str]:
         at: Any = self.groups["front"]["attrs"]
         obj = self.objectives
-        n, m = self.F.shape
+        n = len(self.F)
         lines = [self.timing_line(),
                  f"Pareto front of {', '.join(f'{k} ({s})' for k, s in obj.items())}: {n} "
                  f"designs (of {at['n_candidates']} non-dominated candidates), re-scored on "
@@ -84,13 +167,13 @@ class FrontRecord(Record):
                  f"hypervolume {self.hypervolume:.6g} against the reference point "
                  f"{np.round(self.reference, 6).tolist()}; {len(self.ambiguous)} pairs "
                  f"ambiguous (order within {at.get('z', 2):g} SE in some objective)"]  # fmt: skip
-        head = "  ".join(f"{v:>10}" for v in self.names) + "  " + "  ".join(f"{k:>20}" for k in obj)
-        lines.append("  " + head)
+        lines += self._history_line()
         rows = np.unique(np.linspace(0, n - 1, min(n, SHOWN)).round().astype(int))
-        for i in rows:
-            xs = "  ".join(f"{v:10.4g}" for v in self.X[i])
-            fs = "  ".join(f"{self.F[i, j]:11.5g} ± {self.F_se[i, j]:6.1e}" for j in range(m))
-            lines.append(f"  {xs}  {fs}")
+        others = self.indices
+        if others:
+            lines.append(f"the front's designs with their objectives and every other index of "
+                         f"the study ({', '.join(others)}), re-scored ± SE:")  # fmt: skip
+        lines += self._table(rows)
         if len(rows) < n:
             lines.append(f"  ({len(rows)} of {n} designs shown, evenly along the front)")
         return lines

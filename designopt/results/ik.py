@@ -63,10 +63,25 @@ def summary_lines(ik: Mapping[str, Any]) -> list[str]:
     return lines
 
 
+def unit_map(text: str) -> dict[str, str]:
+    """{name: unit} of an IK archive's ``units`` attr (``"q1, q2 rad; q3 m; pos_err m;
+    rot_err rad; inv_k -"``)."""
+    out: dict[str, str] = {}
+    for part in str(text or "").split(";"):
+        names, _, unit = part.strip().rpartition(" ")
+        for n in names.split(","):
+            if n.strip() and unit:
+                out[n.strip()] = unit
+    return out
+
+
 def csv_text(ik: Mapping[str, Any]) -> str:
     """One row per pose: row (from 1), success, the joints, pos_err, rot_err (and
-    iterations, inv_k); full float precision (``repr``), so the joints read back exactly."""
+    iterations, inv_k), each column headed with its unit (``q1 [deg]``); angles in
+    degrees (the archive keeps radians), lengths in the chain's unit; full float precision
+    (``repr``)."""
     names = joint_names(ik)
+    units = unit_map(ik.get("attrs", {}).get("units", ""))
     q = np.asarray(ik["q"], np.float64)
     cols = {"success": np.asarray(ik["success"], bool).astype(int)}
     cols |= {nm: q[:, i] for i, nm in enumerate(names)}
@@ -75,9 +90,15 @@ def csv_text(ik: Mapping[str, Any]) -> str:
         cols["iterations"] = np.asarray(ik["iterations"]).astype(int)
     if "inv_k" in ik:
         cols["inv_k"] = np.asarray(ik["inv_k"], np.float64)
+    head = ["row"]
+    for k in list(cols):
+        u = units.get(k)
+        if u == "rad":  # every angle a user reads is in degrees
+            cols[k], u = np.rad2deg(np.asarray(cols[k], np.float64)), "deg"
+        head.append(f"{k} [{u}]" if u and u != "-" else k)
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["row", *cols])
+    w.writerow(head)
     for r in range(len(q)):
         w.writerow([r + 1, *(repr(c[r].item()) for c in cols.values())])
     return buf.getvalue()

@@ -80,6 +80,13 @@ class RunRecord(Record):
         return str(self.groups["final"]["attrs"]["stage"])
 
     @property
+    def warnings(self) -> list[str]:
+        """Where the final design's results are far from what was asked (a task region
+        barely reached, an index constraint missed); empty when none."""
+        w = self.groups["final"].get("attrs", {}).get("warnings", [])
+        return [w] if isinstance(w, str) else [str(x) for x in w]
+
+    @property
     def n_samples_used(self) -> int:
         return int(self.groups["final"]["attrs"].get("n_samples_used", 0))
 
@@ -105,6 +112,7 @@ class RunRecord(Record):
             ok = "feasible" if v <= 0 else f"violated by {v:.3g} (no feasible design found)"
             lines.append(f"  constraints: {ok}")
         lines += list(self.hint("extra_lines", []))
+        lines += [f"  warning: {w}" for w in self.warnings]
         return lines
 
     def run_line(self) -> str:
@@ -123,6 +131,7 @@ class RunRecord(Record):
         lines.append(f"f = {self.f:.5f} (stage {self.stage}); "
                      + "; ".join(f"{k} = {float(fin[k]):.5f} ± {float(fin[k + '_se']):.1e}"
                                  for k in subs))  # fmt: skip
+        lines += [f"warning: {w}" for w in self.warnings]
         return lines
 
 

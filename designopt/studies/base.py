@@ -105,7 +105,10 @@ class Cost:
     """What a study's settings cost per design evaluation, for the pre-flight estimate
     (``Study.cost``): Monte-Carlo ``samples`` per design, ``chunk`` of them in flight at
     once, ``n_norm`` designs scored once at set-up; the ``*_key`` fields name the config
-    keys a user lowers (printed in the estimate's messages)."""
+    keys a user lowers (printed in the estimate's messages). The memory a design costs:
+    ``bytes_per_sample`` per design and sample in flight (float64's; a float32 job counts
+    half), ``per_design`` beside them, and ``program``, the resident size of the study's
+    own large compiled program, when it has one (docs/faults.md, "pre-flight")."""
 
     samples: int = 1
     chunk: int = 1
@@ -113,6 +116,9 @@ class Cost:
     samples_key: str = "study.n_samples"
     chunk_key: str = "study.n_samples"
     norm_key: str | None = None
+    bytes_per_sample: int = 128  # app.preflight.BYTES_PER_DESIGN_SAMPLE
+    per_design: int = 0
+    program: int = 0
 
 
 @dataclass(frozen=True)
@@ -194,6 +200,8 @@ class Study:
       (kind "run") and prints ``lines``. None: optimise.
     - ``cost(settings) -> Cost``: the pre-flight estimate's inputs.
     - ``commands``: the study's own subcommands (``Command``), added by the CLI.
+    - ``check``, ``warnings``: checks of the settings beyond their models, and the
+      final design's warnings (below).
     - ``ik``: its inverse kinematics for ``designopt ik`` (``designopt.kinematics.ikjob.IKHook``).
     """
 
@@ -228,3 +236,12 @@ class Study:
     replay: (
         Callable[[Any, Mapping[str, jax.Array], Any, str], tuple[dict[str, Any], list[str]]] | None
     ) = None
+    check: Callable[[Any], None] | None = None
+    """``check(settings)``: what the settings models cannot see alone, checked when the
+    config is validated (a dry run refuses it too), e.g. a task region that no design in
+    the box can reach. Raises ``ValueError("<key under study>: <why>")``."""
+    warnings: Callable[[Any, Mapping[str, Any]], list[str]] = lambda s, fin: []
+    """``warnings(settings, final)``: where the final design's results are far from what
+    was asked (a task region barely reached, an index constraint missed): printed with the
+    summary, archived (``final`` attr ``warnings``), shown by ``designopt show`` and
+    marked on the study's figures."""

@@ -1,5 +1,8 @@
 """The Pareto-front section: 2-D, 3-D or a scatter matrix with ± 2 SE bars, ambiguous
-pairs marked, and the hypervolume history."""
+pairs marked, every index of the study ± SE in the hover text (the objectives first, then
+every other index), the front's designs in parallel coordinates (variables, objectives
+and every other index) and the hypervolume history of the best front found so far (the
+populations' own beside it)."""
 
 from __future__ import annotations
 
@@ -48,8 +51,81 @@ def front_objectives(fr: Mapping[str, Any]) -> tuple[list[str], list[str]]:
     return names[:m], senses[:m]
 
 
+def _hover(fr: Mapping[str, Any], X: np.ndarray, vnames: list[str], objs: list[str],
+           vals: np.ndarray, ses: np.ndarray, others: list[str], amb_count: np.ndarray,
+           units: Mapping[str, str]) -> tuple[np.ndarray, str]:  # fmt: skip
+    """(customdata (n, k), hover template): the design number, its variables, its
+    ambiguous pairs, the objectives ± SE, every other index ± SE (no ± where the index
+    has no SE) and the rank after re-scoring."""
+    n = len(vals)
+    cd = [np.arange(n)[:, None].astype(float), X, amb_count[:, None].astype(float)]
+    tpl = ["<b>design %{customdata[0]}</b>"]
+    c = 1
+    for j, v in enumerate(vnames[: X.shape[1]]):
+        tpl.append(f"{esc(v)} = %{{customdata[{c + j}]:.5~g}} {esc(style.unit_of(v, units))}")
+    c += X.shape[1]
+    tpl.append(f"in %{{customdata[{c}]}} ambiguous pairs")
+    c += 1
+
+    def line(k: str, v: np.ndarray, se: np.ndarray | None) -> None:
+        nonlocal c
+        u = esc(style.unit_of(k, units))
+        if se is None:
+            cd.append(v[:, None])
+            tpl.append(f"{esc(k)} = %{{customdata[{c}]:.5~g}} {u}")
+            c += 1
+        else:
+            cd.extend([v[:, None], se[:, None]])
+            tpl.append(f"{esc(k)} = %{{customdata[{c}]:.5~g}} ± %{{customdata[{c + 1}]:.2~g}} {u}")
+            c += 2
+
+    tpl.append("<i>objectives (± SE):</i>")
+    for i, k in enumerate(objs):
+        line(k, vals[:, i], ses[:, i])
+    if others:
+        tpl.append("<i>every other index (± SE):</i>")
+    for k in others:
+        line(k, _f(fr[k]), _f(fr[k + "_se"]) if k + "_se" in fr else None)
+    if "rank" in fr and _f(fr["rank"]).shape == (n,):
+        cd.append(_f(fr["rank"])[:, None])
+        tpl.append(f"rank after re-scoring: %{{customdata[{c}]}}")
+    return np.concatenate(cd, axis=1), "<br>".join(tpl) + "<extra></extra>"
+
+
+def _designs(fr: Mapping[str, Any], prob: Mapping[str, Any], X: np.ndarray,
+             vnames: list[str], axl: list[str], vals: np.ndarray, others: list[str],
+             keep: np.ndarray, ids: _Ids, units: Mapping[str, str]) -> Plot:  # fmt: skip
+    """The front's designs in parallel coordinates: each variable on its box, each
+    objective and every other index on its range over the front, coloured by the first
+    objective (drag along an axis to pick designs)."""
+    lo = _f(prob["lower"]) if "lower" in prob else None
+    hi = _f(prob["upper"]) if "upper" in prob else None
+    dims = []
+    for j, v in enumerate(vnames[: X.shape[1]]):
+        d = {"label": _lab(v, units), "values": X[keep, j]}
+        if lo is not None and hi is not None and len(lo) == X.shape[1] and hi[j] > lo[j]:
+            d["range"] = [float(lo[j]), float(hi[j])]
+        dims.append(d)
+    dims += [{"label": axl[i], "values": vals[keep, i]} for i in range(vals.shape[1])]
+    dims += [{"label": _lab(k, units), "values": _f(fr[k])[keep]} for k in others]
+    # the page keeps a plot's top margin small: the axis names sit inside the plot area
+    tr = {"type": "parcoords", "dimensions": dims, "domain": {"y": [0.0, 0.84]},
+          "line": {"color": vals[keep, 0], "colorscale": "Viridis", "showscale": True,
+                   "colorbar": {"title": {"text": axl[0], "side": "right"}, "thickness": 12,
+                                "len": 0.84, "y": 0.0, "yanchor": "bottom"}}}  # fmt: skip
+    title = (f"The front's {len(keep)} designs: variables (on their box), objectives and every "
+             f"other index (on their range over the front); colour: the first objective; drag "
+             f"along an axis to pick designs")  # fmt: skip
+    lay = _layout(esc(title), height=480)
+    lay["margin"] = {"l": 60, "r": 40, "b": 24}
+    return Plot(ids("designs"), {"data": [tr], "layout": lay}, wide=True)
+
+
 def _front(tree: Mapping[str, Any], ids: _Ids, units: dict[str, str]) -> list[PageSection]:
     fr = tree["front"]
+    own = fr.get("attrs", {}).get("units", {})  # a linear objective's unit (its variables')
+    if isinstance(own, Mapping):
+        units = dict(units) | {_s(k): _s(v) for k, v in own.items()}
     F = np.atleast_2d(_f(fr["f"]))
     n, m = F.shape
     Fse = np.atleast_2d(_f(fr["f_se"])) if "f_se" in fr else np.full((n, m), np.nan)
@@ -63,28 +139,13 @@ def _front(tree: Mapping[str, Any], ids: _Ids, units: dict[str, str]) -> list[Pa
     X = np.atleast_2d(_f(fr["x"])) if "x" in fr else np.zeros((n, 0))
     prob = tree.get("problem", {})
     vnames = _names(prob["names"]) if "names" in prob else [f"x{i}" for i in range(X.shape[1])]
-    inds = [k for k in _index_names(fr, skip=("x", "f", "ambiguous", "hypervolume"))
-            if _f(fr[k]).shape == (n,)]  # fmt: skip
+    skip = ("x", "f", "ambiguous", "hypervolume", "rank")
+    others = [k for k in _index_names(fr, skip=skip) if _f(fr[k]).shape == (n,) and k not in names]
     pairs = _pairs(fr["ambiguous"], n) if "ambiguous" in fr else np.zeros((0, 2), int)
     amb_count = np.bincount(pairs.ravel(), minlength=n) if len(pairs) else np.zeros(n, int)
     keep = _every(n, MAX_MARKERS)
-    # hover: design number, variables, indices ± SE, ambiguity
-    cd = [np.arange(n)[:, None].astype(float), X, amb_count[:, None].astype(float)]
-    tpl = ["<b>design %{customdata[0]}</b>"]
-    c = 1
-    for j, v in enumerate(vnames[: X.shape[1]]):
-        tpl.append(f"{esc(v)} = %{{customdata[{c + j}]:.5~g}} {esc(style.unit_of(v, units))}")
-    c += X.shape[1]
-    tpl.append(f"in %{{customdata[{c}]}} ambiguous pairs")
-    c += 1
-    for k in inds:
-        se = _f(fr[k + "_se"]) if k + "_se" in fr else np.full(n, np.nan)
-        cd += [_f(fr[k])[:, None], se[:, None]]
-        tpl.append(f"{esc(k)} = %{{customdata[{c}]:.5~g}} ± %{{customdata[{c + 1}]:.2~g}} "
-                   f"{esc(style.unit_of(k, units))}")  # fmt: skip
-        c += 2
-    custom = np.concatenate(cd, axis=1)[keep]
-    hover = "<br>".join(tpl) + "<extra></extra>"
+    custom, hover = _hover(fr, X, vnames, names, vals, ses, others, amb_count, units)
+    custom = custom[keep]
     amb = amb_count[keep] > 0
     colors = np.where(amb, PALETTE[1], PALETTE[0])
     symbols = ["diamond" if a else "circle" for a in amb]
@@ -134,20 +195,35 @@ def _front(tree: Mapping[str, Any], ids: _Ids, units: dict[str, str]) -> list[Pa
         lay = _layout(esc(title + " (pairwise projections)"), height=180 * m + 80)
         sec.items.append(Plot(ids("front-splom"), {"data": [tr], "layout": lay}, wide=True))
     rows = [(a, b) for a, b in zip(names, senses, strict=True)]
+    rows += [(k, "not traded") for k in others]
     sec.items.append("<p class='note'>Values are the indices themselves (a <i>max</i> objective "
-                     "is shown as its index, not negated). Two designs form an <i>ambiguous</i> "
+                     "is shown as its index, not negated); every other index the study computes "
+                     "is in the hover text and the design plot, re-scored like the objectives. "
+                     "Two designs form an <i>ambiguous</i> "
                      "pair when their order in some objective is within 2 standard errors: "
                      "the Monte-Carlo noise could swap them, so neither is known to be better "
-                     "there.</p>" + _table(["objective", "sense"], rows))  # fmt: skip
-    hv_tree = fr if "hypervolume" in fr else tree.get("optimizer", {})
+                     "there.</p>" + _table(["index", "sense"], rows))  # fmt: skip
+    if X.shape[1]:
+        sec.items.append(_designs(fr, prob, X, vnames, axl, vals, others, keep, ids, units))
+    opt = tree.get("optimizer", {})
+    hv_tree = fr if "hypervolume" in fr else opt
     if "hypervolume" in hv_tree:
         hv = _f(hv_tree["hypervolume"])
         ref = fr.get("attrs", {}).get("reference")
-        t = "hypervolume per iteration" + (f" (reference point {np.round(_f(ref), 6).tolist()})" if ref is not None else "")  # fmt: skip
+        pop = _f(opt["population_hypervolume"]) if "population_hypervolume" in opt else None
+        what = ("hypervolume of the best front found so far (every design evaluated) per "
+                "iteration" if pop is not None else "hypervolume per iteration")  # fmt: skip
+        t = what + (f" (reference point {np.round(_f(ref), 6).tolist()})" if ref is not None else "")  # fmt: skip
         if hv.ndim == 2:
             p = _convergence(
                 hv, int(np.argmax(hv[:, -1])), ids, t, "hypervolume [-]", "hypervolume"
             )
+            if pop is not None and pop.shape == hv.shape:
+                it = np.arange(hv.shape[1])
+                p.fig["data"].append({"type": "scatter", "mode": "lines", "x": it,
+                                      "y": np.median(pop, axis=0),
+                                      "name": f"median of the {len(pop)} populations alone",
+                                      "line": {"color": PALETTE[1], "dash": "dot", "width": 1.5}})  # fmt: skip
         else:
             p = Plot(ids("hv"), {"data": [{"type": "scatter", "mode": "lines", "x": np.arange(len(hv)), "y": hv}],
                                  "layout": _layout(esc(t), _lab("iteration", {}), "hypervolume [-]")})  # fmt: skip

@@ -44,9 +44,12 @@ def _aliases(s: DavinciSettings) -> dict[str, str]:
 
 
 def _cost(s) -> Cost:
-    """Monte-Carlo cost per design (pre-flight): the GCI's joint samples, all in flight."""
+    """Monte-Carlo cost per design (pre-flight): the GCI's joint samples, all in flight;
+    its batched IK compiles to a large program (some 570 MB resident once compiled,
+    measured with benchmarks/preflight.py on configs/davinci.yaml)."""
     n = s.indices.n_samples
-    return Cost(n, n, 1, "study.indices.n_samples", "study.indices.n_samples")
+    return Cost(n, n, 1, "study.indices.n_samples", "study.indices.n_samples",
+                program=550 << 20)  # fmt: skip
 
 
 STUDY = Study(

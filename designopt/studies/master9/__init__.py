@@ -49,11 +49,15 @@ def _aliases(s: Master9Settings) -> dict[str, str]:
 
 def _cost(s: Master9Settings) -> Cost:
     """Samples per design, the chunk in flight and the normalisation probes, with the
-    config keys a user lowers (the pre-flight estimate)."""
+    config keys a user lowers (the pre-flight estimate). Its memory per design and sample
+    in flight, ``bytes_per_sample`` (float64's; a float32 job counts half): 8 B, as XLA
+    fuses a chunk's kinematics into its reductions (64 designs × 262144 samples: 5 B of
+    temporaries by ``memory_analysis()`` in float64, 7 B of peak resident set in float32;
+    at the shipped 64 × 8192 either is a few MB)."""
     n = s.indices.n_samples
     return Cost(samples=n, chunk=min(n, s.indices.chunk), n_norm=s.n_norm,
                 samples_key="study.indices.n_samples", chunk_key="study.indices.chunk",
-                norm_key="study.n_norm")  # fmt: skip
+                norm_key="study.n_norm", bytes_per_sample=8)  # fmt: skip
 
 
 def _extra(s: Master9Settings, fin) -> list[str]:

@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from designopt.studies.base import Cost, Study
-from designopt.studies.serial import ikhook
+from designopt.studies.serial import ikhook, reach
 from designopt.studies.serial.commands import COMMANDS
 from designopt.studies.serial.settings import INDEX_NAMES, TASK_INDEX_NAMES, SerialSettings, units
 
@@ -41,24 +41,46 @@ def _aliases(s: SerialSettings) -> dict[str, str]:
 def _cost(s) -> Cost:
     """Monte-Carlo cost per design (pre-flight): the index samples, ``chunk`` in flight,
     and the normalisation probes when the objective normalises. Under ``measure: task``
-    a sample is a target (``front.n_samples`` counts targets too) and a chunk holds the
-    IK solutions compared per target (and its place in the queue)."""
+    a sample is a target (``front.n_samples`` counts targets too) and a chunk holds
+    ``indices.chunk`` targets (1024 unless given).
+
+    The memory behind them goes to the pre-flight as ``Cost`` attributes (it has no fields
+    for them; ``designopt.app.preflight.extra``), bytes measured with XLA's
+    ``memory_analysis()`` and the peak resident set on a 2-core CPU (float64; docs/faults.md):
+
+    - ``bytes_per_sample``: per design and sample of a chunk, about three float64 copies
+      of the Jacobian block (820 B measured for 6 × 6, 30-60 B for 2 × 2); per design and
+      target of a task, the solver's state and final check per kept solution, the study's
+      Jacobian and its condition number: 8 B × (n_best + 1) × (9 + 2 · rows · joints)
+      (1.9 kB measured for the PUMA's 6 × 6 with n_best 2, 0.4 kB for a planar 2R);
+    - ``per_design`` (task): the FK database, n_db entries of joints, pose and Z-order
+      key, 8 B × (joints + 6) each (91 B measured for 6 joints);
+    - ``program`` (task): compiling the batched IK. Its entry-wise LM step is unrolled
+      once per phase of the slot schedule (4096, 512, 64 slots: three for a swarm),
+      each phase some 40 MiB + 4.6 MiB × joints × residual rows (3 position, 6 with a
+      tool axis), on top of 250 MiB for the rest (database, seeds, final check, the
+      runtime's arenas): 0.45 GB measured for the planar 2R, 0.64-0.7 GB (two phases) and
+      0.83-0.97 GB (three) for the PUMA 560 with a tool axis (DH and URDF)."""
     ind, n_norm = s.indices, s.objective.get("n_norm")
+    n_q, rows = len(s.chain.joints), len(ind.rows())
     if ind.measure == "task":
+        from designopt.kinematics import ik
         from designopt.studies.serial import taskindex
 
-        kept = s.task.ik.n_best + 1  # the solutions compared, and the queue
-        n, c = taskindex.n_targets(s), taskindex.chunk(s) * kept
+        o = s.task.ik
+        n, c = taskindex.n_targets(s), taskindex.chunk(s)
+        r = 3 if taskindex.mode(s) == "position" else 6
+        phases = len(ik._phases(o.slots or 4096))  # a swarm fills the default's 4096 slots
+        mem = {
+            "bytes_per_sample": 8 * (o.n_best + 1) * (9 + 2 * rows * n_q),
+            "per_design": 8 * (n_q + 6) * o.n_db,
+            "program": int((250 + phases * (40 + 4.6 * n_q * r)) * (1 << 20)),
+        }
     else:
         n, c = ind.n_samples, min(ind.chunk, ind.n_samples)
-    return Cost(
-        n,
-        c,
-        int(n_norm or 1),
-        "study.indices.n_samples",
-        "study.indices.chunk",
-        "study.objective.n_norm" if n_norm is not None else None,
-    )
+        mem = {"bytes_per_sample": 24 * rows * n_q}
+    return Cost(n, c, int(n_norm or 1), "study.indices.n_samples", "study.indices.chunk",
+                "study.objective.n_norm" if n_norm is not None else None, **mem)  # fmt: skip
 
 
 STUDY = Study(
@@ -76,6 +98,8 @@ STUDY = Study(
     commands=COMMANDS,
     ik=ikhook.HOOK,
     cloud=_cloud,
+    check=reach.check,
+    warnings=reach.warnings,
     tiny={
         "name": "serial",
         "chain": {

@@ -50,9 +50,21 @@ def _fmt(v: np.ndarray) -> str:
     return "[" + ", ".join(f"{x: .6g}" for x in np.asarray(v).ravel()) + "]"
 
 
-def _pose_lines(label: str, R: np.ndarray, p: np.ndarray) -> list[str]:
-    return [f"{label}: p = {_fmt(p)}",
-            f"{' ' * len(label)}  R = {_fmt(R[0])} {_fmt(R[1])} {_fmt(R[2])}"]  # fmt: skip
+def _pose_lines(label: str, R: np.ndarray, p: np.ndarray, u: str) -> list[str]:
+    """The tip pose: p in the chain's length unit ``u``, R's rows, and R as roll, pitch,
+    yaw in degrees (URDF's fixed-axis x-y-z convention)."""
+    rpy = np.degrees(_rpy(np.asarray(R, np.float64)))
+    return [f"{label}: p = {_fmt(p)} {u}",
+            f"{' ' * len(label)}  R = {_fmt(R[0])} {_fmt(R[1])} {_fmt(R[2])}"
+            f" (rpy {_fmt(rpy)} deg)"]  # fmt: skip
+
+
+def _rpy(R: np.ndarray) -> np.ndarray:
+    """Roll, pitch, yaw (rad) of R = Rz(yaw) Ry(pitch) Rx(roll), URDF's convention."""
+    pitch = math.atan2(-R[2, 0], math.hypot(R[0, 0], R[1, 0]))
+    if math.hypot(R[0, 0], R[1, 0]) < 1e-12:  # gimbal lock: yaw folded into roll
+        return np.array([math.atan2(-R[1, 2], R[1, 1]), pitch, 0.0])
+    return np.array([math.atan2(R[2, 1], R[2, 2]), pitch, math.atan2(R[1, 0], R[0, 0])])
 
 
 def chain_arguments(c: argparse.ArgumentParser) -> None:
@@ -60,7 +72,7 @@ def chain_arguments(c: argparse.ArgumentParser) -> None:
     c.add_argument("config", help="config (YAML) with a serial study, e.g. configs/urdf_arm.yaml")
     c.add_argument("--q", default=None, metavar="Q1,Q2,...",
                    help="joint values (degrees for revolute, length units for prismatic)")  # fmt: skip
-    c.add_argument("--design", action="append", default=[], metavar="NAME=VALUE",
+    c.add_argument("--design", action="extend", nargs="+", default=[], metavar="NAME=VALUE",
                    help="a design variable's value (repeat; others: middle of their box)")  # fmt: skip
     c.add_argument("--seed", type=int, default=None, help="seed of the random check poses")
     c.add_argument("--no-cache", action="store_true", help="do not keep compiled programs")
@@ -81,7 +93,7 @@ def cmd_chain(args: argparse.Namespace, ctx: Any) -> int:
 
     jax.config.update("jax_enable_x64", True)
     from designopt.studies.serial.mechanism import build
-    from designopt.studies.serial.settings import UrdfChain
+    from designopt.studies.serial.settings import UrdfChain, length_unit
 
     cfg, _ = loaded
     where = args.config
@@ -92,6 +104,7 @@ def cmd_chain(args: argparse.Namespace, ctx: Any) -> int:
     n = mech.n
     full = np.concatenate([[design[k] for k in s.variables], mech.fixed]) * mech.scale
     urdf_chain = isinstance(s.chain, UrdfChain)
+    u = length_unit(s)  # m for a URDF; every angle printed in degrees
     lines: list[str] = []
     if urdf_chain:
         imp = s.chain.imported
@@ -107,31 +120,35 @@ def cmd_chain(args: argparse.Namespace, ctx: Any) -> int:
                 if imp.types[i] == "R":
                     lim = f" limits [{math.degrees(lo):.4g}, {math.degrees(hi):.4g}] deg"
                 else:
-                    lim = f" limits [{lo:.4g}, {hi:.4g}]"
+                    lim = f" limits [{lo:.4g}, {hi:.4g}] {u}"
                 lim = f" q{i + 1}" + lim
             mim = f" mimics {j.mimic[0]} (x{j.mimic[1]:g} {j.mimic[2]:+g})" if j.mimic else ""
             axis = f" axis {_fmt(j.axis)}" if j.type != "fixed" else ""
             lines.append(f"  {j.name:<16} {j.type:<10} {j.parent} -> {j.child}{axis}{lim}{mim}")
-            lines.append(f"  {'':<16} origin xyz {_fmt(j.xyz)} rpy {_fmt(j.rpy)}")
+            lines.append(f"  {'':<16} origin xyz {_fmt(j.xyz)} {u} rpy "
+                         f"{_fmt(np.degrees(np.asarray(j.rpy, np.float64)))} deg")  # fmt: skip
             for (jn, f), v in bound.items():
                 if jn == j.name:
-                    unit = " deg" if f in ("roll", "pitch", "yaw") else ""
+                    unit = " deg" if f in ("roll", "pitch", "yaw") else f" {u}"
                     what = (f"variable {v} = {design[v]:.6g}{unit}" if v in s.variables else
                             f"fixed {v} = {s.fixed[v]:.6g}{unit}" if isinstance(v, str) else
                             f"fixed {v:.6g}{unit}")  # fmt: skip
                     lines.append(f"  {'':<16} origin.{f}: {what}")
         lines.append(f"off the path (ignored): {len(rob.joints) - len(imp.path)} joints")
     else:
-        lines.append(f"DH chain ({s.chain.convention}), {n} joints")
+        lines.append(f"DH chain ({s.chain.convention}), {n} joints; lengths a, d in {u}, "
+                     "angles alpha, theta in deg")  # fmt: skip
         for i, j in enumerate(s.chain.joints):
+            lim = "deg" if j.type == "R" else u
             lines.append(f"  q{i + 1}: {j.type} a={j.a} alpha={j.alpha} d={j.d} theta={j.theta} "
-                         f"limits {list(j.limits)}")  # fmt: skip
-    lines.append("design: " + ", ".join(f"{k} = {v:g}" for k, v in design.items()))
+                         f"limits {list(j.limits)} {lim}")  # fmt: skip
+    units = {k: ("deg" if k in s.angle_names() else u) for k in design}
+    lines.append("design: " + ", ".join(f"{k} = {v:g} {units[k]}" for k, v in design.items()))
     R0, p0 = (np.asarray(a) for a in mech.model.fk(full, np.zeros(n)))
-    lines += _pose_lines("FK at q = 0", R0, p0)
+    lines += _pose_lines("FK at q = 0", R0, p0, u)
     if q is not None:
         Rq, pq = (np.asarray(a) for a in mech.model.fk(full, q))
-        lines += _pose_lines(f"FK at --q {args.q}", Rq, pq)
+        lines += _pose_lines(f"FK at --q {args.q} (deg, {u})", Rq, pq, u)
     status = 0
     if urdf_chain:
         err = check_import(s, design, mech, full, cfg.seed)
@@ -213,6 +230,9 @@ def cmd_export(args: argparse.Namespace, ctx: Any) -> int:
         s.chain.urdf_text or "", set_values(s, design), s.chain.urdf_path or where
     )
     out = Path(args.urdf)
+    if out.is_dir():
+        raise ConfigError(f"--urdf {out}: is a folder, not a file; give a file name such as "
+                          f"{out / 'robot.urdf'}")  # fmt: skip
     if out.exists() and not getattr(args, "overwrite", False):
         raise ConfigError(f"output '{out}': a file is already there; give --overwrite to "
                           "replace it, or another --urdf")  # fmt: skip

@@ -28,7 +28,7 @@ from designopt.results import RunRecord
 from designopt.studies.serial import taskindex
 from designopt.studies.serial.mechanism import Mechanism, build
 from designopt.studies.serial.objective import measures
-from designopt.studies.serial.settings import ROWS, SerialSettings, units
+from designopt.studies.serial.settings import ROWS, SerialSettings, UrdfChain, length_unit, units
 
 RATES = ("reach",)
 """Success rates (``reach``, under ``measure: task``): clipped to [0, 1], Wilson band."""
@@ -64,12 +64,14 @@ def inv_k(mech: Mechanism, s: SerialSettings, x: np.ndarray, q: np.ndarray) -> n
 
 
 def _unit(mech: Mechanism, i: int, s: SerialSettings) -> tuple[float, str]:
-    return (180 / np.pi, "deg") if _revolute(s, i) else (1.0, "L")
+    """(factor, unit) of active joint i on an axis: degrees, or the chain's length unit."""
+    return (180 / np.pi, "deg") if _revolute(s, i) else (1.0, length_unit(s))
 
 
 def _revolute(s: SerialSettings, i: int) -> bool:
-    j = getattr(s.chain, "joints", None)
-    return j[i].type == "R" if j is not None else True
+    if isinstance(s.chain, UrdfChain):
+        return s.chain.imported.types[i] == "R"
+    return s.chain.joints[i].type == "R"
 
 
 def map_joints(n: int) -> tuple[int, int]:
@@ -181,8 +183,8 @@ def _workspace(p: np.ndarray, c: np.ndarray, s: SerialSettings, folder: Path) ->
     ax.set_xlabel(style.label("x", L))
     ax.set_ylabel(style.label("y", L))
     fig.colorbar(sc, ax=ax, label=style.label("1/k", style.DIMENSIONLESS), shrink=0.7, pad=0.1)
-    ax.set_title("final design: tip positions of 4000 uniform joint samples\n"
-                 "(L: the chain's length unit)", fontsize=9)  # fmt: skip
+    ax.set_title("final design: tip positions of 4000 uniform joint samples"
+                 + ("\n(L: the chain's length unit)" if L == "L" else ""), fontsize=9)  # fmt: skip
     return save(fig, folder, "workspace")
 
 
@@ -246,8 +248,9 @@ def _task_caption(rec: RunRecord, sol: dict[str, np.ndarray], L: str) -> str:
     ta = s.task.tool_axis  # type: ignore[union-attr]
     if ta is not None:
         what += f"; tool axis within {ta.cone:g}° of {_vec(np.asarray(ta.direction))}"
+    warn = [ln for w in rec.warnings for ln in textwrap.wrap("WARNING: " + w, 90)]
     return "\n".join(textwrap.wrap("final design: " + des, 90) + [line]
-                     + textwrap.wrap(what, 90))  # fmt: skip
+                     + textwrap.wrap(what, 90) + warn)  # fmt: skip
 
 
 def _task_panel(ax, a: np.ndarray, b: np.ndarray, c: np.ndarray, ok: np.ndarray, size: float):
@@ -303,7 +306,9 @@ def draw_task(rec: RunRecord, folder: Path) -> list[Path]:
     fig.colorbar(scs[0], ax=axes, label=style.label("1/k", style.DIMENSIONLESS), shrink=0.85)
     if (~ok).any():
         axes[-1].legend(loc="lower right", fontsize=8, framealpha=0.85)
-    fig.suptitle(_task_caption(rec, sol, L), fontsize=9)
+    # a design far from what was asked (rec.warnings): the caption says so, in red
+    fig.suptitle(_task_caption(rec, sol, L), fontsize=9,
+                 color="crimson" if rec.warnings else "black")  # fmt: skip
     return save(fig, folder, "task")
 
 

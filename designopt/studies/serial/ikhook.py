@@ -67,15 +67,17 @@ def _solver() -> Any:
 
 def units(s: Any, names: list[str]) -> str:
     """The units text of the joints and errors: R joints rad, P joints and the position
-    error in L (the chain's own length unit), rot_err rad, inv_k dimensionless."""
-    from designopt.studies.serial.settings import UrdfChain
+    error in the chain's length unit (m for a URDF, the declared unit, else L), rot_err
+    rad, inv_k dimensionless."""
+    from designopt.studies.serial.settings import UrdfChain, length_unit
 
     urdf = isinstance(s.chain, UrdfChain)
     types = s.chain.imported.types if urdf else [j.type for j in s.chain.joints]
     rev = [n for n, t in zip(names, types, strict=True) if t == "R"]
     pri = [n for n, t in zip(names, types, strict=True) if t != "R"]
-    parts = ([", ".join(rev) + " rad"] if rev else []) + ([", ".join(pri) + " L"] if pri else [])
-    return "; ".join([*parts, "pos_err L", "rot_err rad", "inv_k -"])
+    u = length_unit(s)
+    parts = ([", ".join(rev) + " rad"] if rev else []) + ([", ".join(pri) + f" {u}"] if pri else [])
+    return "; ".join([*parts, f"pos_err {u}", "rot_err rad", "inv_k -"])
 
 
 def solve(job: IKJob) -> IKSolution:

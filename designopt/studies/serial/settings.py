@@ -98,6 +98,8 @@ class UrdfChain(Section):
                 ctx = info.context if isinstance(info.context, dict) else {}
                 folder = ctx.get("config_dir")
                 p = (Path(folder) if folder is not None else Path.cwd()) / p
+            if p.is_dir():
+                raise ConfigError(f"{p}: is a folder, not a URDF file (chain.urdf: {self.urdf})")
             if not p.is_file():
                 raise ConfigError(f"{p}: URDF file not found (chain.urdf: {self.urdf}; a "
                                   "relative path is read from the config file's folder)")  # fmt: skip
@@ -275,6 +277,15 @@ class SerialTask(Task):
     ik: TaskIK = TaskIK()
 
 
+class Units(Section):
+    """``study.units``: the unit the chain's lengths (and the task's coordinates) are in.
+    A DH chain keeps whatever unit its numbers are in: name it (``{length: mm}``) and every
+    printout and axis says it; undeclared, lengths are labelled ``L`` (the chain's own
+    length unit). A URDF chain is in metres by the URDF specification."""
+
+    length: str | None = Field(None, min_length=1, max_length=16, pattern=r"^[^\s\[\]]+$")
+
+
 class SerialSettings(StudySettings):
     """A user's serial mechanism: chain, design variables, indices, objective."""
 
@@ -286,6 +297,15 @@ class SerialSettings(StudySettings):
     objective: dict[str, float | bool | int] = {"gci": -1.0}
     constraints: list[AnyConstraint] = []
     task: SerialTask | None = None
+    units: Units = Units()
+
+    @field_validator("units")
+    @classmethod
+    def _urdf_metres(cls, v: Units, info: ValidationInfo) -> Units:
+        if isinstance(info.data.get("chain"), UrdfChain) and v.length not in (None, "m"):
+            raise ValueError(f"length: a URDF's lengths are metres (the URDF specification), "
+                             f"not {v.length!r}; remove units.length or give m")  # fmt: skip
+        return v
 
     @field_validator("fixed")
     @classmethod
@@ -463,23 +483,34 @@ def _no_unused_fixed(info: ValidationInfo, used: dict[str, str], where: str) -> 
         raise ValueError(f"fixed value(s) {unused} appear in no {where}; use or remove them")
 
 
+def length_unit(s: SerialSettings) -> str:
+    """The chain's length unit: m for a URDF chain, the declared ``units.length`` of a DH
+    chain, else ``L`` (undeclared)."""
+    if isinstance(s.chain, UrdfChain):
+        return "m"
+    return s.units.length or "L"
+
+
 def units(s: SerialSettings) -> dict[str, str]:
-    """Angles in deg, lengths in L (the chain's own length unit, e.g. m for the PUMA 560);
+    """Angles in deg, lengths in the chain's length unit u (:func:`length_unit`: m for a
+    URDF, the declared unit of a DH chain, else L);
     gci, gcsei dimensionless; the volume ∫|det Jv| dq in L^rows (an area for a planar
     Jacobian); the manipulability sqrt(det J Jᵀ) in L^(rows in L) for an all-revolute
     chain with no more rows than joints (angular rows count as L when ``length_scale``
     scales them), else "mixed" (prismatic columns or more rows than joints mix units).
     The task indices reach, gci_q05 and joint_margin are dimensionless shares."""
+    u = length_unit(s)
     ang = s.angle_names()
-    out = {k: "deg" if k in ang else "L" for k in s.variables}
+    out = {k: "deg" if k in ang else u for k in s.variables}
     rows = s.indices.rows()
     n_len = sum(r < 3 or s.indices.length_scale != 1.0 for r in rows)
     all_r = all(j.type == "R" for j in s.chain.joints)
     if all_r and len(rows) <= len(s.chain.joints):
-        man = "-" if n_len == 0 else ("L" if n_len == 1 else f"L^{n_len}")
+        man = "-" if n_len == 0 else (u if n_len == 1 else f"{u}^{n_len}")
     else:
         man = "mixed"
-    vol = "L" if len(rows) == 1 else f"L^{len(rows)}"
+    vol = u if len(rows) == 1 else f"{u}^{len(rows)}"
+    out["__length__"] = u
     if s.indices.measure == "task":
         return out | {"reach": "-", "gci": "-", "gci_q05": "-", "manipulability": man,
                       "joint_margin": "-"}  # fmt: skip

@@ -1,0 +1,174 @@
+"""Time to first result, as a new user meets it (issue #36): every shipped config's command
+in a fresh process, first with an empty compilation cache (cold), then with the cache it
+filled (warm).
+
+For each command it prints one row: end to end (the process's wall time), start-up
+(process start to the config loaded), compile (JAX tracing + XLA compiling, from the
+command's own summary), XLA programs, run (end to end less start-up, compile and
+figures), figures, and the time to the first finished iteration (when the progress bar
+first shows an iteration done: everything before it is start-up, set-up and compiling).
+A ``run`` prints its own split (``wall … end to end = start-up … + figures …; compile …``);
+``scan``, ``sweep`` and ``eval`` print their compile time; the other columns are then
+``-``. The CPU model, its vector extensions, the load and the date head the table.
+
+    python benchmarks/latency.py                   # every shipped config (about 30 min on 2 cores)
+    python benchmarks/latency.py --only master9 --only puma560-eval
+    python benchmarks/latency.py --list            # the commands it would run
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+
+# (name, command after `designopt`); {out} is a fresh output path of the repeat
+COMMANDS: list[tuple[str, list[str]]] = [
+    ("master9", ["run", "configs/master9.yaml", "--out", "{out}.h5"]),
+    ("master9_front", ["run", "configs/master9_front.yaml", "--out", "{out}.h5"]),
+    ("davinci", ["run", "configs/davinci.yaml", "--out", "{out}.h5"]),
+    ("davinci_wrist", ["run", "configs/davinci_wrist.yaml", "--out", "{out}.h5"]),
+    ("rcm", ["run", "configs/rcm.yaml", "--out", "{out}.h5"]),
+    ("rcm_teleop", ["run", "configs/rcm_teleop.yaml", "--out", "{out}.h5"]),
+    ("rcm_eta", ["scan", "configs/rcm_eta.yaml", "--out", "{out}.h5"]),
+    ("plas", ["run", "configs/plas.yaml", "--out", "{out}.h5"]),
+    ("plas_scan", ["scan", "configs/plas_scan.yaml", "--out", "{out}.h5"]),
+    ("planar2r", ["run", "configs/planar2r.yaml", "--out", "{out}.h5"]),
+    ("planar2r_front", ["run", "configs/planar2r_front.yaml", "--out", "{out}.h5"]),
+    ("planar2r_task", ["run", "configs/planar2r_task.yaml", "--out", "{out}.h5"]),
+    ("puma560", ["run", "configs/puma560.yaml", "--out", "{out}.h5"]),
+    ("puma560_task", ["run", "configs/puma560_task.yaml", "--out", "{out}.h5"]),
+    ("urdf_arm", ["run", "configs/urdf_arm.yaml", "--out", "{out}.h5"]),
+    ("urdf_puma560", ["run", "configs/urdf_puma560.yaml", "--out", "{out}.h5"]),
+    ("urdf_puma560_task", ["run", "configs/urdf_puma560_task.yaml", "--out", "{out}.h5"]),
+    ("urdf_puma560_front", ["run", "configs/urdf_puma560_front.yaml", "--out", "{out}.h5"]),
+    ("sweep_ptpso", ["sweep", "configs/sweep_ptpso.yaml", "--out", "{out}.h5"]),
+    ("mo_benchmark", ["bench", "configs/mo_benchmark.yaml", "--out", "{out}.h5"]),
+    ("puma560-eval", ["eval", "configs/puma560.yaml", "--design", "a2=0.4", "d4=0.4"]),
+    ("urdf_puma560_task-eval", ["eval", "configs/urdf_puma560_task.yaml", "--design",
+                                "a2=0.4318", "d4=0.4318"]),
+]  # fmt: skip
+"""The shipped configs' commands (`pso_benchmark.yaml` runs for minutes: not here)."""
+
+END_TO_END = re.compile(
+    r"wall (?P<wall>[\d.]+) s end to end = start-up (?P<startup>[\d.]+) s .*figures "
+    r"(?P<figures>[\d.]+) s .*compile (?P<compile>[\d.]+) s of it \((?P<n>\d+) XLA programs\)"
+)
+COMPILE = re.compile(r"compile (?P<compile>[\d.]+) s")
+PROGRAMS = re.compile(r"(?P<n>\d+) XLA compilations")
+FIRST_ITERATION = re.compile(r":\s+\d+%\|[^|]*\|\s*(?P<n>\d+)/\d+")
+
+
+def cpu() -> str:
+    """The CPU model and its widest vector extension (they change the arithmetic)."""
+    model, flags = "unknown CPU", set()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name") and model == "unknown CPU":
+                model = line.split(":", 1)[1].strip()
+            if line.startswith("flags"):
+                flags = set(line.split(":", 1)[1].split())
+    except OSError:
+        pass
+    ext = "AVX-512" if "avx512f" in flags else "AVX2" if "avx2" in flags else "no AVX2"
+    return f"{model} ({ext}), {os.cpu_count()} cores"
+
+
+def _stream(pipe, t0: float, out: list[tuple[float, str]]) -> None:
+    """Lines of a pipe with their time since t0, split at \\n and at tqdm's \\r."""
+    buf = ""
+    for ch in iter(lambda: pipe.read(1), ""):
+        if ch in "\r\n":
+            if buf:
+                out.append((time.perf_counter() - t0, buf))
+            buf = ""
+        else:
+            buf += ch
+    if buf:
+        out.append((time.perf_counter() - t0, buf))
+
+
+def one(argv: list[str], cache: Path, out: str) -> dict[str, float | str]:
+    """One command in a fresh process with ``cache`` as its compilation cache."""
+    env = dict(os.environ, DESIGNOPT_CACHE_DIR=str(cache), PYTHONUNBUFFERED="1")
+    exe = Path(sys.executable).with_name("designopt")
+    cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "designopt.cli"]
+    cmd += [a.format(out=out) for a in argv] + (["--overwrite"] if argv[0] != "eval" else [])
+    t0 = time.perf_counter()
+    p = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True)  # fmt: skip
+    lines: list[tuple[float, str]] = []
+    errs: list[tuple[float, str]] = []
+    threads = [threading.Thread(target=_stream, args=(p.stdout, t0, lines)),
+               threading.Thread(target=_stream, args=(p.stderr, t0, errs))]  # fmt: skip
+    for t in threads:
+        t.start()
+    rc = p.wait()
+    wall = time.perf_counter() - t0
+    for t in threads:
+        t.join()
+    if rc != 0:
+        tail = "\n".join(ln for _, ln in (lines + errs)[-15:])
+        raise SystemExit(f"{' '.join(cmd)} failed ({rc}):\n{tail}")
+    row: dict[str, float | str] = {"wall": wall}
+    text = "\n".join(ln for _, ln in lines)
+    m = END_TO_END.search(text)
+    if m:
+        row |= {k: float(m[k]) for k in ("startup", "figures", "compile")} | {"n": int(m["n"])}
+    else:
+        c, n = COMPILE.search(text), PROGRAMS.search(text)
+        if c:
+            row["compile"] = float(c["compile"])
+        if n:
+            row["n"] = int(n["n"])
+    first = next((t for t, ln in errs if (f := FIRST_ITERATION.search(ln)) and int(f["n"]) > 0),
+                 None)  # fmt: skip
+    if first is not None:
+        row["first"] = first
+    if "compile" in row:
+        row["run"] = wall - float(row.get("startup", 0.0)) - float(row["compile"]) \
+            - float(row.get("figures", 0.0))  # fmt: skip
+    return row
+
+
+def fmt(row: dict, k: str) -> str:
+    v = row.get(k)
+    return "-" if v is None else (f"{v:d}" if isinstance(v, int) else f"{v:.1f}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--only", action="append", default=[], metavar="NAME",
+                    help="only this command (repeat); names: --list")  # fmt: skip
+    ap.add_argument("--list", action="store_true", help="print the commands and stop")
+    args = ap.parse_args()
+    todo = [(n, c) for n, c in COMMANDS if not args.only or n in args.only]
+    if args.list or not todo:
+        for n, c in COMMANDS:
+            print(f"{n:<24} designopt {' '.join(c)}")
+        return
+    print(f"{cpu()}; load {os.getloadavg()[0]:.1f}; {time.strftime('%Y-%m-%d %H:%M')}")
+    head = ["command", "cache", "end to end", "start-up", "compile", "programs", "run",
+            "figures", "first iteration"]  # fmt: skip
+    print("| " + " | ".join(head) + " |")
+    print("|" + "---|" * len(head))
+    keys = ("wall", "startup", "compile", "n", "run", "figures", "first")
+    with tempfile.TemporaryDirectory(prefix="designopt-latency-") as tmp:
+        for name, argv in todo:
+            cache = Path(tmp) / f"cache-{name}"  # empty: the first run compiles everything
+            for which in ("cold", "warm"):
+                row = one(argv, cache, str(Path(tmp) / f"{name}-{which}"))
+                print(f"| {name} | {which} | " + " | ".join(fmt(row, k) for k in keys) + " |",
+                      flush=True)  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
