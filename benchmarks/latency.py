@@ -3,9 +3,10 @@ in a fresh process, first with an empty compilation cache (cold), then with the 
 filled (warm).
 
 For each command it prints one row: end to end (the process's wall time), start-up
-(process start to the config loaded), compile (JAX tracing + XLA compiling, from the
-command's own summary), XLA programs, run (end to end less start-up, compile and
-figures), figures, and the time to the first finished iteration (when the progress bar
+(process start to the config loaded), compile (JAX tracing + XLA compiling of the whole
+command, figures included, from its own summary), XLA programs, run (end to end less
+start-up and compile: the arithmetic, drawing and writing), figures (their wall time,
+their compiling included), and the time to the first finished iteration (when the progress bar
 first shows an iteration done: everything before it is start-up, set-up and compiling).
 A ``run`` prints its own split (``wall … end to end = start-up … + figures …; compile …``);
 ``scan``, ``sweep`` and ``eval`` print their compile time; the other columns are then
@@ -133,9 +134,8 @@ def one(argv: list[str], cache: Path, out: str) -> dict[str, float | str]:
                  None)  # fmt: skip
     if first is not None:
         row["first"] = first
-    if "compile" in row:
-        row["run"] = wall - float(row.get("startup", 0.0)) - float(row["compile"]) \
-            - float(row.get("figures", 0.0))  # fmt: skip
+    if "compile" in row:  # everything but starting and compiling: arithmetic, drawing, writing
+        row["run"] = wall - float(row.get("startup", 0.0)) - float(row["compile"])
     return row
 
 
