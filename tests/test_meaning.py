@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from figcheck import assert_clean
 
 import designopt
 from designopt.cli.commands import main
@@ -162,6 +163,7 @@ def test_a_barely_reaching_design_is_said_so_everywhere(far_run, capsys):
         (fig,) = [f for name, f in canvas.RECORD if name == "task"]
         title = fig._suptitle
         assert "WARNING: reach = " in title.get_text() and title.get_color() == "crimson"
+        assert_clean(canvas.RECORD)  # units, clipping, overlaps (docs/figures.md)
     finally:
         import matplotlib.pyplot as plt
 
@@ -170,11 +172,11 @@ def test_a_barely_reaching_design_is_said_so_everywhere(far_run, capsys):
         canvas.RECORD = None
 
 
-def test_a_missed_index_constraint_is_a_warning_and_a_met_one_is_not():
+def test_a_missed_index_constraint_is_a_warning_and_a_met_one_is_not(tmp_path):
     from designopt.studies.serial import reach
     from designopt.studies.serial.settings import SerialSettings
 
-    raw = yaml.safe_load(planar_task(Path("/tmp"), reach=0.99).read_text())["study"]
+    raw = yaml.safe_load(planar_task(tmp_path, reach=0.99).read_text())["study"]
     s = SerialSettings.model_validate(raw)
     missed = reach.warnings(s, {"reach": 0.69, "reach_se": 0.01})
     assert len(missed) == 1 and "asked ≥ 0.99" in missed[0] and "reach = 0.69" in missed[0]

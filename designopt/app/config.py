@@ -465,7 +465,7 @@ def error_text(e: ValidationError, raw: Any = None) -> str:
         first = head.split(".")[0]
         for base in (loc, loc[:-1]):
             if isinstance(_node(raw, base), dict) and first in _node(raw, base):
-                loc, msg = [*base, *head.split(".", 1)[:1], *head.split(".", 1)[1:]], rest
+                loc, msg = [*base, *head.split(".", 1)], rest
                 break
     return f"key '{'.'.join(loc) or '(top level)'}': {msg}"
 

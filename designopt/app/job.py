@@ -23,8 +23,9 @@ from designopt.studies import Study, get
 
 
 def dtype_of(cfg: Any) -> np.dtype:
-    """The config's precision; float64 needs JAX's x64 mode (the CLI turns it on, a script
-    must call ``jax.config.update("jax_enable_x64", True)`` itself)."""
+    """The config's precision; float64 needs JAX's x64 mode (the CLI turns it on, the
+    Python API enters ``jax.enable_x64`` for its calls; a script calling the pipeline
+    directly enables it itself)."""
     if cfg.precision == "float64" and not jax.config.jax_enable_x64:
         raise ConfigError(
             "key 'precision': float64 needs JAX's 64-bit mode; call "
