@@ -209,6 +209,33 @@ class SerialModel:
         rot, pos = w.seal((w.rot_entries(), w.pos_lins()))
         return _squeeze((w.rot_array(rot), w.pos_array(pos)), single)
 
+    def joint_frames(self, X: ArrayLike, q: ArrayLike) -> tuple[Array, Array, Array]:
+        """Where the chain's joints are: (origins (M, C, n_chain + 1, 3), axes (M, C,
+        n_chain, 3), tip rotation (M, C, 3, 3)). ``origins[..., i, :]`` is the point at
+        which chain joint i acts (the start of its rotation or translation step), the
+        last one the tip; ``axes[..., i, :]`` is joint i's unit axis in the base frame.
+        Link i runs from origin i to origin i + 1 (the segments a drawing and the
+        ``links: auto`` collision capsules use); origins[..., -1, :] equals ``fk``'s
+        position and the tip rotation its rotation."""
+        w, X, q, single = self._walk(X, q)
+        n = self.n_chain
+        marks = [w.joints[i][2] for i in range(n)] + [len(w.incs)]
+        pos: list[list[dict]] = []
+        acc: dict[int | None, Vec3] = {}
+        t = 0
+        for mk in marks:  # running prefix sums of the translation steps
+            while t < mk:
+                k, f, col = w.incs[t]
+                acc = dict(acc)
+                acc[k] = _axpy(acc.get(k), f, col)
+                t += 1
+            pos.append([{k: v[i] for k, v in acc.items()} for i in range(3)])
+        axes = [list(w.joints[i][1]) for i in range(n)]
+        pos, axes, rot = w.seal((pos, axes, w.rot_entries()))
+        P = jnp.stack([w.pos_array(p) for p in pos], -2)
+        A = jnp.stack([jnp.stack([w.full(x) for x in a], -1) for a in axes], -2)
+        return _squeeze((P, A, w.rot_array(rot)), single)
+
     def jacobian(
         self,
         X: ArrayLike,
