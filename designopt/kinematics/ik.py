@@ -109,7 +109,8 @@ class IKResult(NamedTuple):
     """Per target: joints (active), success, position error (model units), orientation
     error (rad; 0 for ``position``), 1/k (2-norm, position block) at the joints, and the
     seed they come from (0 = the nearest database entry; for a failure, the seed that
-    came closest)."""
+    came closest). With an ``accept`` predicate, ``success`` also asks that it accepts the
+    joints, and ``converged`` says whether they are within tolerance and limits alone."""
 
     q: jax.Array
     success: jax.Array
@@ -117,6 +118,8 @@ class IKResult(NamedTuple):
     rot_err: jax.Array
     inv_k: jax.Array
     seed: jax.Array
+    converged: jax.Array  # within tolerance and limits, accepted or not (= success without
+    #                       an ``accept`` predicate)
 
 
 # ------------------------------------------------------------ entry-wise kinematics
@@ -500,17 +503,24 @@ def _check(mode: Mode, R_t, opts: IKOptions) -> None:
 def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | None,
           lower: jax.Array, upper: jax.Array, key: jax.Array, mode: Mode = "position",
           opts: IKOptions = DEFAULTS,
-          score: Callable[[jax.Array], jax.Array] | None = None) -> IKResult:  # fmt: skip
+          score: Callable[[jax.Array], jax.Array] | None = None,
+          accept: Callable[[jax.Array, jax.Array, jax.Array], jax.Array] | None = None,
+          ) -> IKResult:  # fmt: skip
     """IK of the same T targets (p_t (T, 3), R_t (T, 3, 3) or None) for M designs
-    X (M, D): every field has leading axes (M, T). The database draws and the seeds'
-    hashes are shared by the designs (common random numbers); the designs' targets share
-    one queue of slots. With ``opts.n_best`` > 1 a target's solver goes on after a seed
-    converged, until ``n_best`` have (or its seeds run out), and keeps the solution of
-    highest ``score(q)`` (q (M, T, n) → (M, T); default the 2-norm 1/k of the position
-    Jacobian, :attr:`IKResult.inv_k`)."""
+    X (M, D), or of each design's own T targets (p_t (M, T, 3), R_t (M, T, 3, 3)): every
+    field has leading axes (M, T). The database draws and the seeds' hashes are shared
+    by the designs (common random numbers); the designs' targets share one queue of
+    slots. With ``opts.n_best`` > 1 a target's solver goes on after a seed converged,
+    until ``n_best`` have (or its seeds run out), and keeps the solution of highest
+    ``score(q)`` (q (M, T, n) → (M, T); default the 2-norm 1/k of the position Jacobian,
+    :attr:`IKResult.inv_k`). ``accept(m, t, q)`` (design indices (B,), target indices
+    (B,), joints (B, n) → bool (B,)), e.g. "collision-free": a converged seed it refuses
+    is dropped like one that failed and the target goes on with its next seed; only
+    accepted solutions count as successes (and towards ``n_best``)."""
     _check(mode, R_t, opts)
     X = jnp.asarray(X)
-    M, T, n = X.shape[0], p_t.shape[0], lower.shape[0]
+    per_design = p_t.ndim == 3
+    M, T, n = X.shape[0], p_t.shape[-2], lower.shape[0]
     I = M * T  # noqa: E741  (items: design-major)
     dtype = p_t.dtype
     ch = _Chain(model)
@@ -527,7 +537,10 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
     index = jax.vmap(lambda p, R, Lm: _index(q_db, p, R, Lm, mode))(p_db, R_db, L)
     q_sorted = index[4]  # (M, n_db, n)
     n_near = min(opts.n_nearest, opts.n_db, opts.window)
-    if n_near:
+    if n_near and per_design:
+        near = jax.lax.map(lambda a: _nearest(a[:5], a[6], a[7], a[5], mode, n_near, opts.window),
+                           (*index, L, p_t, R_t))  # (M, T, k)  # fmt: skip
+    elif n_near:
         near = jax.lax.map(lambda a: _nearest(a[:5], p_t, R_t, a[5], mode, n_near, opts.window),
                            (*index, L))  # (M, T, k)  # fmt: skip
     else:
@@ -535,8 +548,10 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
     attempts = max(n_near + opts.n_random * opts.rounds, 1)
     salt = jax.random.bits(k_hash, (), jnp.uint32)
     xT = X.T  # (D, M)
-    ptT = p_t.T  # (3, T)
-    RtT = None if R_t is None else R_t.reshape(T, 9).T  # (9, T): row 3i + j holds R[i, j]
+    # (3, T) or, per design, (3, M·T) by item; R: row 3i + j holds R[i, j]
+    ptT = p_t.reshape(-1, 3).T
+    RtT = None if R_t is None else R_t.reshape(-1, 9).T
+    tcol = (lambda i, t: jnp.minimum(i, I - 1)) if per_design else (lambda i, t: t)  # noqa: E731
     cols = () if mode == "position" else (2,) if mode == "axis" else (0, 1, 2)
     tol_p2, tol_r2 = (0.5 * opts.tol_pos) ** 2, (0.5 * opts.tol_rot) ** 2
     rows = _rows(mode)
@@ -563,10 +578,11 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         xc = [xT[k, m] for k in range(ch.D)]
         tx = ch.trig_x(xc)
         Lm = L[m]
-        pt = [ptT[j, t] for j in range(3)]
+        tc = tcol(i, t)
+        pt = [ptT[j, tc] for j in range(3)]
         Rt = None
         if RtT is not None:
-            Rt = [[RtT[3 * r + c, t] if c in cols else 0.0 for c in range(3)] for r in range(3)]
+            Rt = [[RtT[3 * r + c, tc] if c in cols else 0.0 for c in range(3)] for r in range(3)]
 
         def body(_, c):
             qc, tq, conv, Em = c
@@ -597,10 +613,15 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         qc, ok, Em = block(i, [q[j] for j in range(n)])
         q = jnp.stack(qc)
         it = it + opts.block
-        # a seed is dropped when it used its steps or its least error stopped falling
+        # a seed is dropped when it used its steps or its least error stopped falling, or
+        # converged to joints ``accept`` refuses
         stalled = ~(Em < opts.stall * Eb)
         Eb = jnp.minimum(Eb, Em)
-        give_up = ~ok & ((it >= iters) | stalled)
+        refused = jnp.zeros_like(ok)
+        if accept is not None:
+            refused = ok & ~accept(*split(i), q.T)
+            ok = ok & ~refused
+        give_up = ~ok & ((it >= iters) | stalled | refused)
         last = a + 1 >= attempts
         # converged joints go to the item's next solution slot (of n_best); a dropped
         # seed's joints go to slot 0 when the item has none and they beat its best so far
@@ -667,13 +688,17 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         Ra = jnp.stack([jnp.stack([arr(x) for x in row], -1) for row in R], -2)
         pa = jnp.stack([arr(x) for x in p], -1).reshape(M, T, 3)
         Ja = jnp.stack([jnp.stack([arr(x) for x in row], -1) for row in J], -2)
-        pe, re = errors(pa, Ra.reshape(M, T, 3, 3), p_t[None],
-                        None if R_t is None else R_t[None], mode)  # fmt: skip
+        pe, re = errors(pa, Ra.reshape(M, T, 3, 3), p_t if per_design else p_t[None],
+                        None if R_t is None else R_t if per_design else R_t[None], mode)  # fmt: skip
         q = jnp.stack(qc, -1).reshape(M, T, n)
         inside = jnp.all((q >= lower) & (q <= upper), -1)
-        ok = (pe <= opts.tol_pos * L[:, None]) & (re <= opts.tol_rot) & inside
+        conv = (pe <= opts.tol_pos * L[:, None]) & (re <= opts.tol_rot) & inside
+        ok = conv
+        if accept is not None:
+            items = jnp.arange(I, dtype=jnp.int32)
+            ok = conv & accept(items // T, items % T, q.reshape(I, n)).reshape(M, T)
         ik_ = inv_cond(Ja.reshape(M, T, 3, n), "2")
-        r = IKResult(q, ok, pe, re, ik_, a_out[c * I : (c + 1) * I].reshape(M, T))
+        r = IKResult(q, ok, pe, re, ik_, a_out[c * I : (c + 1) * I].reshape(M, T), conv)
         if best is None:
             best = r
             if nb > 1:

@@ -193,8 +193,49 @@ class ToolAxis(Section):
 
 
 class Task(Section):
+    """The region, and at most one of: a cone of tool directions (``tool_axis``), or a
+    port (``port``: the fixed point in the body wall the instrument passes through; each
+    target's tool axis is then the unit vector from the port to the target, and
+    ``insertion`` = [d0, d1] bounds the tool's depth past the port, |target − port|)."""
+
     region: Region
     tool_axis: ToolAxis | None = None
+    port: Vec3 | None = None
+    insertion: tuple[float, float] | None = None
+
+    @field_validator("port")
+    @classmethod
+    def _port(cls, v: Vec3 | None) -> Vec3 | None:
+        if v is not None:
+            bad = validation.first_bad(list(v))
+            if bad is not None:
+                raise ValueError(bad[1])
+        return v
+
+    @field_validator("insertion")
+    @classmethod
+    def _insertion(cls, v: tuple[float, float] | None) -> tuple[float, float] | None:
+        if v is not None:
+            bad = validation.first_bad(list(v))
+            if bad is not None:
+                raise ValueError(bad[1])
+            if not 0 <= v[0] < v[1]:
+                raise ValueError(f"needs 0 ≤ d0 < d1 (the depth past the port), got {list(v)}")
+        return v
+
+    @model_validator(mode="after")
+    def _one_axis_rule(self) -> Task:
+        if self.port is not None and self.tool_axis is not None:
+            raise ValueError("port and tool_axis exclude each other: with a port, each "
+                             "target's tool axis is the line from the port to the target; "
+                             "remove one of them")  # fmt: skip
+        if self.insertion is not None and self.port is None:
+            raise ValueError("insertion: is the tool's depth past a port; give task.port")
+        return self
+
+    def depth_range(self) -> tuple[float, float]:
+        """[d0, d1] of ``insertion``, else [0, ∞)."""
+        return self.insertion if self.insertion is not None else (0.0, math.inf)
 
 
 # --------------------------------------------------------------------------- samples
@@ -318,13 +359,66 @@ def kind(region: Any) -> str:
 
 def targets(task: Task, key: jax.Array, n: int, dtype=jnp.float64):
     """(positions (N, 3), tool frames (N, 3, 3) or None): the task's samples. A tool
-    frame's last column is the sampled tool axis (its roll is arbitrary: the IK leaves
-    it free)."""
+    frame's last column is the sampled tool axis, or with a port the unit vector from the
+    port to the target (its roll is arbitrary: the IK leaves it free)."""
     ax = task.tool_axis
     frame = None if ax is None else jnp.asarray(_frame(ax.direction), dtype)
     cos_c = None if ax is None else jnp.cos(jnp.radians(jnp.asarray(ax.cone, dtype)))
     # one jitted call (op by op, the sampling compiled some fifteen one-op programs)
-    return _targets(kind(task.region), region_params(task.region, dtype), key, n, frame, cos_c)
+    p, R = _targets(kind(task.region), region_params(task.region, dtype), key, n, frame, cos_c)
+    if task.port is not None:
+        R = port_frames(p, jnp.asarray(task.port, dtype))
+    return p, R
+
+
+@jax.jit
+def port_frames(p: jax.Array, port: jax.Array) -> jax.Array:
+    """Tool frames (..., 3, 3) whose z axis is the unit vector from ``port`` (..., 3) to
+    the target ``p`` (..., 3); a target on the port gets z = (0, 0, 1) (its depth is 0:
+    outside any insertion range but [0, d1], and unreached: see ``depth``)."""
+    d = p - port
+    n = jnp.linalg.norm(d, axis=-1, keepdims=True)
+    ok = n > 0
+    z = jnp.where(ok, d / jnp.where(ok, n, 1.0), jnp.asarray([0.0, 0.0, 1.0], p.dtype))
+    return _frames_of(z)
+
+
+def _frames_of(z: jax.Array) -> jax.Array:
+    """Orthonormal frames (..., 3, 3) whose last column is the unit vector z (..., 3)."""
+    dtype = z.dtype
+    a = jnp.where(
+        jnp.abs(z[..., :1]) < 0.9, jnp.array([1.0, 0, 0], dtype), jnp.array([0, 1.0, 0], dtype)
+    )
+    x = jnp.cross(a, z)
+    x = x / jnp.linalg.norm(x, axis=-1, keepdims=True)
+    return jnp.stack([x, jnp.cross(z, x), z], -1)
+
+
+def depths(p: np.ndarray, port: Vec3) -> np.ndarray:
+    """|p − port|: the tool's depth past the port at each target (N,)."""
+    return np.linalg.norm(np.asarray(p, np.float64) - np.asarray(port, np.float64), axis=-1)
+
+
+def check_port(task: Task, n: int = 8192) -> None:
+    """ValueError naming ``task.insertion`` when no point of the region lies at a depth
+    past the port within the insertion range (checked on n samples of the region, or
+    every point of a points file): then no target could ever be reached."""
+    if task.port is None:
+        return
+    if isinstance(task.region, Points):
+        p = task.region.xyz()
+    else:
+        dt = jnp.float64 if jax.config.jax_enable_x64 else jnp.float32
+        p = np.asarray(_targets(kind(task.region), region_params(task.region, dt),
+                                jax.random.key(0), n, None, None)[0], np.float64)  # fmt: skip
+    d = depths(p, task.port)
+    d0, d1 = task.depth_range()
+    if not np.any((d >= d0) & (d <= d1) & (d > 0)):
+        raise ValueError(
+            f"task.insertion: no target of the region lies at a depth in [{d0:g}, {d1:g}] "
+            f"past the port {list(task.port)}: the region's depths run from {d.min():.4g} to "
+            f"{d.max():.4g} (the chain's length unit); move the port or widen the insertion"
+        )
 
 
 @partial(jax.jit, static_argnames=("region_kind", "n"))
@@ -334,11 +428,4 @@ def _targets(region_kind: str, rparams: dict[str, jax.Array], key: jax.Array, n:
     p = sample_region(region_kind, rparams, k_p, n)
     if frame is None:
         return p, None
-    z = _cap(frame, cos_c, k_a, p.shape[0])
-    dtype = p.dtype
-    a = jnp.where(
-        jnp.abs(z[:, :1]) < 0.9, jnp.array([1.0, 0, 0], dtype), jnp.array([0, 1.0, 0], dtype)
-    )
-    x = jnp.cross(a, z)
-    x = x / jnp.linalg.norm(x, axis=-1, keepdims=True)
-    return p, jnp.stack([x, jnp.cross(z, x), z], -1)
+    return p, _frames_of(_cap(frame, cos_c, k_a, p.shape[0]))

@@ -78,20 +78,20 @@ def build_task_fn(mech: Mechanism, s: SerialSettings, dtype: Any):
 
     def fn(params, X, key):
         per = taskindex.per_target(mech, s, params, design_full(params, X, dtype), dtype)
-        est = taskindex.estimates(per)
+        est = taskindex.estimates_of(s, mech, per, params)
         out = {}
         for k, (v, se) in est.items():
             out[k], out[k + "_se"] = v, se
         b = params["bounds"]
         f = normalise.weighted_sum([est[k][0] for k in names], b, w)
-        lin = [i for i, k in enumerate(names) if k in taskindex.MEANS]
+        lin = [i for i, k in enumerate(names) if taskindex.mean_type(k)]
         f_se = jnp.zeros_like(f)
         if lin:
             c = normalise.weighted_sum([taskindex.values(per, names[i]) for i in lin],
                                        b[jnp.asarray(lin)], [w[i] for i in lin])  # fmt: skip
             f_se = jnp.std(c, -1, ddof=1) / np.sqrt(c.shape[-1])
         for i, k in enumerate(names):
-            if k not in taskindex.MEANS:
+            if not taskindex.mean_type(k):
                 f_se = f_se + abs(w[i]) * out[k + "_se"] / jnp.abs(b[i, 1] - b[i, 0])
         return f, out | {"f_se": f_se}
 
@@ -201,7 +201,9 @@ def problem(s: SerialSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Pro
         "bounds": normalise.unit_bounds(len(weights), dtype),
     }
     if task:  # once per run, shared by the swarm (common random numbers)
-        params |= taskindex.targets(s, keys["samples"], dtype)
+        from designopt.studies.serial import bodies
+
+        params |= taskindex.targets(s, keys["samples"], dtype) | bodies.base_params(s, mech, dtype)
     norm_bounds = None
     b = np.asarray([[0.0, 1.0]] * len(weights))  # params["bounds"]: unit rows unless normalised
     if s.objective.get("normalize", False):

@@ -23,6 +23,7 @@ from pydantic import (
 )
 
 from designopt.core.errors import ConfigError
+from designopt.kinematics.collision import Collision
 from designopt.kinematics.task import Task
 from designopt.studies.base import Section, StudySettings, check_replicates
 
@@ -286,17 +287,47 @@ class Units(Section):
     length: str | None = Field(None, min_length=1, max_length=16, pattern=r"^[^\s\[\]]+$")
 
 
+Entry = float | str
+"""A number, or the name of a design variable or fixed value."""
+
+
+class ArmBase(Section):
+    """Where an arm's base frame sits in the world (the task's frame): ``xyz`` (the
+    chain's length unit) and ``rpy`` (degrees; R = Rz(yaw)·Ry(pitch)·Rx(roll), the URDF
+    convention). Every entry is a number or the name of a design variable or fixed
+    value, so the placement can be designed like any chain number."""
+
+    xyz: tuple[Entry, Entry, Entry] = (0.0, 0.0, 0.0)
+    rpy: tuple[Entry, Entry, Entry] = (0.0, 0.0, 0.0)
+
+
+class Arm(Section):
+    """One of several identical arms (copies of ``chain``): its base and its port (else
+    ``task.port``, if any)."""
+
+    base: ArmBase = ArmBase()
+    port: tuple[float, float, float] | None = None
+
+
+ARM_INDEX_NAMES = ("reach_all", "arms_free")
+"""Indices of a multi-arm study beside ``reach_<k>`` per arm (docs/task.md)."""
+COLLISION_INDEX_NAMES = ("clearance", "collision_free")
+"""Indices under ``study.collision`` (docs/task.md)."""
+
+
 class SerialSettings(StudySettings):
     """A user's serial mechanism: chain, design variables, indices, objective."""
 
     name: Literal["serial"] = "serial"
     variables: dict[str, tuple[float, float]]
     fixed: dict[str, float] = {}
+    arms: list[Arm] | None = Field(None, min_length=2, max_length=8)
     chain: AnyChain
     indices: SerialIndices = SerialIndices()
     objective: dict[str, float | bool | int] = {"gci": -1.0}
     constraints: list[AnyConstraint] = []
     task: SerialTask | None = None
+    collision: Collision | None = None
     units: Units = Units()
 
     @field_validator("units")
@@ -319,9 +350,9 @@ class SerialSettings(StudySettings):
     @classmethod
     def _names(cls, chain: Chain | UrdfChain, info: ValidationInfo) -> Chain | UrdfChain:
         known = set(info.data.get("variables", {})) | set(info.data.get("fixed", {}))
-        kinds: dict[str, str] = {}
+        kinds: dict[str, str] = _arm_names(info.data.get("arms"), known, info)
         if isinstance(chain, UrdfChain):
-            return _urdf_names(chain, info, known)
+            return _urdf_names(chain, info, known, kinds)
         for i, j in enumerate(chain.joints):
             for e in ("a", "alpha", "d", "theta"):
                 v = getattr(j, e)
@@ -339,7 +370,8 @@ class SerialSettings(StudySettings):
                         )
         unused = sorted(set(info.data.get("variables", {})) - set(kinds))
         if unused:
-            raise ValueError(f"design variable(s) {unused} appear in no DH entry of the chain")
+            raise ValueError(f"design variable(s) {unused} appear in no DH entry of the chain"
+                             + (" or arm base" if info.data.get("arms") else ""))  # fmt: skip
         _no_unused_fixed(info, kinds, "DH entry of the chain")
         return chain
 
@@ -356,7 +388,7 @@ class SerialSettings(StudySettings):
         if ind.normalized and ind.norm != "fro":
             raise ValueError("indices.normalized: applies to norm 'fro' only")
         self._check_task()
-        names = TASK_INDEX_NAMES if ind.measure == "task" else INDEX_NAMES
+        names = self.index_names()
         obj = self.objective
         for k, v in obj.items():
             if k in ("normalize",):
@@ -407,6 +439,37 @@ class SerialSettings(StudySettings):
             raise ValueError(f"task: a task region is scored under indices.measure: task; "
                              f"this config's measure is '{ind.measure}' (set measure: task "
                              "or remove study.task)")  # fmt: skip
+        for key in ("collision", "arms"):
+            if getattr(self, key) is not None and ind.measure != "task":
+                raise ValueError(f"{key}: is scored at the IK solutions of a task "
+                                 "(indices.measure: task and a study.task section)")  # fmt: skip
+        if self.arms is not None:
+            if self.collision is None:
+                raise ValueError("arms: several arms are checked against each other as "
+                                 "capsules: give study.collision (at least the links' radius)")  # fmt: skip
+            if self.task.tool_axis is not None:  # type: ignore[union-attr]
+                raise ValueError("arms: the arms reach the task through their ports "
+                                 "(arms.<k>.port or task.port) or by position; a "
+                                 "task.tool_axis cone is for one arm")  # fmt: skip
+            given = [a.port is not None for a in self.arms]
+            if any(given) and not all(given):
+                raise ValueError("arms: give every arm a port or none (task.port is the "
+                                 "default for arms without one)")  # fmt: skip
+            if all(given) and self.task.port is not None:  # type: ignore[union-attr]
+                raise ValueError("arms: every arm has its own port; remove task.port")
+            d = self.task.insertion  # type: ignore[union-attr]
+            if d is not None and self.task.port is None and not any(given):  # type: ignore[union-attr]
+                raise ValueError("task.insertion: needs a port")
+        c = self.collision
+        if c is not None and isinstance(c.radius, list):
+            n = len(self.chain.joints)
+            if len(c.radius) != n:
+                raise ValueError(f"collision.radius: one radius per link ({n} links, one per "
+                                 f"joint), got {len(c.radius)}")  # fmt: skip
+        if c is not None and c.links == "urdf":
+            raise ValueError("collision.links: 'urdf' (the URDF's <collision> shapes) is not "
+                             "supported yet; use links: auto (a capsule per link between "
+                             "joint origins) with a radius")  # fmt: skip
 
     def needs_float64(self) -> str | None:
         if self.indices.measure == "task":
@@ -424,7 +487,12 @@ class SerialSettings(StudySettings):
 
     def index_names(self) -> tuple[str, ...]:
         if self.indices.measure == "task":
-            return TASK_INDEX_NAMES
+            out = TASK_INDEX_NAMES
+            if self.collision is not None:
+                out += COLLISION_INDEX_NAMES
+            if self.arms is not None:
+                out += tuple(f"reach_{k}" for k in range(len(self.arms))) + ARM_INDEX_NAMES
+            return out
         return tuple(k for k in INDEX_NAMES if k != "volume" or self.has_volume())
 
     def weights(self) -> dict[str, float]:
@@ -443,19 +511,52 @@ class SerialSettings(StudySettings):
                 v
                 for (_, f), v in self.chain.bound().items()
                 if isinstance(v, str) and f in ("roll", "pitch", "yaw")
-            }
+            } | self._arm_angles()
         return {
             getattr(j, e)
             for j in self.chain.joints
             for e in ("alpha", "theta")
             if isinstance(getattr(j, e), str)
-        }
+        } | self._arm_angles()
+
+    def _arm_angles(self) -> set[str]:
+        return {v for a in self.arms or [] for v in a.base.rpy if isinstance(v, str)}
+
+    def ports(self) -> list[tuple[float, float, float] | None]:
+        """The port of each arm (one entry without ``arms``): its own, else ``task.port``."""
+        tp = None if self.task is None else self.task.port
+        if self.arms is None:
+            return [tp]
+        return [a.port if a.port is not None else tp for a in self.arms]
 
 
-def _urdf_names(chain: UrdfChain, info: ValidationInfo, known: set[str]) -> UrdfChain:
-    """Every ``set`` name is a variable or fixed value, used as an angle or as a length
-    but not both; every variable appears in ``set``."""
+def _arm_names(arms: list[Arm] | None, known: set[str], info: ValidationInfo) -> dict[str, str]:
+    """{name: angle | length} of the names the arms' bases use; ValueError for a name
+    that is neither a design variable (with its bounds) nor a fixed value."""
     kinds: dict[str, str] = {}
+    for k, arm in enumerate(arms or []):
+        for fld, kind in (("xyz", "length"), ("rpy", "angle")):
+            for i, v in enumerate(getattr(arm.base, fld)):
+                if not isinstance(v, str):
+                    continue
+                if v not in known:
+                    raise ValueError(
+                        f"arms.{k}.base.{fld}.{i}: '{v}' is neither a design variable (give "
+                        f"it bounds under variables) nor a fixed value (variables: "
+                        f"{sorted(info.data.get('variables', {}))}, fixed: "
+                        f"{sorted(info.data.get('fixed', {}))})"
+                    )
+                if kinds.setdefault(v, kind) != kind:
+                    raise ValueError(f"arms.{k}.base.{fld}.{i}: '{v}' is used as an angle "
+                                     "and as a length")  # fmt: skip
+    return kinds
+
+
+def _urdf_names(chain: UrdfChain, info: ValidationInfo, known: set[str],
+                kinds: dict[str, str] | None = None) -> UrdfChain:  # fmt: skip
+    """Every ``set`` name is a variable or fixed value, used as an angle or as a length
+    but not both; every variable appears in ``set`` (or an arm's base)."""
+    kinds = dict(kinds or {})
     for key, v in chain.set.items():
         if not isinstance(v, str):
             continue
@@ -470,7 +571,8 @@ def _urdf_names(chain: UrdfChain, info: ValidationInfo, known: set[str]) -> Urdf
             raise ValueError(f"set.{key}: '{v}' is used as an angle and as a length")
     unused = sorted(set(info.data.get("variables", {})) - set(kinds))
     if unused:
-        raise ValueError(f"design variable(s) {unused} appear in no chain.set entry")
+        raise ValueError(f"design variable(s) {unused} appear in no chain.set entry"
+                         + (" or arm base" if info.data.get("arms") else ""))  # fmt: skip
     _no_unused_fixed(info, kinds, "chain.set entry")
     return chain
 
@@ -512,6 +614,8 @@ def units(s: SerialSettings) -> dict[str, str]:
     vol = u if len(rows) == 1 else f"{u}^{len(rows)}"
     out["__length__"] = u
     if s.indices.measure == "task":
-        return out | {"reach": "-", "gci": "-", "gci_q05": "-", "manipulability": man,
-                      "joint_margin": "-"}  # fmt: skip
+        out |= {"reach": "-", "gci": "-", "gci_q05": "-", "manipulability": man,
+                "joint_margin": "-"}  # fmt: skip
+        out |= {"clearance": u, "collision_free": "-"} if s.collision is not None else {}
+        return out | {k: "-" for k in s.index_names() if k.startswith(("reach_", "arms_"))}
     return out | {"gci": "-", "gcsei": "-", "manipulability": man, "volume": vol}

@@ -33,7 +33,25 @@ from designopt.studies.serial.settings import SerialSettings
 
 Q = 0.05  # gci_q05
 MEANS = ("reach", "gci", "manipulability", "joint_margin")
-"""The indices that are means over the targets (their per-target values add up)."""
+"""The indices that are means over the targets (their per-target values add up); under
+``collision`` ``clearance`` too (:func:`mean_type`)."""
+
+
+def mean_type(name: str) -> bool:
+    """Whether the index ``name`` is a mean over the targets (:func:`values` gives them)."""
+    return name in MEANS or name == "clearance"
+
+
+def estimates_of(s: SerialSettings, mech: Mechanism, per: dict[str, jax.Array],
+                 params: dict[str, Any]) -> dict[str, tuple[jax.Array, jax.Array]]:  # fmt: skip
+    """:func:`estimates` with the study's arms, radii and margin (``bodies.geometry``)."""
+    from designopt.studies.serial import bodies
+
+    g = bodies.geometry(s, mech)
+    if g is None:
+        return estimates(per)
+    key = jax.random.fold_in(params["sample_key"], 2)  # the arms' target tuples
+    return estimates(per, key, g.radii, g.margin)
 
 
 def options(s: SerialSettings) -> ik.IKOptions:
@@ -75,21 +93,43 @@ def targets(s: SerialSettings, key: jax.Array, dtype: Any) -> dict[str, jax.Arra
 
 def per_target(mech: Mechanism, s: SerialSettings, params: dict[str, Any], full: jax.Array,
                dtype: Any, opts: ik.IKOptions | None = None) -> dict[str, jax.Array]:  # fmt: skip
-    """Per design and target (M, N): success, 1/k, manipulability, joint margin (all 0
-    where unreached) and the joints q (M, N, n), for designs ``full`` (M, P) in kernel
-    units. Targets go through the IK in chunks (``lax.map``); the last chunk is padded
-    with copies of the last target and cut off again. ``opts``: the solver's options
-    (default :func:`options`)."""
+    """Per arm, design and target (A, M, N) (A = 1 without ``arms``): success, converged,
+    1/k, manipulability, joint margin (all 0 where unreached), clearance (under
+    ``collision``: the kept solution's, 0 where unreached) and the joints q
+    (A, M, N, n), for designs ``full`` (M, P) in kernel units; with ``arms`` also the
+    kept solutions' capsules in the world (``segments`` (A, M, N, L, 2, 3)). Targets go
+    through the IK in chunks (``lax.map``); the last chunk is padded with copies of the
+    last target and cut off again. ``opts``: the solver's options (default
+    :func:`options`). Under ``collision`` the IK keeps trying seeds until a converged
+    solution is collision-free (``bodies``)."""
+    from designopt.kinematics.collision import obstacle_params
+    from designopt.kinematics.task import port_frames
+    from designopt.studies.serial import bodies
+
     ind, md = s.indices, mode(s)
     opts = options(s) if opts is None else opts
     rows = ind.rows()
     lo, hi = params["q_lower"].astype(dtype), params["q_upper"].astype(dtype)
     p = params["target_p"].astype(dtype)
     R = params["target_R"].astype(dtype) if "target_R" in params else None
-    N = p.shape[0]
+    N, M = p.shape[0], full.shape[0]
     C = chunk(s)
     n_chunks = -(-N // C)
     pad = n_chunks * C - N
+    geo = bodies.geometry(s, mech)
+    arms = s.arms is not None
+    A = len(s.arms) if arms else 1
+    obst = None if geo is None else obstacle_params(s.collision.obstacles, dtype)  # type: ignore[union-attr]
+    ports = s.ports()
+    has_port = ports[0] is not None
+    d0, d1 = s.task.depth_range()  # type: ignore[union-attr]
+    if arms:
+        Rb, tb = bodies.base_frames(params, full)  # (A, M, 3, 3), (A, M, 3)
+        port = params["arm_port"].astype(dtype) if has_port else None  # (A, 3)
+        X = jnp.tile(full, (A, 1))  # (A·M, P), arm-major
+    else:
+        port = jnp.asarray([ports[0]], dtype) if has_port else None
+        X = full
 
     def padded(a):
         return jnp.concatenate([a, jnp.repeat(a[-1:], pad, 0)]) if pad else a
@@ -100,28 +140,70 @@ def per_target(mech: Mechanism, s: SerialSettings, params: dict[str, Any], full:
     sc = jnp.asarray([1.0 if r < 3 else ind.length_scale for r in rows], dtype)
     half = (hi - lo) / 2
 
+    def clearance(m, pt, q):  # the clearance of items: rows m of X (B,), targets pt (B, 3)
+        P = jax.vmap(lambda x, qq: mech.model.joint_frames(x, qq)[0])(X[m], q)
+        a = m // M
+        if arms:  # arm a's joint origins in the world frame
+            P = jnp.einsum("bij,bkj->bki", Rb[a, m % M], P) + tb[a, m % M][:, None, :]
+        Pw = P
+        seg = bodies._segments(Pw, geo.links)  # type: ignore[union-attr]
+        if port is None:
+            return bodies.obstacle_and_self(geo, obst, seg, None, None), seg  # type: ignore[arg-type]
+        pa = port[a if arms else jnp.zeros_like(a)]
+        z = pt - pa
+        z = z / jnp.maximum(jnp.linalg.norm(z, axis=-1, keepdims=True), 1e-300)
+        return bodies.obstacle_and_self(geo, obst, seg, pa, z), seg  # type: ignore[arg-type]
+
     def one_chunk(args):
         pt, Rt = args
+        if arms:  # each arm's targets in its own base frame, (A·M, C, ...)
+            pl = jnp.einsum("amji,amcj->amci", Rb, pt[None, None] - tb[:, :, None, :])
+            p_ik = pl.reshape(A * M, C, 3)
+            if port is not None:
+                Rw = port_frames(pt[None], port[:, None, :])  # (A, C, 3, 3)
+                R_ik = jnp.einsum("amji,acjk->amcik", Rb, Rw).reshape(A * M, C, 3, 3)
+            else:
+                R_ik = None
+        else:
+            p_ik, R_ik = pt, Rt
 
-        def jac(q):  # the study's Jacobian block (M, C, rows, n) at joints q (M, C, n)
-            return jax.vmap(lambda x, q: mech.model.jacobian(x, q, rows=rows))(full, q)
+        def jac(q):  # the study's Jacobian block (A·M, C, rows, n) at joints q (A·M, C, n)
+            return jax.vmap(lambda x, q: mech.model.jacobian(x, q, rows=rows))(X, q)
 
         def score(q):  # of several converged seeds, keep the best-conditioned
             return inv_cond(jac(q) * sc[:, None], ind.norm, ind.normalized)
 
-        res = ik.solve(mech.model, full, pt, Rt, lo, hi, key, md, opts, score)
+        accept = None
+        if geo is not None:
+            def accept(m, t, q):
+                return clearance(m, pt[t], q)[0] >= geo.margin  # type: ignore[union-attr]
+
+        res = ik.solve(mech.model, X, p_ik, R_ik, lo, hi, key, md, opts, score, accept)
         J = jac(res.q)
         inv_k, man = inv_cond(J * sc[:, None], ind.norm, ind.normalized, with_volume=True)
-        ok = res.success
+        ok, conv = res.success, res.converged
+        if port is not None:  # the insertion depth |target − port| of each arm
+            depth = jnp.linalg.norm(pt[None] - port[:, None, :], axis=-1)  # (A or 1, C)
+            inside = (depth >= d0) & (depth <= d1) & (depth > 0)
+            inside = jnp.repeat(inside, M, 0) if arms else inside
+            ok, conv = ok & inside, conv & inside
         margin = jnp.min(jnp.minimum(res.q - lo, hi - res.q) / half, -1)
         z = jnp.zeros_like(inv_k)
-        return {"success": ok.astype(dtype), "inv_k": jnp.where(ok, inv_k, z),
-                "manipulability": jnp.where(ok, man, z),
-                "joint_margin": jnp.where(ok, jnp.clip(margin, 0.0, 1.0), z),
-                "q": res.q, "pos_err": res.pos_err, "rot_err": res.rot_err}  # fmt: skip
+        out = {"success": ok.astype(dtype), "converged": conv.astype(dtype),
+               "inv_k": jnp.where(ok, inv_k, z), "manipulability": jnp.where(ok, man, z),
+               "joint_margin": jnp.where(ok, jnp.clip(margin, 0.0, 1.0), z),
+               "q": res.q, "pos_err": res.pos_err, "rot_err": res.rot_err}  # fmt: skip
+        if geo is not None:
+            m_all = jnp.repeat(jnp.arange(X.shape[0]), C)
+            t_all = jnp.tile(jnp.arange(C), X.shape[0])
+            c, seg = clearance(m_all, pt[t_all], res.q.reshape(-1, res.q.shape[-1]))
+            out["clearance"] = jnp.where(ok, c.reshape(ok.shape), z)
+            if arms:
+                out["segments"] = seg.reshape(*ok.shape, *seg.shape[1:])
+        return out
 
-    out = jax.lax.map(one_chunk, (pc, Rc))  # each (n_chunks, M, C, ...)
-    return {k: jnp.moveaxis(v, 0, 1).reshape(v.shape[1], n_chunks * C, *v.shape[3:])[:, :N]
+    out = jax.lax.map(one_chunk, (pc, Rc))  # each (n_chunks, A·M, C, ...)
+    return {k: jnp.moveaxis(v, 0, 1).reshape(A, M, n_chunks * C, *v.shape[3:])[:, :, :N]
             for k, v in out.items()}  # fmt: skip
 
 
@@ -138,23 +220,77 @@ def quantile(v: jax.Array, q: float = Q) -> tuple[jax.Array, jax.Array]:
 
 
 def values(per: dict[str, jax.Array], name: str) -> jax.Array:
-    """The per-target values (M, N) whose mean is the index ``name`` (a MEANS entry)."""
-    return per["success"] if name == "reach" else per["inv_k" if name == "gci" else name]
+    """The per-target values (M, N) whose mean is the index ``name`` (a MEANS entry or
+    ``clearance``): with several arms, the mean over the arms at each target."""
+    v = per["success"] if name == "reach" else per["inv_k" if name == "gci" else name]
+    return jnp.mean(v, 0)
 
 
-def estimates(per: dict[str, jax.Array]) -> dict[str, tuple[jax.Array, jax.Array]]:
-    """(value, SE) (M,) of every task index from the per-target values (M, N)."""
-    N = per["success"].shape[-1]
+def _share(x: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """(mean, Agresti–Coull SE) of 0/1 values (M, N) along N: sd/√N is 0 when every
+    target (or none) counts, which claims too much; √(p̃(1 − p̃)/(N + 4)) with
+    p̃ = (x + 2)/(N + 4) stays positive there and equals the usual SE to O(1/N)."""
+    N = x.shape[-1]
+    pt = (jnp.sum(x, -1) + 2.0) / (N + 4.0)
+    return jnp.mean(x, -1), jnp.sqrt(pt * (1.0 - pt) / (N + 4.0))
+
+
+def ratio(y: jax.Array, x: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """The ratio estimator Σy/Σx along the last axis with its delta-method SE
+    √(Σ(y − r x)² / (N (N − 1))) / x̄ (0 and 0 where Σx = 0: nothing to count)."""
+    N = y.shape[-1]
+    sx = jnp.sum(x, -1)
+    r = jnp.where(sx > 0, jnp.sum(y, -1) / jnp.where(sx > 0, sx, 1.0), 0.0)
+    res = y - r[..., None] * x
+    se = jnp.sqrt(jnp.sum(res * res, -1) / (N * (N - 1))) / jnp.where(sx > 0, sx / N, 1.0)
+    return r, jnp.where(sx > 0, se, 0.0)
+
+
+def estimates(per: dict[str, jax.Array], key: jax.Array | None = None,
+              radii: tuple[float, ...] = (), margin: float = 0.0,
+              ) -> dict[str, tuple[jax.Array, jax.Array]]:  # fmt: skip
+    """(value, SE) (M,) of every task index from the per-target values (A, M, N).
+
+    With several arms (A > 1): ``reach``, ``gci`` and the other means are means over the
+    arms and targets (their SE the spread of the per-target means over the arms, never
+    below the Agresti–Coull SE for ``reach``); ``reach_<k>`` each arm's share;
+    ``reach_all`` the share of targets every arm reaches; ``arms_free`` (needs ``key``,
+    the arms' ``radii`` and the ``margin``): one target per arm, arm k's the k-th
+    independent permutation of the targets (arm 0's the identity), and among the tuples
+    every arm reaches, the share whose kept solutions keep every arm at least ``margin``
+    from every other (capsule against capsule), a ratio estimator."""
+    A, M, N = per["success"].shape
     out = {}
-    for k in MEANS:
+    for k in MEANS + (("clearance",) if "clearance" in per else ()):
         v = values(per, k)
         out[k] = (jnp.mean(v, -1), jnp.std(v, -1, ddof=1) / np.sqrt(N))
-    # reach is a binomial share: sd/√N is 0 when every target (or none) is reached,
-    # which claims too much; the Agresti–Coull SE √(p̃(1 − p̃)/(N + 4)), p̃ = (x + 2)/(N + 4),
-    # stays positive there and equals the usual one to O(1/N) elsewhere
-    pt = (jnp.sum(per["success"], -1) + 2.0) / (N + 4.0)
-    out["reach"] = (out["reach"][0], jnp.sqrt(pt * (1.0 - pt) / (N + 4.0)))
-    out["gci_q05"] = quantile(per["inv_k"])
+    if A == 1:
+        out["reach"] = _share(per["success"][0])
+    else:
+        out["reach"] = (out["reach"][0], jnp.maximum(out["reach"][1], _share(
+            jnp.moveaxis(per["success"], 0, 1).reshape(M, A * N))[1]))  # fmt: skip
+    out["gci_q05"] = quantile(jnp.moveaxis(per["inv_k"], 0, 1).reshape(M, A * N))
+    if "clearance" in per:
+        out["collision_free"] = ratio(jnp.sum(per["success"], 0), jnp.sum(per["converged"], 0))
+    if A > 1:
+        from designopt.kinematics.collision import arms_clearance
+
+        for k in range(A):
+            out[f"reach_{k}"] = _share(per["success"][k])
+        out["reach_all"] = _share(jnp.prod(per["success"], 0))
+        assert key is not None
+        perm = [jnp.arange(N)] + [jax.random.permutation(jax.random.fold_in(key, k), N)
+                                  for k in range(1, A)]  # fmt: skip
+        ok = jnp.prod(jnp.stack([per["success"][k][:, perm[k]] for k in range(A)]), 0)
+        seg = [per["segments"][k][:, perm[k]] for k in range(A)]
+        r = jnp.asarray(radii, seg[0].dtype)
+        gap = None
+        for a in range(A):
+            for b in range(a + 1, A):
+                d = arms_clearance(seg[a], r, seg[b], r)
+                gap = d if gap is None else jnp.minimum(gap, d)
+        free = (gap >= margin).astype(ok.dtype)  # type: ignore[operator]
+        out["arms_free"] = ratio(ok * free, ok)
     return out
 
 
@@ -190,7 +326,8 @@ def solution(s: SerialSettings, x: Any, keys: Any,
         o = o if "slots" in s.task.ik.model_fields_set else o._replace(slots=128)  # type: ignore[union-attr]
 
         def run(p, X):
-            return {k: v[0] for k, v in per_target(mech, s, p, X, dtype, o).items()}
+            out = per_target(mech, s, p, X, dtype, o)
+            return {k: v[0, 0] if s.arms is None else v[:, 0] for k, v in out.items()}
 
         _SOLVERS[ck] = (mech, jax.jit(run))
     mech, run = _SOLVERS[ck]
@@ -199,6 +336,9 @@ def solution(s: SerialSettings, x: Any, keys: Any,
     # a target an ulp away can send the IK to another of its solutions)
     p = {"q_lower": jnp.asarray(mech.lower, dtype), "q_upper": jnp.asarray(mech.upper, dtype),
          "sample_key": keys["samples"]} | targets(s, keys["samples"], dtype)  # fmt: skip
+    from designopt.studies.serial import bodies
+
+    p |= bodies.base_params(s, mech, dtype)
     xv = np.asarray([x[k] for k in s.variables] if hasattr(x, "keys") else x, np.float64)
     full = jnp.concatenate([jnp.asarray(xv, dtype), jnp.asarray(mech.fixed, dtype)])
     full = (full * jnp.asarray(mech.scale, dtype))[None]

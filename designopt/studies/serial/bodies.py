@@ -1,0 +1,209 @@
+"""The serial study's bodies: link capsules, ports, obstacles and several arms (docs/task.md).
+
+Under ``study.collision`` every link of the chain is a capsule (``links: auto``) from its
+joint's origin to the next joint's origin (the tip for the last), of the configured
+radius, so the shapes follow the design variables. Links of zero length in every design
+(e.g. between the coincident joints of a spherical wrist) are points inside their
+neighbours' capsules and are left out. The self-collision pairs are the non-adjacent
+pairs of the remaining links, less the pairs that overlap in nearly every configuration
+(≥ :data:`ALWAYS` of 512 joint draws at the middle design: two links that meet at a short
+offset link, whose capsules overlap wherever the joints are) — the "always in
+collision" pairs a MoveIt set-up also disables; they are listed by :func:`describe`.
+
+With a port the instrument passes through the body wall there: the part of the chain
+beyond the port plane (through the port, normal to the tool axis) is inside the patient
+and is not checked against the obstacles (the patient's body, the table); the link that
+crosses the plane is cut there. Links before it are checked in full.
+
+Several arms (``study.arms``) are copies of the chain at base frames T_k(x) (their
+``xyz``/``rpy`` entries numbers or design variables): each arm solves the task in its own
+base frame, and its capsules are placed in the world by T_k for the obstacle and the
+arm-against-arm checks.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from designopt.kinematics import collision as col
+from designopt.studies.serial.mechanism import Mechanism
+from designopt.studies.serial.settings import SerialSettings
+
+ALWAYS = 0.95
+"""A link pair whose capsules overlap in at least this share of random configurations
+(at the middle design) is not checked (it would collide everywhere)."""
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """What the collision checks need that does not change with the design: the links
+    kept (chain link indices), their radii, the self-collision pairs (indices into the
+    kept links) and the pairs left out as always overlapping."""
+
+    links: tuple[int, ...]
+    radii: tuple[float, ...]
+    pairs: tuple[tuple[int, int], ...]
+    always: tuple[tuple[int, int], ...]
+    margin: float
+    self_check: bool
+    cap: float  # the longest reach of any design: a clearance counts at most this much
+
+
+def _middle(mech: Mechanism, s: SerialSettings) -> np.ndarray:
+    lo, hi = s.box()[1:]
+    return np.concatenate([(np.asarray(lo) + np.asarray(hi)) / 2, mech.fixed]) * mech.scale
+
+
+def geometry(s: SerialSettings, mech: Mechanism) -> Geometry | None:
+    """The study's link capsules and pairs (None without ``study.collision``), found by
+    evaluating the chain at set-up (also when called while a program is traced)."""
+    if s.collision is None:
+        return None
+    key = s.model_dump_json()
+    if key not in _GEOMETRY:
+        with jax.ensure_compile_time_eval():
+            _GEOMETRY[key] = _geometry(s, mech)
+    return _GEOMETRY[key]
+
+
+_GEOMETRY: dict[str, Geometry] = {}
+
+
+def _geometry(s: SerialSettings, mech: Mechanism) -> Geometry:
+    c = s.collision
+    assert c is not None
+    n = mech.model.n_chain
+    radius = list(c.radius) if isinstance(c.radius, list) else [float(c.radius)] * n
+    rng = np.random.default_rng(0)
+    lo, hi = s.box()[1:]
+    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    X = np.concatenate([lo + (hi - lo) * rng.uniform(size=(8, len(lo))),
+                        np.broadcast_to(mech.fixed, (8, len(mech.fixed)))], 1) * mech.scale  # fmt: skip
+    X = np.concatenate([X, _middle(mech, s)[None]])
+    q = mech.lower + (mech.upper - mech.lower) * rng.uniform(size=(64, mech.n))
+    with jax.default_device(jax.devices("cpu")[0]):
+        P = np.asarray(mech.model.joint_frames(jnp.asarray(X), jnp.asarray(q))[0])
+    length = np.linalg.norm(np.diff(P, axis=-2), axis=-1).max(axis=(0, 1))  # (n,)
+    scale = max(float(np.abs(P).max()), 1e-12)
+    links = tuple(i for i in range(n) if length[i] > 1e-9 * scale)
+    if not links:
+        raise ValueError("collision: every link of the chain has zero length")
+    radii = tuple(radius[i] for i in links)
+    pairs = col.nonadjacent_pairs(len(links)) if c.self_ else ()
+    always: list[tuple[int, int]] = []
+    if pairs:
+        q = mech.lower + (mech.upper - mech.lower) * rng.uniform(size=(512, mech.n))
+        with jax.default_device(jax.devices("cpu")[0]):
+            Pm = np.asarray(mech.model.joint_frames(jnp.asarray(_middle(mech, s)),
+                                                    jnp.asarray(q))[0])  # fmt: skip
+        seg = _segments(Pm, links)  # (512, L, 2, 3)
+        keep = []
+        for i, j in pairs:
+            d = np.asarray(col.capsule_capsule(seg[:, i, 0], seg[:, i, 1], radii[i],
+                                               seg[:, j, 0], seg[:, j, 1], radii[j]))  # fmt: skip
+            (always if np.mean(d < c.margin) >= ALWAYS else keep).append((i, j))
+        pairs = tuple(keep)
+    from designopt.studies.serial.reach import largest_reach
+
+    return Geometry(links, radii, tuple(pairs), tuple(always), float(c.margin), bool(c.self_),
+                    largest_reach(s))  # fmt: skip
+
+
+def _segments(P: Any, links: tuple[int, ...]) -> Any:
+    """(..., L, 2, 3) capsule end points of the kept links from joint origins (..., n + 1, 3)."""
+    xp = np if isinstance(P, np.ndarray) else jnp
+    idx = np.asarray(links)
+    return xp.stack([P[..., idx, :], P[..., idx + 1, :]], -2)
+
+
+def describe(g: Geometry) -> str:
+    """One line on the capsules: links, radii, pairs checked and left out."""
+    left = f"; left out as always overlapping: {list(g.always)}" if g.always else ""
+    return (f"capsules on links {[i + 1 for i in g.links]} (radii {list(g.radii)}), "
+            f"{len(g.pairs)} self-collision pair(s){left}")  # fmt: skip
+
+
+# ------------------------------------------------------------------- base frames
+
+
+def rpy_matrix(r: Any, p: Any, y: Any) -> jax.Array:
+    """R = Rz(y)·Ry(p)·Rx(r) (radians), (..., 3, 3)."""
+    cr, sr, cp, sp, cy, sy = (jnp.cos(r), jnp.sin(r), jnp.cos(p), jnp.sin(p), jnp.cos(y),
+                              jnp.sin(y))  # fmt: skip
+    return jnp.stack([
+        jnp.stack([cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr], -1),
+        jnp.stack([sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr], -1),
+        jnp.stack([-sp, cp * sr, cp * cr], -1),
+    ], -2)  # fmt: skip
+
+
+def base_params(s: SerialSettings, mech: Mechanism, dtype: Any) -> dict[str, jax.Array]:
+    """The arms' base entries as arrays: ``arm_const`` (A, 6) (xyz in length units, rpy in
+    rad) and ``arm_col`` (A, 6) int, the design column (variables then fixed, kernel
+    units) an entry reads, −1 for a number. Empty without ``arms``."""
+    if s.arms is None:
+        return {}
+    const = np.zeros((len(s.arms), 6))
+    cols = -np.ones((len(s.arms), 6), np.int32)
+    for k, a in enumerate(s.arms):
+        for i, v in enumerate((*a.base.xyz, *a.base.rpy)):
+            if isinstance(v, str):
+                cols[k, i] = mech.names.index(v)
+            else:
+                const[k, i] = math.radians(v) if i >= 3 else float(v)
+    ports = np.asarray(s.ports() if s.ports()[0] is not None else np.zeros((0, 3)))
+    out = {"arm_const": jnp.asarray(const, dtype), "arm_col": jnp.asarray(cols)}
+    return out | ({"arm_port": jnp.asarray(ports, dtype)} if len(ports) else {})
+
+
+def base_frames(params: dict[str, Any], full: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """(R (A, M, 3, 3), t (A, M, 3)) of every arm's base for designs ``full`` (M, P)."""
+    c, k = params["arm_const"].astype(full.dtype), params["arm_col"]
+    v = c[:, None, :] + jnp.where(k[:, None, :] >= 0,
+                                  jnp.moveaxis(full[:, jnp.maximum(k, 0)], 0, 1), 0.0)  # fmt: skip
+    return rpy_matrix(v[..., 3], v[..., 4], v[..., 5]), v[..., :3]
+
+
+# ---------------------------------------------------------------------- clearance
+
+
+def cut_at_port(seg: jax.Array, port: jax.Array, z: jax.Array) -> jax.Array:
+    """The capsule end points (..., L, 2, 3) with the part beyond the port plane (through
+    ``port`` (..., 3), normal the tool axis ``z`` (..., 3)) removed: links behind the last
+    link that starts before the plane are kept, that link is cut where it crosses, and the
+    links after it (inside the patient) collapse onto the cut (so they add nothing to a
+    minimum over the links)."""
+    a, b = seg[..., 0, :], seg[..., 1, :]
+    sa = jnp.sum((a - port[..., None, :]) * z[..., None, :], -1)  # (..., L)
+    sb = jnp.sum((b - port[..., None, :]) * z[..., None, :], -1)
+    L = seg.shape[-3]
+    idx = jnp.arange(L)
+    before = sa < 0
+    c = jnp.max(jnp.where(before, idx, 0), -1)  # the last link starting before the plane
+    t = jnp.clip(jnp.where(sb > sa, -sa / jnp.where(sb > sa, sb - sa, 1.0), 1.0), 0.0, 1.0)
+    cut_b = a + t[..., None] * (b - a)
+    ac = jnp.take_along_axis(a, c[..., None, None].repeat(3, -1), -2)[..., 0, :]
+    bc = jnp.take_along_axis(cut_b, c[..., None, None].repeat(3, -1), -2)[..., 0, :]
+    cut = jnp.stack([ac, bc], -2)  # (..., 2, 3)
+    where = idx[..., :] >= c[..., None]
+    return jnp.where(where[..., None, None], cut[..., None, :, :], seg)
+
+
+def obstacle_and_self(g: Geometry, obst: Any, seg: jax.Array, port: jax.Array | None,
+                      z: jax.Array | None) -> jax.Array:  # fmt: skip
+    """The clearance (...,) of one arm's capsules (..., L, 2, 3) (world frame): the least
+    signed distance to the obstacles (the part beyond the port excluded) and between its
+    non-adjacent links, at most ``g.cap`` (the longest reach: finite where nothing is
+    checked)."""
+    r = jnp.asarray(g.radii, seg.dtype)
+    cut = seg if port is None else cut_at_port(seg, port, z)
+    d = col.clearance(cut, r, obst, ())
+    if g.pairs:
+        d = jnp.minimum(d, col.clearance(seg, r, None, g.pairs))
+    return jnp.minimum(d, g.cap)  # +inf where nothing is checked
