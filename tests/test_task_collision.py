@@ -202,3 +202,39 @@ def test_port_and_tool_axis_exclude_each_other():
     cfg["study"]["task"]["tool_axis"] = {"direction": [0, 0, -1]}
     with pytest.raises(ConfigError, match="port and tool_axis exclude each other"):
         validate(cfg, "test")
+
+
+def test_the_tool_axis_passes_through_the_port_on_a_urdf_arm():
+    """configs/urdf_puma560_port.yaml: at every reached target yourdfpy's FK of the URDF
+    (the design written into it) puts the tool tip on the target, its z axis on the line
+    from the port (within the IK's tolerance), pointing into the body, at a depth within
+    the insertion range; the links before the port stay above the skin."""
+    from pathlib import Path
+
+    import yaml
+
+    from designopt.kinematics import urdf as U
+    from designopt.studies.serial import taskindex
+    from designopt.studies.serial.commands import set_values
+
+    path = Path(__file__).parents[1] / "configs" / "urdf_puma560_port.yaml"
+    cfg = yaml.safe_load(path.read_text())
+    cfg["study"]["indices"]["n_samples"] = 64
+    c = validate(cfg, str(path))
+    s = c.study
+    x = {"a2": 0.43, "d4": 0.43, "l_tool": 0.4}
+    sol = taskindex.solution(s, x, streams(c.seed))
+    ok = sol["success"]
+    assert ok.mean() > 0.5
+    ref = U.Reference(U.export_text(s.chain.urdf_text, set_values(s, x), "port"))
+    port = np.asarray(s.task.port)
+    d0, d1 = s.task.insertion
+    for i in np.flatnonzero(ok):
+        T = ref.fk(s.chain.imported, sol["q"][i])
+        p, z = T[:3, 3], T[:3, 2]
+        target = sol["target_p"][i]
+        assert np.linalg.norm(p - target) <= 1e-6
+        assert np.linalg.norm(np.cross(port - p, z)) <= 1e-6  # the axis line meets the port
+        assert z @ (target - port) > 0
+        assert d0 <= np.linalg.norm(target - port) <= d1
+    assert np.all(sol["clearance"][ok] >= 0)

@@ -399,11 +399,14 @@ def depths(p: np.ndarray, port: Vec3) -> np.ndarray:
     return np.linalg.norm(np.asarray(p, np.float64) - np.asarray(port, np.float64), axis=-1)
 
 
-def check_port(task: Task, n: int = 8192) -> None:
+def check_port(task: Task, n: int = 8192, port: Vec3 | None = None,
+               where: str = "task.port") -> None:  # fmt: skip
     """ValueError naming ``task.insertion`` when no point of the region lies at a depth
-    past the port within the insertion range (checked on n samples of the region, or
-    every point of a points file): then no target could ever be reached."""
-    if task.port is None:
+    past the port (``port``, else ``task.port``) within the insertion range (checked on
+    n samples of the region, or every point of a points file): then no target could ever
+    be reached."""
+    port = task.port if port is None else port
+    if port is None:
         return
     if isinstance(task.region, Points):
         p = task.region.xyz()
@@ -411,12 +414,13 @@ def check_port(task: Task, n: int = 8192) -> None:
         dt = jnp.float64 if jax.config.jax_enable_x64 else jnp.float32
         p = np.asarray(_targets(kind(task.region), region_params(task.region, dt),
                                 jax.random.key(0), n, None, None)[0], np.float64)  # fmt: skip
-    d = depths(p, task.port)
+    d = depths(p, port)
     d0, d1 = task.depth_range()
     if not np.any((d >= d0) & (d <= d1) & (d > 0)):
+        key = "task.insertion" if task.insertion is not None else where
         raise ValueError(
-            f"task.insertion: no target of the region lies at a depth in [{d0:g}, {d1:g}] "
-            f"past the port {list(task.port)}: the region's depths run from {d.min():.4g} to "
+            f"{key}: no target of the region lies at a depth in [{d0:g}, {d1:g}] past the "
+            f"port {list(port)} ({where}): the region's depths run from {d.min():.4g} to "
             f"{d.max():.4g} (the chain's length unit); move the port or widen the insertion"
         )
 

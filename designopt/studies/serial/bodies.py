@@ -12,8 +12,11 @@ collision" pairs a MoveIt set-up also disables; they are listed by :func:`descri
 
 With a port the instrument passes through the body wall there: the part of the chain
 beyond the port plane (through the port, normal to the tool axis) is inside the patient
-and is not checked against the obstacles (the patient's body, the table); the link that
-crosses the plane is cut there. Links before it are checked in full.
+and is not checked against the obstacles (the patient's body, the table). The link that
+crosses the plane is cut twice its radius before it: its capsule touches the body wall
+at the port, and that neighbourhood (the trocar's) is not checked. So a tool leaning more
+than 60° from a half-space's normal at the port reads as touching it. Links before it
+are checked in full, and every link in the self-collision check.
 
 Several arms (``study.arms``) are copies of the chain at base frames T_k(x) (their
 ``xyz``/``rpy`` entries numbers or design variables): each arm solves the task in its own
@@ -173,26 +176,31 @@ def base_frames(params: dict[str, Any], full: jax.Array) -> tuple[jax.Array, jax
 # ---------------------------------------------------------------------- clearance
 
 
-def cut_at_port(seg: jax.Array, port: jax.Array, z: jax.Array) -> jax.Array:
-    """The capsule end points (..., L, 2, 3) with the part beyond the port plane (through
-    ``port`` (..., 3), normal the tool axis ``z`` (..., 3)) removed: links behind the last
-    link that starts before the plane are kept, that link is cut where it crosses, and the
-    links after it (inside the patient) collapse onto the cut (so they add nothing to a
-    minimum over the links)."""
+def cut_at_port(seg: jax.Array, port: jax.Array, z: jax.Array, radii: jax.Array) -> jax.Array:
+    """The capsule end points (..., L, 2, 3) with the part inside the patient removed:
+    links before the last link that starts before the port plane (through ``port``
+    (..., 3), normal the tool axis ``z`` (..., 3)) are kept; that link, the one through
+    the port, is cut 2·r (its radii ``radii`` (L,)) before the plane, since its capsule
+    touches the body wall at the port (the trocar's neighbourhood is not checked); the
+    links after it (inside) collapse onto the cut piece, so they add nothing to a minimum
+    over the links."""
     a, b = seg[..., 0, :], seg[..., 1, :]
     sa = jnp.sum((a - port[..., None, :]) * z[..., None, :], -1)  # (..., L)
     sb = jnp.sum((b - port[..., None, :]) * z[..., None, :], -1)
     L = seg.shape[-3]
     idx = jnp.arange(L)
-    before = sa < 0
-    c = jnp.max(jnp.where(before, idx, 0), -1)  # the last link starting before the plane
-    t = jnp.clip(jnp.where(sb > sa, -sa / jnp.where(sb > sa, sb - sa, 1.0), 1.0), 0.0, 1.0)
+    c = jnp.max(jnp.where(sa < 0, idx, 0), -1)  # the last link starting before the plane
+    length = jnp.linalg.norm(b - a, axis=-1)
+    t = jnp.where(sb > sa, -sa / jnp.where(sb > sa, sb - sa, 1.0), 1.0)  # the crossing
+    t = jnp.clip(t - 2 * radii / jnp.maximum(length, 1e-300), 0.0, 1.0)
     cut_b = a + t[..., None] * (b - a)
-    ac = jnp.take_along_axis(a, c[..., None, None].repeat(3, -1), -2)[..., 0, :]
-    bc = jnp.take_along_axis(cut_b, c[..., None, None].repeat(3, -1), -2)[..., 0, :]
-    cut = jnp.stack([ac, bc], -2)  # (..., 2, 3)
-    where = idx[..., :] >= c[..., None]
-    return jnp.where(where[..., None, None], cut[..., None, :, :], seg)
+
+    def at_c(v):  # (..., L, 3) -> (..., 3) at link c
+        return jnp.take_along_axis(v, jnp.broadcast_to(c[..., None, None], (*c.shape, 1, 3)),
+                                   -2)[..., 0, :]  # fmt: skip
+
+    cut = jnp.stack([at_c(a), at_c(cut_b)], -2)  # (..., 2, 3)
+    return jnp.where((idx >= c[..., None])[..., None, None], cut[..., None, :, :], seg)
 
 
 def obstacle_and_self(g: Geometry, obst: Any, seg: jax.Array, port: jax.Array | None,
@@ -202,7 +210,7 @@ def obstacle_and_self(g: Geometry, obst: Any, seg: jax.Array, port: jax.Array | 
     non-adjacent links, at most ``g.cap`` (the longest reach: finite where nothing is
     checked)."""
     r = jnp.asarray(g.radii, seg.dtype)
-    cut = seg if port is None else cut_at_port(seg, port, z)
+    cut = seg if port is None else cut_at_port(seg, port, z, r)
     d = col.clearance(cut, r, obst, ())
     if g.pairs:
         d = jnp.minimum(d, col.clearance(seg, r, None, g.pairs))

@@ -39,6 +39,9 @@ def check(s: SerialSettings) -> None:
     the task region."""
     if s.task is None:
         return
+    _check_ports(s)
+    if s.arms is not None:
+        return  # the bases move the arms: the region's distance is from each arm's base
     near = tk.nearest_distance(s.task.region)
     far = largest_reach(s)
     if near > far * (1 + 1e-9) + 1e-12:
@@ -49,6 +52,27 @@ def check(s: SerialSettings) -> None:
             f"{far:.4g} {u} (the sum of its link lengths along the chain); check the "
             f"region's position and the chain's length unit"
         )
+
+
+def _check_ports(s: SerialSettings) -> None:
+    """ValueError when a port leaves no target within the insertion range, or sits on
+    an arm's base (inside its base link: within a capsule radius, or at the origin
+    without collision capsules)."""
+    r = 0.0
+    if s.collision is not None:
+        r = min(s.collision.radius) if isinstance(s.collision.radius, list) else s.collision.radius
+    for k, port in enumerate(s.ports()):
+        if port is None:
+            continue
+        where = "task.port" if s.arms is None or s.arms[k].port is None else f"arms.{k}.port"
+        tk.check_port(s.task, port=port, where=where)  # type: ignore[arg-type]
+        base = (0.0, 0.0, 0.0) if s.arms is None else s.arms[k].base.xyz
+        if all(isinstance(v, float | int) for v in base):
+            d = float(np.linalg.norm(np.subtract(port, base)))  # type: ignore[arg-type]
+            if d <= max(r, 1e-9):
+                raise ValueError(f"{where}: the port {list(port)} lies inside the arm's base "
+                                 f"link ({d:.3g} from its base origin); the instrument must "
+                                 "enter the body away from the base")  # fmt: skip
 
 
 def warnings(s: SerialSettings, final: Mapping[str, Any]) -> list[str]:

@@ -62,9 +62,10 @@ def options(s: SerialSettings) -> ik.IKOptions:
 
 
 def mode(s: SerialSettings) -> ik.Mode:
-    """``axis`` with a tool-axis cone (the roll about the tool axis is free), else
-    ``position``."""
-    return "position" if s.task.tool_axis is None else "axis"  # type: ignore[union-attr]
+    """``axis`` with a tool-axis cone or a port (the roll about the tool axis is free),
+    else ``position``."""
+    axis = s.task.tool_axis is not None or s.ports()[0] is not None  # type: ignore[union-attr]
+    return "axis" if axis else "position"
 
 
 def n_targets(s: SerialSettings) -> int:
