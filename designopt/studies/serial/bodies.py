@@ -149,27 +149,33 @@ def rpy_matrix(r: Any, p: Any, y: Any) -> jax.Array:
 def base_params(s: SerialSettings, mech: Mechanism, dtype: Any) -> dict[str, jax.Array]:
     """The arms' base entries as arrays: ``arm_const`` (A, 6) (xyz in length units, rpy in
     rad) and ``arm_col`` (A, 6) int, the design column (variables then fixed, kernel
-    units) an entry reads, −1 for a number. Empty without ``arms``."""
+    units) an entry reads, −1 for a number, and ``arm_sign`` (A, 6), −1 for "-name".
+    Empty without ``arms``."""
     if s.arms is None:
         return {}
     const = np.zeros((len(s.arms), 6))
     cols = -np.ones((len(s.arms), 6), np.int32)
+    sign = np.ones((len(s.arms), 6))
     for k, a in enumerate(s.arms):
         for i, v in enumerate((*a.base.xyz, *a.base.rpy)):
             if isinstance(v, str):
-                cols[k, i] = mech.names.index(v)
+                cols[k, i] = mech.names.index(v.removeprefix("-"))
+                sign[k, i] = -1.0 if v.startswith("-") else 1.0
             else:
                 const[k, i] = math.radians(v) if i >= 3 else float(v)
     ports = np.asarray(s.ports() if s.ports()[0] is not None else np.zeros((0, 3)))
-    out = {"arm_const": jnp.asarray(const, dtype), "arm_col": jnp.asarray(cols)}
+    out = {"arm_const": jnp.asarray(const, dtype), "arm_col": jnp.asarray(cols),
+           "arm_sign": jnp.asarray(sign, dtype)}  # fmt: skip
     return out | ({"arm_port": jnp.asarray(ports, dtype)} if len(ports) else {})
 
 
 def base_frames(params: dict[str, Any], full: jax.Array) -> tuple[jax.Array, jax.Array]:
     """(R (A, M, 3, 3), t (A, M, 3)) of every arm's base for designs ``full`` (M, P)."""
     c, k = params["arm_const"].astype(full.dtype), params["arm_col"]
+    sg = params["arm_sign"].astype(full.dtype)
     v = c[:, None, :] + jnp.where(k[:, None, :] >= 0,
-                                  jnp.moveaxis(full[:, jnp.maximum(k, 0)], 0, 1), 0.0)  # fmt: skip
+                                  sg[:, None, :] * jnp.moveaxis(full[:, jnp.maximum(k, 0)], 0, 1),
+                                  0.0)  # fmt: skip
     return rpy_matrix(v[..., 3], v[..., 4], v[..., 5]), v[..., :3]
 
 

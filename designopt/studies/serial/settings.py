@@ -295,7 +295,8 @@ class ArmBase(Section):
     """Where an arm's base frame sits in the world (the task's frame): ``xyz`` (the
     chain's length unit) and ``rpy`` (degrees; R = Rz(yaw)·Ry(pitch)·Rx(roll), the URDF
     convention). Every entry is a number or the name of a design variable or fixed
-    value, so the placement can be designed like any chain number."""
+    value, or minus one ("-b"), so the placement can be designed like any chain number
+    (two arms at x = −b and x = b share the variable b)."""
 
     xyz: tuple[Entry, Entry, Entry] = (0.0, 0.0, 0.0)
     rpy: tuple[Entry, Entry, Entry] = (0.0, 0.0, 0.0)
@@ -520,7 +521,7 @@ class SerialSettings(StudySettings):
         } | self._arm_angles()
 
     def _arm_angles(self) -> set[str]:
-        return {v for a in self.arms or [] for v in a.base.rpy if isinstance(v, str)}
+        return {v.removeprefix("-") for a in self.arms or [] for v in a.base.rpy if isinstance(v, str)}
 
     def ports(self) -> list[tuple[float, float, float] | None]:
         """The port of each arm (one entry without ``arms``): its own, else ``task.port``."""
@@ -539,6 +540,7 @@ def _arm_names(arms: list[Arm] | None, known: set[str], info: ValidationInfo) ->
             for i, v in enumerate(getattr(arm.base, fld)):
                 if not isinstance(v, str):
                     continue
+                v = v.removeprefix("-")  # "-b": minus the variable b
                 if v not in known:
                     raise ValueError(
                         f"arms.{k}.base.{fld}.{i}: '{v}' is neither a design variable (give "
