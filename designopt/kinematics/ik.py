@@ -43,9 +43,12 @@ Scheduling. Every (design, target) pair is an item of one queue (a ring buffer o
 runs ``block`` steps on every slot (a converged configuration is frozen), then a slot
 whose item converged or ran out of seeds is freed, one whose seed was dropped puts the
 item back at the end of the queue with its next seed, and free slots take the queue's
-next pairs. Once the queue is empty the busy slots move to a batch 8× smaller (down to 32
-slots or more: 4096 → 512 → 64, 1024 → 128), so
-the hard tail does not keep a large batch running. Designs share the queue: a design
+next pairs. The steps run on the busy slots only, a chunk of B/8 slots at a time (all
+B when B/8 < 32): once the queue is empty the busy slots move to the front (in their order)
+and only the chunks that hold them run, so the hard tail does not keep a large batch
+running, and the step is compiled once, for one chunk (earlier the busy slots moved to
+batches 8× and 64× smaller, each with its own copy of the step: 4096 → 512 → 64).
+Designs share the queue: a design
 with many unreachable targets costs its own work, not every design's.
 
 Arithmetic. The step is evaluated entry by entry (structure of arrays: every entry of e,
@@ -59,7 +62,8 @@ operations and 12× the sines and cosines).
 A target is solved when its position error is ≤ ``tol_pos``·L and its orientation error
 ≤ ``tol_rot`` rad, within the limits, checked afresh at the end on the returned joints
 (with XLA's own sin and cos); unreachable targets are reported as failures, never as
-successes.
+successes. The n_best solution slots are checked in a loop (one copy of the check and
+the score in the program) and the result's fields are materialised once.
 """
 
 from __future__ import annotations
@@ -484,11 +488,18 @@ def _fk_arrays(ch: _Chain, X: jax.Array, q: jax.Array) -> tuple[jax.Array, jax.A
 
 
 def _phases(B: int) -> tuple[int, ...]:
-    """Slot counts of the successive phases: B, B/8, B/64, … (not below 32)."""
+    """B, B/8, B/64, … (not below 32): the solver's slots, then the slots per chunk of
+    steps (``B/8``). (Once the successive batches' slot counts, each compiled apart.)"""
     out = [B]
     while out[-1] // 8 >= 32:
         out.append(out[-1] // 8)
     return tuple(out)
+
+
+def _materialised(r: IKResult) -> IKResult:
+    """The fields computed once (XLA would otherwise fuse the final check, FK and
+    condition number included, into each consumer of each field: a copy per use)."""
+    return IKResult(*jax.lax.optimization_barrier(tuple(r)))
 
 
 def _check(mode: Mode, R_t, opts: IKOptions) -> None:
@@ -605,12 +616,45 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         return qc, ok, Em
 
     nb = opts.n_best
+    B0 = opts.slots if opts.slots > 0 else max(1024, min(4096, I // 4))
+    B = min(I, B0)
+    C = _phases(B)[1] if len(_phases(B)) > 1 else B  # slots per block call
+    Bp = -(-B // C) * C  # slots, a multiple of C (the extra ones never busy)
+
+    def blocks(i, q):
+        """:func:`block` on the busy slots (a prefix, :func:`compact`), C at a time: the
+        step's program is compiled once, for C slots, and the hard tail (few busy
+        slots) runs few of them."""
+        busy = jnp.sum(i < I, dtype=jnp.int32)
+
+        def chunk(k, c):
+            q, ok, Em = c
+            o = (k * C).astype(jnp.int32)
+            qk = [jax.lax.dynamic_slice(q[j], (o,), (C,)) for j in range(n)]
+            qc, okk, Emk = block(jax.lax.dynamic_slice(i, (o,), (C,)), qk)
+            return (jax.lax.dynamic_update_slice(q, jnp.stack(qc), (jnp.int32(0), o)),
+                    jax.lax.dynamic_update_slice(ok, okk, (o,)),
+                    jax.lax.dynamic_update_slice(Em, Emk, (o,)))  # fmt: skip
+
+        c0 = (q, jnp.zeros(i.shape, bool), jnp.full(i.shape, jnp.inf, dtype))
+        q, ok, Em = jax.lax.fori_loop(0, (busy + C - 1) // C, chunk, c0)
+        return list(q), ok, Em
+
+    def compact(s):
+        """The busy slots moved to the front, in their order (a slot's place changes no
+        item's result). While the queue holds pairs every slot is busy: nothing moves."""
+        busy = s[0] < I
+        nb_ = jnp.sum(busy, dtype=jnp.int32)
+        to = jnp.where(busy, jnp.cumsum(busy, dtype=jnp.int32) - 1,
+                       nb_ + jnp.cumsum(~busy, dtype=jnp.int32) - 1)  # fmt: skip
+        return (*(jnp.zeros_like(x).at[to].set(x, unique_indices=True) for x in s[:4]),
+                jnp.zeros_like(s[4]).at[:, to].set(s[4], unique_indices=True), *s[5:])  # fmt: skip
 
     def round_(s):
         i, a, it, Eb, q, head, tail, qi, qa, q_out, a_out, E_out, nc = s
         active = i < I
         ic = jnp.minimum(i, I - 1)
-        qc, ok, Em = block(i, [q[j] for j in range(n)])
+        qc, ok, Em = blocks(i, q)
         q = jnp.stack(qc)
         it = it + opts.block
         # a seed is dropped when it used its steps or its least error stopped falling, or
@@ -651,26 +695,15 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         q = jnp.where(take[None], seed(i, a), q)
         return i, a, it, Eb, q, head, tail, qi, qa, q_out, a_out, E_out, nc
 
-    B0 = opts.slots if opts.slots > 0 else max(1024, min(4096, I // 4))
-    sizes = _phases(min(I, B0))
-    i = jnp.arange(sizes[0], dtype=jnp.int32)
+    i = jnp.where(jnp.arange(Bp) < B, jnp.arange(Bp, dtype=jnp.int32), I)
     a = jnp.zeros_like(i)
     s = (i, a, a, jnp.full(i.shape, jnp.inf, dtype), seed(i, a),
-         jnp.asarray(sizes[0], jnp.int32), jnp.asarray(I, jnp.int32),
+         jnp.asarray(B, jnp.int32), jnp.asarray(I, jnp.int32),
          jnp.arange(I, dtype=jnp.int32), jnp.zeros((I,), jnp.int32),
          jnp.zeros((n, nb * I), dtype), jnp.zeros((nb * I,), jnp.int32),
          jnp.full((I,), jnp.inf, dtype), jnp.zeros((I,), jnp.int32))  # fmt: skip
-    for ph in range(len(sizes)):
-        B_next = sizes[ph + 1] if ph + 1 < len(sizes) else 0
 
-        def cond(s, B_next=B_next):
-            busy = jnp.sum(s[0] < I)
-            return ((s[5] < s[6]) | (busy > B_next)) if B_next else busy > 0
-
-        s = jax.lax.while_loop(cond, round_, s)
-        if B_next:  # the busy slots (at most B_next) move to a smaller batch
-            keep = jnp.argsort(s[0] >= I, stable=True)[:B_next]
-            s = (*(x[keep] for x in s[:4]), s[4][:, keep], *s[5:])
+    s = jax.lax.while_loop(lambda s: jnp.any(s[0] < I), lambda s: round_(compact(s)), s)
     q_out, a_out, n_conv = s[9], s[10], s[12].reshape(M, T)
 
     # the returned joints, checked afresh with XLA's sin and cos; of several converged
@@ -681,9 +714,9 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
     def arr(x):
         return jnp.broadcast_to(jnp.asarray(x, dtype), (I,))
 
-    best = None
-    for c in range(nb):
-        qc = [q_out[j, c * I : (c + 1) * I] for j in range(n)]
+    def result(c):
+        """The solutions of slot c (of n_best) checked afresh, and their scores."""
+        qc = [jax.lax.dynamic_slice_in_dim(q_out[j], c * I, I) for j in range(n)]
         R, p, J = ch.fk(xc, qc, ch.trig_q(qc, exact=True, one=one), tx, (0, 1, 2))
         Ra = jnp.stack([jnp.stack([arr(x) for x in row], -1) for row in R], -2)
         pa = jnp.stack([arr(x) for x in p], -1).reshape(M, T, 3)
@@ -698,21 +731,29 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
             items = jnp.arange(I, dtype=jnp.int32)
             ok = conv & accept(items // T, items % T, q.reshape(I, n)).reshape(M, T)
         ik_ = inv_cond(Ja.reshape(M, T, 3, n), "2")
-        r = IKResult(q, ok, pe, re, ik_, a_out[c * I : (c + 1) * I].reshape(M, T), conv)
-        if best is None:
-            best = r
-            if nb > 1:
-                sc_best = jnp.where(ok, jnp.nan_to_num(score(q) if score else ik_, nan=-jnp.inf),
-                                    -jnp.inf)  # fmt: skip
-            continue
-        sc = jnp.where(ok & (c < n_conv), jnp.nan_to_num(score(q) if score else ik_, nan=-jnp.inf),
+        a_c = jax.lax.dynamic_slice_in_dim(a_out, c * I, I).reshape(M, T)
+        return IKResult(q, ok, pe, re, ik_, a_c, conv)
+
+    if nb == 1:
+        return _materialised(result(0))
+
+    def pick(c, carry):
+        """Slot c's solutions replace the best so far where they score higher (slot 0's
+        always: a target's solution when none converged is there)."""
+        best, sc_best = carry
+        r = result(c)
+        ok = r.success & ((c == 0) | (c < n_conv))
+        sc = jnp.where(ok, jnp.nan_to_num(score(r.q) if score else r.inv_k, nan=-jnp.inf),
                        -jnp.inf)  # fmt: skip
-        take = sc > sc_best
-        sc_best = jnp.where(take, sc, sc_best)
+        take = jax.lax.optimization_barrier((c == 0) | (sc > sc_best))
         best = IKResult(*(jnp.where(take.reshape(take.shape + (1,) * (x.ndim - 2)), y, x)
                           for x, y in zip(best, r, strict=True)))  # fmt: skip
-    assert best is not None
-    return best
+        return best, jnp.where(take, sc, sc_best)
+
+    shapes = jax.eval_shape(result, 0)
+    best0 = IKResult(*(jnp.zeros(x.shape, x.dtype) for x in shapes))
+    best, _ = jax.lax.fori_loop(0, nb, pick, (best0, jnp.full((M, T), -jnp.inf, dtype)))
+    return _materialised(best)
 
 
 def solve_design(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | None,
