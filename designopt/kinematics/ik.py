@@ -584,7 +584,8 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
 
     def block(i, qc):
         """``opts.block`` steps from qc (frozen where converged) for items i. Returns
-        (qc, converged, the least E = ½|e|² met)."""
+        (qc, converged and accepted, the least E = ½|e|² met, converged but refused by
+        ``accept``)."""
         m, t = split(i)
         xc = [xT[k, m] for k in range(ch.D)]
         tx = ch.trig_x(xc)
@@ -613,7 +614,11 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         z = jnp.zeros_like(qc[0])
         c0 = (qc, ch.trig_q(qc), z > 0, z + jnp.inf)
         qc, _, ok, Em = jax.lax.fori_loop(0, opts.block, body, c0)
-        return qc, ok, Em
+        refused = jnp.zeros_like(ok)
+        if accept is not None:
+            refused = ok & ~accept(m, t, jnp.stack(qc, -1))
+            ok = ok & ~refused
+        return qc, ok, Em, refused
 
     nb = opts.n_best
     B0 = opts.slots if opts.slots > 0 else max(1024, min(4096, I // 4))
@@ -628,17 +633,19 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         busy = jnp.sum(i < I, dtype=jnp.int32)
 
         def chunk(k, c):
-            q, ok, Em = c
+            q, ok, Em, rf = c
             o = (k * C).astype(jnp.int32)
             qk = [jax.lax.dynamic_slice(q[j], (o,), (C,)) for j in range(n)]
-            qc, okk, Emk = block(jax.lax.dynamic_slice(i, (o,), (C,)), qk)
+            qc, okk, Emk, rfk = block(jax.lax.dynamic_slice(i, (o,), (C,)), qk)
             return (jax.lax.dynamic_update_slice(q, jnp.stack(qc), (jnp.int32(0), o)),
                     jax.lax.dynamic_update_slice(ok, okk, (o,)),
-                    jax.lax.dynamic_update_slice(Em, Emk, (o,)))  # fmt: skip
+                    jax.lax.dynamic_update_slice(Em, Emk, (o,)),
+                    jax.lax.dynamic_update_slice(rf, rfk, (o,)))  # fmt: skip
 
-        c0 = (q, jnp.zeros(i.shape, bool), jnp.full(i.shape, jnp.inf, dtype))
-        q, ok, Em = jax.lax.fori_loop(0, (busy + C - 1) // C, chunk, c0)
-        return list(q), ok, Em
+        z = jnp.zeros(i.shape, bool)
+        c0 = (q, z, jnp.full(i.shape, jnp.inf, dtype), z)
+        q, ok, Em, rf = jax.lax.fori_loop(0, (busy + C - 1) // C, chunk, c0)
+        return list(q), ok, Em, rf
 
     def compact(s):
         """The busy slots moved to the front, in their order (a slot's place changes no
@@ -654,17 +661,13 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         i, a, it, Eb, q, head, tail, qi, qa, q_out, a_out, E_out, nc = s
         active = i < I
         ic = jnp.minimum(i, I - 1)
-        qc, ok, Em = blocks(i, q)
+        qc, ok, Em, refused = blocks(i, q)
         q = jnp.stack(qc)
         it = it + opts.block
         # a seed is dropped when it used its steps or its least error stopped falling, or
         # converged to joints ``accept`` refuses
         stalled = ~(Em < opts.stall * Eb)
         Eb = jnp.minimum(Eb, Em)
-        refused = jnp.zeros_like(ok)
-        if accept is not None:
-            refused = ok & ~accept(*split(i), q.T)
-            ok = ok & ~refused
         give_up = ~ok & ((it >= iters) | stalled | refused)
         last = a + 1 >= attempts
         # converged joints go to the item's next solution slot (of n_best); a dropped
