@@ -230,7 +230,8 @@ def _task_caption(rec: RunRecord, sol: dict[str, np.ndarray], L: str) -> str:
 
     s: SerialSettings = rec.config.study
     units = STUDY_UNITS(s)
-    per = {k: sol[k][None].astype(np.float64) for k in ("success", "inv_k",
+    lead = (slice(None), None) if s.arms is not None else (None, None)  # (A, M = 1, N)
+    per = {k: sol[k][lead].astype(np.float64) for k in ("success", "inv_k",
            "manipulability", "joint_margin")}  # fmt: skip
     est = jax.jit(taskindex.estimates)(per)
     est = {k: (float(v[0][0]), float(v[1][0])) for k, v in est.items()}
