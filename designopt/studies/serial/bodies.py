@@ -221,3 +221,43 @@ def obstacle_and_self(g: Geometry, obst: Any, seg: jax.Array, port: jax.Array | 
     if g.pairs:
         d = jnp.minimum(d, col.clearance(seg, r, None, g.pairs))
     return jnp.minimum(d, g.cap)  # +inf where nothing is checked
+
+
+def check(s: SerialSettings, mech: Mechanism) -> None:
+    """ValueError naming ``collision.obstacles.<i>`` when a link of the middle design
+    overlaps that obstacle in every one of 256 random configurations (e.g. a base link
+    standing in the table's half-space): every target would be unreached. The port's
+    exemption is not applied here, so a link through the port is not counted."""
+    g = geometry(s, mech)
+    c = s.collision
+    if g is None or c is None or not c.obstacles:
+        return
+    rng = np.random.default_rng(1)
+    q = mech.lower + (mech.upper - mech.lower) * rng.uniform(size=(256, mech.n))
+    full = _middle(mech, s)[None]
+    with jax.ensure_compile_time_eval(), jax.default_device(jax.devices("cpu")[0]):
+        P = mech.model.joint_frames(jnp.asarray(full), jnp.asarray(q))[0][0]  # (256, n+1, 3)
+        frames = [(jnp.eye(3), jnp.zeros(3))]
+        if s.arms is not None:
+            p = base_params(s, mech, jnp.float64 if jax.config.jax_enable_x64 else jnp.float32)
+            Rb, tb = base_frames(p, jnp.asarray(full))
+            frames = [(Rb[k, 0], tb[k, 0]) for k in range(len(s.arms))]
+        last = len(g.links) - 1
+        for i, ob in enumerate(c.obstacles):
+            op = col.obstacle_params([ob], P.dtype)
+            for k, (R, t) in enumerate(frames):
+                seg = _segments(P @ R.T + t, g.links)  # (256, L, 2, 3)
+                for j in range(len(g.links)):
+                    if j == last and s.ports()[min(k, len(s.ports()) - 1)] is not None:
+                        continue  # the link through the port may touch the body wall
+                    d = np.asarray(
+                        col.clearance(seg[:, j : j + 1], jnp.asarray(g.radii[j : j + 1]), op)
+                    )
+                    if np.all(d < g.margin):
+                        arm = f" of arm {k}" if s.arms is not None else ""
+                        raise ValueError(
+                            f"collision.obstacles.{i}: link {g.links[j] + 1}{arm} overlaps this "
+                            f"{ob.shape} in every configuration of the middle design (e.g. a "
+                            "base standing inside the table's half-space): every target would "
+                            "be unreached; move the obstacle or the base"
+                        )

@@ -40,6 +40,10 @@ def check(s: SerialSettings) -> None:
     if s.task is None:
         return
     _check_ports(s)
+    if s.collision is not None:
+        from designopt.studies.serial import bodies
+
+        bodies.check(s, build(s))
     if s.arms is not None:
         return  # the bases move the arms: the region's distance is from each arm's base
     near = tk.nearest_distance(s.task.region)

@@ -176,6 +176,7 @@ def per_target(mech: Mechanism, s: SerialSettings, params: dict[str, Any], full:
 
         accept = None
         if geo is not None:
+
             def accept(m, t, q):
                 return clearance(m, pt[t], q)[0] >= geo.margin  # type: ignore[union-attr]
 
