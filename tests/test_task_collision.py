@@ -188,7 +188,7 @@ def _seg_seg(a0, a1, b0, b1, n: int = 64):
         {"shape": "halfspace", "point": [0, 0, 1], "normal": [0, 0, 1]}]}},
      "obstacles.0.*link 1 overlaps this halfspace in every configuration"),
     ({"task": {"region": DISK, "port": [1.1, 0, 0.5], "insertion": [0.8, 0.9]}},
-     "task.insertion: no target of the region lies at a depth in"),
+     "insertion.: no target of the region lies at a depth in"),
     ({"task": {"region": DISK, "port": [0, 0, 0.01]}}, "inside the arm's base link"),
     ({"task": {"region": DISK, "insertion": [0.1, 0.2]}}, "insertion.*is the tool's depth past a port"),
 ])  # fmt: skip
