@@ -60,7 +60,10 @@ def _cost(s) -> Cost:
       each phase some 40 MiB + 4.6 MiB × joints × residual rows (3 position, 6 with a
       tool axis), on top of 250 MiB for the rest (database, seeds, final check, the
       runtime's arenas): 0.45 GB measured for the planar 2R, 0.64-0.7 GB (two phases) and
-      0.83-0.97 GB (three) for the PUMA 560 with a tool axis (DH and URDF)."""
+      0.83-0.97 GB (three) for the PUMA 560 with a tool axis (DH and URDF).
+
+    With ``arms`` every arm solves every target: the per-target and per-design bytes are
+    A times one arm's (plus the arms' kept capsules, 48 B per joint and target)."""
     ind, n_norm = s.indices, s.objective.get("n_norm")
     n_q, rows = len(s.chain.joints), len(ind.rows())
     if ind.measure == "task":
@@ -71,9 +74,11 @@ def _cost(s) -> Cost:
         n, c = taskindex.n_targets(s), taskindex.chunk(s)
         r = 3 if taskindex.mode(s) == "position" else 6
         phases = len(ik._phases(o.slots or 4096))  # a swarm fills the default's 4096 slots
+        A = 1 if s.arms is None else len(s.arms)  # each arm solves every target
+        seg = 0 if s.arms is None else 8 * 6 * n_q  # the arms' kept capsules
         mem = {
-            "bytes_per_sample": 8 * (o.n_best + 1) * (9 + 2 * rows * n_q),
-            "per_design": 8 * (n_q + 6) * o.n_db,
+            "bytes_per_sample": A * (8 * (o.n_best + 1) * (9 + 2 * rows * n_q) + seg),
+            "per_design": A * 8 * (n_q + 6) * o.n_db,
             "program": int((250 + phases * (40 + 4.6 * n_q * r)) * (1 << 20)),
         }
     else:
