@@ -335,8 +335,8 @@ def test_tool_axis_targets_fill_the_cone_and_solutions_meet_them():
     s, mech = cfg.study, build(cfg.study)
     per = jax.jit(lambda p, X: taskindex.per_target(mech, s, p, design_full(p, X, jnp.float64),
                                                     jnp.float64))(problem.params, X)  # fmt: skip
-    ok = np.asarray(per["success"][0]) > 0.5
-    q = np.asarray(per["q"][0])
+    ok = np.asarray(per["success"][0, 0]) > 0.5  # (arm, design, target)
+    q = np.asarray(per["q"][0, 0])
     assert ok.mean() >= 0.5, ok.mean()
     T = dh_fk(q, [0, x["a2"], 0.0203, 0, 0, 0], np.radians(PUMA_ALPHA),
               [0, 0, 0.15005, x["d4"], 0, 0])  # fmt: skip

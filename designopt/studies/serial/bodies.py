@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import partial
 from typing import Any
 
 import jax
@@ -37,6 +38,29 @@ import numpy as np
 from designopt.kinematics import collision as col
 from designopt.studies.serial.mechanism import Mechanism
 from designopt.studies.serial.settings import SerialSettings
+
+
+@partial(jax.jit, static_argnums=0)
+def _origins(model: Any, X: jax.Array, q: jax.Array) -> jax.Array:
+    """Joint origins (M, C, n + 1, 3): one compiled call (op by op, the set-up checks
+    compiled some hundred one-op programs)."""
+    return model.joint_frames(X, q)[0]
+
+
+@partial(jax.jit, static_argnums=2)
+def _pair_gaps(seg: jax.Array, radii: jax.Array, pairs: tuple) -> jax.Array:
+    """Capsule distances (C, len(pairs)) of the link pairs of segments (C, L, 2, 3)."""
+    i, j = np.asarray(pairs).T
+    return col.capsule_capsule(seg[:, i, 0], seg[:, i, 1], radii[i], seg[:, j, 0],
+                               seg[:, j, 1], radii[j])  # fmt: skip
+
+
+@jax.jit
+def _link_gaps(seg: jax.Array, radii: jax.Array, obst: Any) -> jax.Array:
+    """Each link's clearance to the obstacles (C, L) of segments (C, L, 2, 3)."""
+    return jnp.stack([col.clearance(seg[:, j : j + 1], radii[j : j + 1], obst)
+                      for j in range(seg.shape[1])], -1)  # fmt: skip
+
 
 ALWAYS = 0.95
 """A link pair whose capsules overlap in at least this share of random configurations
@@ -90,8 +114,7 @@ def _geometry(s: SerialSettings, mech: Mechanism) -> Geometry:
                         np.broadcast_to(mech.fixed, (8, len(mech.fixed)))], 1) * mech.scale  # fmt: skip
     X = np.concatenate([X, _middle(mech, s)[None]])
     q = mech.lower + (mech.upper - mech.lower) * rng.uniform(size=(64, mech.n))
-    with jax.default_device(jax.devices("cpu")[0]):
-        P = np.asarray(mech.model.joint_frames(jnp.asarray(X), jnp.asarray(q))[0])
+    P = np.asarray(_origins(mech.model, jnp.asarray(X), jnp.asarray(q)))
     length = np.linalg.norm(np.diff(P, axis=-2), axis=-1).max(axis=(0, 1))  # (n,)
     scale = max(float(np.abs(P).max()), 1e-12)
     links = tuple(i for i in range(n) if length[i] > 1e-9 * scale)
@@ -102,15 +125,13 @@ def _geometry(s: SerialSettings, mech: Mechanism) -> Geometry:
     always: list[tuple[int, int]] = []
     if pairs:
         q = mech.lower + (mech.upper - mech.lower) * rng.uniform(size=(512, mech.n))
-        with jax.default_device(jax.devices("cpu")[0]):
-            Pm = np.asarray(mech.model.joint_frames(jnp.asarray(_middle(mech, s)),
-                                                    jnp.asarray(q))[0])  # fmt: skip
+        Pm = np.asarray(_origins(mech.model, jnp.asarray(_middle(mech, s))[None],
+                                 jnp.asarray(q)))[0]  # fmt: skip
         seg = _segments(Pm, links)  # (512, L, 2, 3)
+        d = np.asarray(_pair_gaps(jnp.asarray(seg), jnp.asarray(radii), tuple(pairs)))
         keep = []
-        for i, j in pairs:
-            d = np.asarray(col.capsule_capsule(seg[:, i, 0], seg[:, i, 1], radii[i],
-                                               seg[:, j, 0], seg[:, j, 1], radii[j]))  # fmt: skip
-            (always if np.mean(d < c.margin) >= ALWAYS else keep).append((i, j))
+        for p, ij in enumerate(pairs):
+            (always if np.mean(d[:, p] < c.margin) >= ALWAYS else keep).append(ij)
         pairs = tuple(keep)
     from designopt.studies.serial.reach import largest_reach
 
@@ -235,29 +256,27 @@ def check(s: SerialSettings, mech: Mechanism) -> None:
     rng = np.random.default_rng(1)
     q = mech.lower + (mech.upper - mech.lower) * rng.uniform(size=(256, mech.n))
     full = _middle(mech, s)[None]
-    with jax.ensure_compile_time_eval(), jax.default_device(jax.devices("cpu")[0]):
-        P = mech.model.joint_frames(jnp.asarray(full), jnp.asarray(q))[0][0]  # (256, n+1, 3)
-        frames = [(jnp.eye(3), jnp.zeros(3))]
-        if s.arms is not None:
-            p = base_params(s, mech, jnp.float64 if jax.config.jax_enable_x64 else jnp.float32)
-            Rb, tb = base_frames(p, jnp.asarray(full))
-            frames = [(Rb[k, 0], tb[k, 0]) for k in range(len(s.arms))]
-        last = len(g.links) - 1
-        for i, ob in enumerate(c.obstacles):
-            op = col.obstacle_params([ob], P.dtype)
-            for k, (R, t) in enumerate(frames):
-                seg = _segments(P @ R.T + t, g.links)  # (256, L, 2, 3)
-                for j in range(len(g.links)):
-                    if j == last and s.ports()[min(k, len(s.ports()) - 1)] is not None:
-                        continue  # the link through the port may touch the body wall
-                    d = np.asarray(
-                        col.clearance(seg[:, j : j + 1], jnp.asarray(g.radii[j : j + 1]), op)
+    P = np.asarray(_origins(mech.model, jnp.asarray(full), jnp.asarray(q)))[0]  # (256, n+1, 3)
+    frames = [(np.eye(3), np.zeros(3))]
+    if s.arms is not None:
+        p = base_params(s, mech, jnp.float64 if jax.config.jax_enable_x64 else jnp.float32)
+        Rb, tb = (np.asarray(v, np.float64) for v in base_frames(p, jnp.asarray(full)))
+        frames = [(Rb[k, 0], tb[k, 0]) for k in range(len(s.arms))]
+    last = len(g.links) - 1
+    radii = jnp.asarray(g.radii)
+    for i, ob in enumerate(c.obstacles):
+        op = col.obstacle_params([ob], radii.dtype)
+        for k, (R, t) in enumerate(frames):
+            seg = _segments(P @ R.T + t, g.links)  # (256, L, 2, 3)
+            gaps = np.asarray(_link_gaps(jnp.asarray(seg, radii.dtype), radii, op))
+            for j in range(len(g.links)):
+                if j == last and s.ports()[min(k, len(s.ports()) - 1)] is not None:
+                    continue  # the link through the port may touch the body wall
+                if np.all(gaps[:, j] < g.margin):
+                    arm = f" of arm {k}" if s.arms is not None else ""
+                    raise ValueError(
+                        f"collision.obstacles.{i}: link {g.links[j] + 1}{arm} overlaps this "
+                        f"{ob.shape} in every configuration of the middle design (e.g. a "
+                        "base standing inside the table's half-space): every target would "
+                        "be unreached; move the obstacle or the base"
                     )
-                    if np.all(d < g.margin):
-                        arm = f" of arm {k}" if s.arms is not None else ""
-                        raise ValueError(
-                            f"collision.obstacles.{i}: link {g.links[j] + 1}{arm} overlaps this "
-                            f"{ob.shape} in every configuration of the middle design (e.g. a "
-                            "base standing inside the table's half-space): every target would "
-                            "be unreached; move the obstacle or the base"
-                        )
