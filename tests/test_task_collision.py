@@ -245,3 +245,47 @@ def test_the_tool_axis_passes_through_the_port_on_a_urdf_arm():
         assert z @ (target - port) > 0
         assert d0 <= np.linalg.norm(target - port) <= d1
     assert np.all(sol["clearance"][ok] >= 0)
+
+
+PLANAR_URDF = """<?xml version="1.0"?>
+<robot name="planar2r">
+  <link name="base"/>
+  <link name="l1"><collision><origin xyz="0.5 0 0" rpy="0 1.5707963267948966 0"/>
+    <geometry><cylinder radius="0.05" length="1.0"/></geometry></collision></link>
+  <link name="l2"><collision><origin xyz="0.3 0 0" rpy="0 1.5707963267948966 0"/>
+    <geometry><cylinder radius="0.05" length="0.6"/></geometry></collision></link>
+  <link name="tip"/>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/>
+    <axis xyz="0 0 1"/><limit lower="-3.14159265" upper="3.14159265" effort="1" velocity="1"/></joint>
+  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/>
+    <origin xyz="1.0 0 0"/><axis xyz="0 0 1"/>
+    <limit lower="-3.14159265" upper="3.14159265" effort="1" velocity="1"/></joint>
+  <joint name="jt" type="fixed"><parent link="l2"/><child link="tip"/>
+    <origin xyz="0.6 0 0"/></joint>
+</robot>
+"""
+
+
+def test_urdf_collision_shapes_score_like_the_same_capsules_from_joint_origins(tmp_path):
+    """links: urdf with a cylinder along each link of a planar 2R URDF (capsules of the
+    same radius, end to end) gives the reach of links: auto on the same chain."""
+    (tmp_path / "planar.urdf").write_text(PLANAR_URDF)
+    cfg = _config(2048)
+    s = cfg["study"]
+    s["chain"] = {"urdf": str(tmp_path / "planar.urdf"), "tip": "tip",
+                  "set": {"jt.origin.x": "l2"}}  # fmt: skip
+    s["variables"] = {"l2": [0.3, 1.5]}
+    s["indices"]["jacobian"] = ["vx", "vy"]
+    auto = _indices(cfg, np.array([[0.6]]))
+    s["collision"] = {"links": "urdf", "obstacles": [BALL]}
+    got = _indices(cfg, np.array([[0.6]]))
+    assert abs(got["reach"][0] - auto["reach"][0]) <= 2 * got["reach_se"][0]
+    assert abs(got["clearance"][0] - auto["clearance"][0]) <= 1e-6 + 2 * got["clearance_se"][0]
+    ok, elbows, tip = _elbows(_disk(200_000, np.random.default_rng(4)), 1.0, 0.6)
+    want = np.mean(ok & (_free_of_ball(elbows[0], tip) | _free_of_ball(elbows[1], tip)))
+    assert abs(got["reach"][0] - want) <= 4 * got["reach_se"][0]
+    s["collision"]["radius"] = 0.05
+    from designopt.core.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="URDF's <collision> shapes give the radii"):
+        validate(copy.deepcopy(cfg), "test")

@@ -55,6 +55,7 @@ from pydantic import (
     Tag,
     TypeAdapter,
     field_validator,
+    model_validator,
 )
 
 from designopt.core.settings import Section
@@ -183,7 +184,7 @@ class Collision(Section):
     model_config = ConfigDict(populate_by_name=True)  # `self` in YAML, `self_` in Python
 
     links: Literal["auto", "urdf"] = "auto"
-    radius: float | list[float]
+    radius: float | list[float] | None = None
     self_: StrictBool = Field(True, alias="self")
     obstacles: list[Obstacle] = []
     margin: Annotated[float, AfterValidator(_finite)] = 0.0
@@ -193,6 +194,8 @@ class Collision(Section):
     def _radii(cls, v: Any) -> Any:
         # checked here, before the union, for one error naming the bad radius (the union
         # would report a failure per member)
+        if v is None:
+            return v
         many = isinstance(v, list | tuple)
         if many and not v:
             raise ValueError("needs at least one radius (or one number for every link)")
@@ -210,6 +213,16 @@ class Collision(Section):
                 raise ValueError(f"{at}{e}") from None
         return v
 
+    @model_validator(mode="after")
+    def _radius_rule(self) -> Collision:
+        if self.links == "auto" and self.radius is None:
+            raise ValueError("radius: links: auto needs the capsules' radius (one number, "
+                             "or one per link)")  # fmt: skip
+        if self.links == "urdf" and self.radius is not None:
+            raise ValueError("radius: under links: urdf the URDF's <collision> shapes give "
+                             "the radii; remove radius (margin adds a safety distance)")  # fmt: skip
+        return self
+
     @field_validator("margin")
     @classmethod
     def _margin(cls, v: float) -> float:
@@ -225,6 +238,7 @@ class Collision(Section):
                 raise ValueError(f"collision.radius: the list has {len(self.radius)} radii "
                                  f"but the chain has {n_links} links")  # fmt: skip
             return tuple(self.radius)
+        assert self.radius is not None, "links: urdf takes the URDF's radii"
         return (float(self.radius),) * n_links
 
     def params(self, dtype=jnp.float64) -> ObstacleParams:

@@ -69,9 +69,11 @@ ALWAYS = 0.95
 
 @dataclass(frozen=True)
 class Geometry:
-    """What the collision checks need that does not change with the design: the links
-    kept (chain link indices), their radii, the self-collision pairs (indices into the
-    kept links) and the pairs left out as always overlapping."""
+    """What the collision checks need that does not change with the design: the
+    capsules (``links: auto``: the chain links kept; ``links: urdf``: the URDF's shapes,
+    ``urdf`` = (imported path, bindings, capsules in their link frames)), their radii,
+    the self-collision pairs (indices into the capsules) and the pairs left out as
+    always overlapping."""
 
     links: tuple[int, ...]
     radii: tuple[float, ...]
@@ -80,6 +82,21 @@ class Geometry:
     margin: float
     self_check: bool
     cap: float  # the longest reach of any design: a clearance counts at most this much
+    names: tuple[str, ...] = ()  # what each capsule is, for messages
+    urdf: Any = None
+
+    def outer(self, model: Any, X: jax.Array, q: jax.Array) -> jax.Array:
+        """Capsule end points (M, C, L, 2, 3) for designs X (M, P) and joints q (C, n)."""
+        if self.urdf is None:
+            return _segments(_origins(model, X, q), self.links)
+        from designopt.kinematics.urdf_collision import world_capsules
+
+        imp, bindings, caps = self.urdf
+        return world_capsules(imp, bindings, caps, X, q)[0]
+
+    def items(self, model: Any, X: jax.Array, q: jax.Array) -> jax.Array:
+        """Capsule end points (B, L, 2, 3) of items: designs X (B, P), joints q (B, n)."""
+        return jax.vmap(lambda x, qq: self.outer(model, x[None], qq[None])[0, 0])(X, q)
 
 
 def _middle(mech: Mechanism, s: SerialSettings) -> np.ndarray:
@@ -105,38 +122,70 @@ _GEOMETRY: dict[str, Geometry] = {}
 def _geometry(s: SerialSettings, mech: Mechanism) -> Geometry:
     c = s.collision
     assert c is not None
-    n = mech.model.n_chain
-    radius = list(c.radius) if isinstance(c.radius, list) else [float(c.radius)] * n
     rng = np.random.default_rng(0)
     lo, hi = s.box()[1:]
     lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
     X = np.concatenate([lo + (hi - lo) * rng.uniform(size=(8, len(lo))),
                         np.broadcast_to(mech.fixed, (8, len(mech.fixed)))], 1) * mech.scale  # fmt: skip
     X = np.concatenate([X, _middle(mech, s)[None]])
+    xl = np.concatenate([lo, mech.fixed]) * mech.scale
+    xh = np.concatenate([hi, mech.fixed]) * mech.scale
+    cap = mech.model.reach_bound(np.minimum(xl, xh), np.maximum(xl, xh), mech.lower, mech.upper)
+    if c.links == "urdf":
+        return _urdf_geometry(s, mech, c, cap)
     q = mech.lower + (mech.upper - mech.lower) * rng.uniform(size=(64, mech.n))
     P = np.asarray(_origins(mech.model, jnp.asarray(X), jnp.asarray(q)))
+    n = mech.model.n_chain
+    radius = list(c.radius) if isinstance(c.radius, list) else [float(c.radius)] * n  # type: ignore[arg-type]
     length = np.linalg.norm(np.diff(P, axis=-2), axis=-1).max(axis=(0, 1))  # (n,)
     scale = max(float(np.abs(P).max()), 1e-12)
     links = tuple(i for i in range(n) if length[i] > 1e-9 * scale)
     if not links:
         raise ValueError("collision: every link of the chain has zero length")
     radii = tuple(radius[i] for i in links)
+    g = Geometry(links, radii, (), (), float(c.margin), bool(c.self_), cap,
+                 tuple(f"link {i + 1}" for i in links))  # fmt: skip
     pairs = col.nonadjacent_pairs(len(links)) if c.self_ else ()
-    always: list[tuple[int, int]] = []
-    if pairs:
-        q = mech.lower + (mech.upper - mech.lower) * rng.uniform(size=(512, mech.n))
-        Pm = np.asarray(_origins(mech.model, jnp.asarray(_middle(mech, s))[None],
-                                 jnp.asarray(q)))[0]  # fmt: skip
-        seg = _segments(Pm, links)  # (512, L, 2, 3)
-        d = np.asarray(_pair_gaps(jnp.asarray(seg), jnp.asarray(radii), tuple(pairs)))
-        keep = []
-        for p, ij in enumerate(pairs):
-            (always if np.mean(d[:, p] < c.margin) >= ALWAYS else keep).append(ij)
-        pairs = tuple(keep)
-    from designopt.studies.serial.reach import largest_reach
+    return _drop_always(g, s, mech, pairs, rng)
 
-    return Geometry(links, radii, tuple(pairs), tuple(always), float(c.margin), bool(c.self_),
-                    largest_reach(s))  # fmt: skip
+
+def _urdf_geometry(s: SerialSettings, mech: Mechanism, c: Any, cap: float) -> Geometry:
+    """``links: urdf``: a capsule per ``<collision>`` element of the path's links; the
+    pairs are those of links that are not neighbours on the path."""
+    from designopt.kinematics.urdf_collision import capsules, path_links
+    from designopt.studies.serial.mechanism import urdf_bindings
+
+    ch = s.chain
+    imp = ch.imported  # type: ignore[union-attr]
+    caps = tuple(capsules(ch.urdf_text, ch.urdf_path, imp))  # type: ignore[union-attr]
+    if not caps:
+        raise ValueError(f"collision.links: the URDF has no <collision> shape on the links "
+                         f"from '{imp.base}' to '{imp.tip}'; use links: auto with a radius")  # fmt: skip
+    order = path_links(imp)
+    pos = [order.index(k.link) for k in caps]
+    pairs = tuple((i, j) for i in range(len(caps)) for j in range(i + 1, len(caps))
+                  if abs(pos[i] - pos[j]) >= 2) if c.self_ else ()  # fmt: skip
+    g = Geometry(tuple(range(len(caps))), tuple(float(k.radius) for k in caps), (), (),
+                 float(c.margin), bool(c.self_), cap, tuple(k.link for k in caps),
+                 (imp, urdf_bindings(s), caps))  # fmt: skip
+    return _drop_always(g, s, mech, pairs, np.random.default_rng(0))
+
+
+def _drop_always(g: Geometry, s: SerialSettings, mech: Mechanism, pairs: tuple,
+                 rng: np.random.Generator) -> Geometry:  # fmt: skip
+    """``g`` with the self-collision ``pairs``, less those overlapping in ≥ ALWAYS of 512
+    random configurations at the middle design."""
+    from dataclasses import replace
+
+    if not pairs:
+        return g
+    q = mech.lower + (mech.upper - mech.lower) * rng.uniform(size=(512, mech.n))
+    seg = g.outer(mech.model, jnp.asarray(_middle(mech, s))[None], jnp.asarray(q))[0]
+    d = np.asarray(_pair_gaps(seg, jnp.asarray(g.radii), tuple(pairs)))
+    keep, always = [], []
+    for p, ij in enumerate(pairs):
+        (always if np.mean(d[:, p] < g.margin) >= ALWAYS else keep).append(ij)
+    return replace(g, pairs=tuple(keep), always=tuple(always))
 
 
 def _segments(P: Any, links: tuple[int, ...]) -> Any:
@@ -149,7 +198,7 @@ def _segments(P: Any, links: tuple[int, ...]) -> Any:
 def describe(g: Geometry) -> str:
     """One line on the capsules: links, radii, pairs checked and left out."""
     left = f"; left out as always overlapping: {list(g.always)}" if g.always else ""
-    return (f"capsules on links {[i + 1 for i in g.links]} (radii {list(g.radii)}), "
+    return (f"capsules on {', '.join(g.names)} (radii {list(g.radii)}), "
             f"{len(g.pairs)} self-collision pair(s){left}")  # fmt: skip
 
 
@@ -256,7 +305,7 @@ def check(s: SerialSettings, mech: Mechanism) -> None:
     rng = np.random.default_rng(1)
     q = mech.lower + (mech.upper - mech.lower) * rng.uniform(size=(256, mech.n))
     full = _middle(mech, s)[None]
-    P = np.asarray(_origins(mech.model, jnp.asarray(full), jnp.asarray(q)))[0]  # (256, n+1, 3)
+    S = np.asarray(g.outer(mech.model, jnp.asarray(full), jnp.asarray(q)))[0]  # (256, L, 2, 3)
     frames = [(np.eye(3), np.zeros(3))]
     if s.arms is not None:
         p = base_params(s, mech, jnp.float64 if jax.config.jax_enable_x64 else jnp.float32)
@@ -267,7 +316,7 @@ def check(s: SerialSettings, mech: Mechanism) -> None:
     for i, ob in enumerate(c.obstacles):
         op = col.obstacle_params([ob], radii.dtype)
         for k, (R, t) in enumerate(frames):
-            seg = _segments(P @ R.T + t, g.links)  # (256, L, 2, 3)
+            seg = S @ R.T + t  # (256, L, 2, 3)
             gaps = np.asarray(_link_gaps(jnp.asarray(seg, radii.dtype), radii, op))
             for j in range(len(g.links)):
                 if j == last and s.ports()[min(k, len(s.ports()) - 1)] is not None:
@@ -275,7 +324,7 @@ def check(s: SerialSettings, mech: Mechanism) -> None:
                 if np.all(gaps[:, j] < g.margin):
                     arm = f" of arm {k}" if s.arms is not None else ""
                     raise ValueError(
-                        f"collision.obstacles.{i}: link {g.links[j] + 1}{arm} overlaps this "
+                        f"collision.obstacles.{i}: {g.names[j]}{arm} overlaps this "
                         f"{ob.shape} in every configuration of the middle design (e.g. a "
                         "base standing inside the table's half-space): every target would "
                         "be unreached; move the obstacle or the base"

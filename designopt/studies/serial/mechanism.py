@@ -38,6 +38,22 @@ def _entry(v: float | str, angle: bool) -> float | str:
     return float(np.deg2rad(v)) if angle else float(v)
 
 
+def urdf_bindings(s: SerialSettings) -> dict[tuple[str, str], tuple[float, tuple]]:
+    """A URDF chain's ``set`` as kernel bindings: (joint, field) → (const, ((design
+    column, 1),)) in kernel units (rad for angles; the columns are variables then fixed
+    names, angle columns scaled deg → rad by ``Mechanism.scale``)."""
+    from designopt.kinematics import urdf
+
+    names = tuple(s.variables) + tuple(s.fixed)
+    out: dict[tuple[str, str], tuple[float, tuple]] = {}
+    for (joint, fld), v in s.chain.bound().items():  # type: ignore[union-attr]
+        if isinstance(v, str):
+            out[(joint, fld)] = (0.0, ((names.index(v), 1.0),))
+        else:
+            out[(joint, fld)] = (float(np.deg2rad(v)) if fld in urdf.ANGLE_FIELDS else float(v), ())
+    return out
+
+
 def build(s: SerialSettings) -> Mechanism:
     """The chain of ``s`` as a kernel model with its joint box and design columns."""
     names = tuple(s.variables) + tuple(s.fixed)
@@ -48,16 +64,7 @@ def build(s: SerialSettings) -> Mechanism:
         from designopt.kinematics import urdf
 
         imp = s.chain.imported
-        bindings: dict[tuple[str, str], urdf.Lin] = {}
-        for (joint, fld), v in s.chain.bound().items():
-            if isinstance(v, str):
-                bindings[(joint, fld)] = (0.0, ((names.index(v), 1.0),))
-            else:
-                bindings[(joint, fld)] = (
-                    float(np.deg2rad(v)) if fld in urdf.ANGLE_FIELDS else float(v),
-                    (),
-                )
-        model = urdf.lower(imp, bindings, names)
+        model = urdf.lower(imp, urdf_bindings(s), names)
         lo, hi = np.array(imp.lower), np.array(imp.upper)
         return Mechanism(model, names, len(s.variables), scale, fixed, lo, hi)
     joints = s.chain.joints

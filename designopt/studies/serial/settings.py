@@ -467,10 +467,9 @@ class SerialSettings(StudySettings):
             if len(c.radius) != n:
                 raise ValueError(f"collision.radius: one radius per link ({n} links, one per "
                                  f"joint), got {len(c.radius)}")  # fmt: skip
-        if c is not None and c.links == "urdf":
-            raise ValueError("collision.links: 'urdf' (the URDF's <collision> shapes) is not "
-                             "supported yet; use links: auto (a capsule per link between "
-                             "joint origins) with a radius")  # fmt: skip
+        if c is not None and c.links == "urdf" and not isinstance(self.chain, UrdfChain):
+            raise ValueError("collision.links: 'urdf' takes a URDF chain's <collision> "
+                             "shapes; a DH chain uses links: auto with a radius")  # fmt: skip
 
     def needs_float64(self) -> str | None:
         if self.indices.measure == "task":

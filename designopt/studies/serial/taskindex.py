@@ -142,12 +142,10 @@ def per_target(mech: Mechanism, s: SerialSettings, params: dict[str, Any], full:
     half = (hi - lo) / 2
 
     def clearance(m, pt, q):  # the clearance of items: rows m of X (B,), targets pt (B, 3)
-        P = jax.vmap(lambda x, qq: mech.model.joint_frames(x, qq)[0])(X[m], q)
+        seg = geo.items(mech.model, X[m], q)  # type: ignore[union-attr]  # (B, L, 2, 3)
         a = m // M
-        if arms:  # arm a's joint origins in the world frame
-            P = jnp.einsum("bij,bkj->bki", Rb[a, m % M], P) + tb[a, m % M][:, None, :]
-        Pw = P
-        seg = bodies._segments(Pw, geo.links)  # type: ignore[union-attr]
+        if arms:  # arm a's capsules in the world frame
+            seg = jnp.einsum("bij,blej->blei", Rb[a, m % M], seg) + tb[a, m % M][:, None, None]
         if port is None:
             return bodies.obstacle_and_self(geo, obst, seg, None, None), seg  # type: ignore[arg-type]
         pa = port[a if arms else jnp.zeros_like(a)]
