@@ -407,9 +407,9 @@ def draw_3d(ax: Any, scene: Scene, unit: str, legend: bool = True,
         pc = Poly3DCollection(np.concatenate(polys), facecolors=colours, alpha=0.55, shade=True,
                               edgecolor="none", zorder=3, rasterized=True)  # fmt: skip
         ax.add_collection3d(pc)
-    for arm, r in zip(scene.arms, rs, strict=True):
-        P = arm.points()
-        ax.plot(*P.T, color="0.15", lw=1.0, marker="o", ms=2.5, zorder=4)
+    for k_arm, (arm, r) in enumerate(zip(scene.arms, rs, strict=True)):
+        P = arm.points()  # the centre line's data are the joints (gid: tests read them back)
+        ax.plot(*P.T, color="0.15", lw=1.0, marker="o", ms=2.5, zorder=4, gid=f"arm{k_arm}-joints")
         L = max(4 * r, 0.08 * arm.length())
         for seg in axis_arrows(arm, L):
             ax.quiver(*seg[0], *(seg[1] - seg[0]), color="0.2", lw=1.0, arrow_length_ratio=0.3,
@@ -458,7 +458,7 @@ def draw_2d(ax: Any, arms: Sequence[Arm], E: np.ndarray, rs: Sequence[float] | N
     from matplotlib.patches import Circle, FancyArrowPatch, Polygon
 
     rs = radii(arms) if rs is None else rs
-    for arm, r in zip(arms, rs, strict=True):
+    for k_arm, (arm, r) in enumerate(zip(arms, rs, strict=True)):
         col = COLLIDING if arm.colliding else arm.color
         P = arm.points() @ E
         tol = 1e-9 * max(arm.length(), 1e-300)
@@ -471,7 +471,8 @@ def draw_2d(ax: Any, arms: Sequence[Arm], E: np.ndarray, rs: Sequence[float] | N
                                      alpha=alpha, lw=0, hatch="///" if arm.colliding else None))  # fmt: skip
         for p in P:
             ax.add_patch(Circle(p, r, fc=col, alpha=alpha, lw=0))
-        ax.plot(P[:, 0], P[:, 1], color="0.15", lw=1.0, marker="o", ms=2.5, zorder=4)
+        ax.plot(P[:, 0], P[:, 1], color="0.15", lw=1.0, marker="o", ms=2.5, zorder=4,
+                gid=f"arm{k_arm}-joints")  # fmt: skip
         L = max(4 * r, 0.08 * arm.length())
         for seg in axis_arrows(arm, L):
             s2 = seg @ E
@@ -496,18 +497,34 @@ def draw_region_2d(ax: Any, region: Any, E: np.ndarray) -> None:
 
 def figure(scenes: Sequence[Scene], unit: str, title: str = "", size: float = 5.0):
     """One 3-D panel per scene, side by side on common axis limits (so that arms compare
-    by size), with the arms' legend at the right; returns the figure (save it with
-    ``designopt.figures.save``)."""
-    fig = style.figure(figsize=(size * len(scenes) + 2.6, size + 0.9))
-    fig.get_layout_engine().set(rect=(0, 0.05, 1, 0.95))  # room for the 3-D x, y labels
+    by size), the legend below them, ``title`` wrapped to the width; laid out by hand in
+    inches (constrained layout does not see a 3-D axes' labels). Returns the figure (save
+    it with ``designopt.figures.save``)."""
+    import textwrap
+
+    from designopt.figures.canvas import plt
+
+    W = size * len(scenes) + 0.5
+    lines = (
+        [ln for par in title.split("\n") for ln in textwrap.wrap(par, int(W * 12.5))]
+        if title
+        else []
+    )
+    handles = list({h.get_label(): h for sc in scenes for h in legend_handles(sc)}.values())
+    ncol = max(1, min(len(handles), int(W // 2.6)))
+    rows = -(-len(handles) // ncol)
+    top = 0.15 + 0.19 * len(lines) + 0.15  # the title, then the panels' own titles
+    bottom = 0.55 + (0.22 * rows + 0.15 if handles else 0.0)  # x, y labels hang below
+    H = size + top + bottom
+    fig = plt.figure(figsize=(W, H))
     pts = np.vstack([scene_points(sc) for sc in scenes])
     for k, sc in enumerate(scenes):
-        ax = fig.add_subplot(1, len(scenes), k + 1, projection="3d")
+        ax = fig.add_axes(((0.1 + k * size) / W, bottom / H, (size - 0.45) / W, size / H),
+                          projection="3d")  # fmt: skip
         draw_3d(ax, sc, unit, legend=False, limits=pts)
-    handles = {h.get_label(): h for sc in scenes for h in legend_handles(sc)}
     if handles:
-        fig.legend(handles=list(handles.values()), loc="outside right center", fontsize=8,
-                   framealpha=0.9)  # fmt: skip
-    if title:
-        fig.suptitle(title, fontsize=9.5)
+        fig.legend(handles=handles, loc="lower center", bbox_to_anchor=(0.5, 0.1 / H),
+                   ncol=ncol, fontsize=8, framealpha=0.9)  # fmt: skip
+    if lines:
+        fig.suptitle("\n".join(lines), fontsize=9.5, y=1 - 0.1 / H, va="top")
     return fig

@@ -233,6 +233,11 @@ class Study:
     """``cloud(record)``: the workspace of a run's final design as a point cloud for the
     interactive report, {"xyz": (n, 3), "value": (n,), "label", "unit"} (e.g. coloured
     by 1/k); None: the study has none."""
+    robot: Callable[[Any], Mapping[str, Any] | None] | None = None
+    """``robot(record)``: the robot in 3-D for the interactive report, {"view":
+    ``designopt.figures.html.View``} for a run (the final design, a slider through
+    representative poses) or {"front": ``designopt.figures.html.FrontView``} for a Pareto
+    front (the robot of the design hovered or clicked); None: the study draws none."""
     replay: (
         Callable[[Any, Mapping[str, jax.Array], Any, str], tuple[dict[str, Any], list[str]]] | None
     ) = None
