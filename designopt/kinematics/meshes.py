@@ -13,7 +13,8 @@
   ``set`` numbers of a design written in (as ``urdf.export_text`` writes them), links
   hanging off the path by fixed joints included (above the base too);
 - :func:`placed` gives each link's triangles (vertices in the base frame, faces),
-  decimated by vertex clustering (:func:`decimate`) to a budget of triangles in all.
+  decimated by vertex clustering (:func:`decimate`) to a budget of triangles in all,
+  shared in proportion to each mesh's size (none below :data:`KEEP`).
 
 A mesh is drawn as the file gives it: a length that is a design variable moves the links
 after it, but no mesh is stretched (``Placed.moved`` names the links whose own geometry
@@ -35,6 +36,9 @@ from designopt.kinematics.urdf import ANGLE_FIELDS, MOVABLE, Imported, UJoint, r
 
 MAX_TRIANGLES = 20_000
 """Triangles of one robot's meshes in a drawing, all links together (decimated above)."""
+KEEP = 64
+"""A mesh of this many triangles or fewer is never decimated (a box keeps its 12): the
+budget is shared among the meshes in proportion to their size, none below this."""
 
 
 @dataclass(frozen=True)
@@ -227,7 +231,8 @@ def link_poses(imp: Imported, values: Mapping[tuple[str, str], float],
 def decimate(V: np.ndarray, F: np.ndarray, target: int) -> tuple[np.ndarray, np.ndarray]:
     """At most ``target`` triangles by vertex clustering: vertices merged per cell of a
     cubic grid (the finest grid that meets the budget, by bisection), each cell's vertex
-    their mean, faces that collapse dropped. Unchanged when already within budget."""
+    their mean, faces that collapse dropped. Unchanged when already within budget; never
+    empty (a target too small for any surface gives the coarsest grid that keeps one)."""
     if len(F) <= target:
         return V, F
     lo_c, ext = V.min(0), float(np.ptp(V, 0).max()) or 1.0
@@ -243,17 +248,22 @@ def decimate(V: np.ndarray, F: np.ndarray, target: int) -> tuple[np.ndarray, np.
         first = np.unique(np.sort(G, 1), axis=0, return_index=True)[1]  # no duplicates
         return W / cnt[:, None], G[np.sort(first)]
 
-    a, b = 1, 2
-    while len(cluster(b)[1]) <= target and b < 1 << 16:
-        a, b = b, 2 * b
-    best = cluster(a)
-    while b - a > 1:
-        m = (a + b) // 2
-        got = cluster(m)
-        if len(got[1]) <= target:
-            a, best = m, got
-        else:
-            b = m
+    n = 1
+    while len(cluster(n)[1]) == 0 and n < 1 << 16:  # the coarsest grid with a surface
+        n *= 2
+    a, best = n, cluster(n)
+    if len(best[1]) <= target:
+        b = 2 * a
+        while len(cluster(b)[1]) <= target and b < 1 << 16:
+            a, b = b, 2 * b
+        best = cluster(a)
+        while b - a > 1:
+            m = (a + b) // 2
+            got = cluster(m)
+            if len(got[1]) <= target:
+                a, best = m, got
+            else:
+                b = m
     Vn, Fn = best
     used = np.unique(Fn)
     remap = np.full(len(Vn), -1)
@@ -287,10 +297,9 @@ def _geometry(text: str, urdf_path: str | None, max_triangles: int | None):
         else:
             parts.append((v.link, *g))
     full = sum(len(F) for _, _, F in parts)
-    if max_triangles is not None and full > max_triangles:
-        parts = [
-            (lk, *decimate(V, F, max(4, max_triangles * len(F) // full))) for lk, V, F in parts
-        ]
+    if max_triangles is not None and full > max_triangles:  # shared in proportion
+        parts = [(lk, *decimate(V, F, max(max_triangles * len(F) // full, KEEP)))
+                 for lk, V, F in parts]  # fmt: skip
     return tuple(parts), tuple(missing), full
 
 

@@ -205,9 +205,11 @@ def _scene_layout(unit: str, traces: Sequence[dict[str, Any]], **kw: Any) -> dic
                     "range": [float(mid[k] - span[k] / 2), float(mid[k] + span[k] / 2)]}
            for k, a in enumerate(("xaxis", "yaxis", "zaxis"))}  # fmt: skip
     r = span / span.max()
+    flat = (hi - lo)[2] - 2 * pad < 0.2 * ext  # a planar scene: seen from above
+    eye = {"x": 0.3, "y": -1.0, "z": 1.9} if flat else {"x": 1.3, "y": 1.3, "z": 0.9}
     return out | {"aspectmode": "manual",
                   "aspectratio": {"x": float(r[0]), "y": float(r[1]), "z": float(r[2])},
-                  "camera": {"eye": {"x": 1.45, "y": 1.45, "z": 1.0}}} | kw  # fmt: skip
+                  "camera": {"eye": eye}} | kw  # fmt: skip
 
 
 def _mark_trace(p: np.ndarray | None) -> dict[str, Any]:
@@ -226,7 +228,9 @@ def view_plot(view: View, ids: _Ids) -> Plot:
     dyn: list[dict[str, Any]] = []
     for k, arm in enumerate(first.arms):
         dyn += arm_traces(arm, arm.radius or r, first.hover[k])
-    dyn.append(_mark_trace(first.mark))
+    marked = any(p.mark is not None for p in view.poses)
+    if marked:  # the target each pose reaches
+        dyn.append(_mark_trace(first.mark))
     n0 = len(static)
     idx = list(range(n0, n0 + len(dyn)))
     frames = []
@@ -236,8 +240,9 @@ def view_plot(view: View, ids: _Ids) -> Plot:
             geo = arm_geometry(arm, arm.radius or r)
             geo[1] = geo[1] | {"hovertemplate": p.hover[k]}
             upd += geo
-        m = _mark_trace(p.mark)
-        upd.append({k: m[k] for k in ("x", "y", "z")})
+        if marked:
+            m = _mark_trace(p.mark)
+            upd.append({k: m[k] for k in ("x", "y", "z")})
         frames.append({"name": p.label, "data": upd, "traces": idx})
     every = static + dyn + [t for f in frames for t in f["data"]]
     lay = _layout(esc(view.title), scene=_scene_layout(view.unit, every), height=640)

@@ -366,7 +366,7 @@ def cmd_view(args: argparse.Namespace, ctx: Any) -> int:
         view = page.View(title=title.replace("\n", "; ") + "; drag to rotate", unit=u,
                          scene=robot.Scene(arms=ref, region=region, cone=cone),
                          poses=[page.Pose("this pose", [arm_h], [hover(s, "this design", q)])],
-                         note=(("grey: the original robot (the URDF's numbers); ") if ref else "")
+                         note=(("blue: the original robot (the URDF's numbers); ") if ref else "")
                          + "hover the joints for their values")  # fmt: skip
         doc = page.document([page.robot_section(view)], f"designopt view: {Path(where).name}")
         writer.write_file(html, doc.encode("utf-8"), "HTML view")

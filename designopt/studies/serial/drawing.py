@@ -155,7 +155,7 @@ def original_model(s: SerialSettings, mech: Mechanism):
 
 
 def original_arm(s: SerialSettings, mech: Mechanism, q: np.ndarray, label: str = "original (the URDF's numbers)",
-                 color: str = "#7f7f7f", budget: int | None = FIGURE_TRIANGLES) -> Arm:  # fmt: skip
+                 color: str = "#4c72b0", budget: int | None = FIGURE_TRIANGLES) -> Arm:  # fmt: skip
     """The URDF's own robot at joints q."""
     x0 = [0.5 * (lo + hi) for lo, hi in s.variables.values()]  # unused by the model
     return arms(
@@ -399,7 +399,7 @@ def front_view(rec: Any):
         objtxt = ", ".join(f"{name} = {c[i]:.4g}" for (name, _), c in zip(objs, cols, strict=True))
         hov.append(f"{_design_text(s, d)}; {objtxt}")
     note = (f"each design at the home pose ({joint_values(s, q0)}: each joint at 0 where its "
-            "limits allow, else mid-range)" + ("; grey: the original robot (the URDF's numbers)"
+            "limits allow, else mid-range)" + ("; blue: the original robot (the URDF's numbers)"
                                                if ref else ""))  # fmt: skip
     mn = meshes_note(s, dict(zip(s.variables, X[0], strict=True)), q0, budget)
     return FrontView(title=f"Pareto front ({n} designs)", unit=length_unit(s), x=cols[0],
