@@ -26,7 +26,7 @@ from designopt.figures import canvas, robot
 from designopt.figures.html import robot as hrobot
 from designopt.figures.html.model import _Ids
 from designopt.kinematics import meshes, urdf
-from designopt.studies.serial import commands, drawing
+from designopt.studies.serial import commands, drawing, report
 from designopt.studies.serial.mechanism import build
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -295,7 +295,7 @@ def front(tmp_path_factory):
 
 def test_front_view_precomputes_each_designs_robot(front):
     _, rec = front
-    fv = drawing.front_view(rec)
+    fv = report.front_view(rec)
     s = rec.config.study
     mech = build(s)
     n = len(rec.X)

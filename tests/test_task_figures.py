@@ -19,7 +19,7 @@ from PIL import Image
 
 import designopt
 from designopt.figures import canvas, html
-from designopt.studies.serial import drawing, taskindex
+from designopt.studies.serial import drawing, report, taskindex
 from designopt.studies.serial import figures as serial_figs
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -179,7 +179,7 @@ def test_task_report_slider_moves_the_arm(run, tmp_path):
 
     out, rec = run
     sol = taskindex.solution(rec.config.study, rec.x, rec.keys())
-    view = drawing.run_view(rec)
+    view = report.run_view(rec)
     picks = drawing.slider_targets(sol)
     assert [p.label for p in view.poses] == [lab for lab, _ in picks] and len(picks) >= 5
     for p, (_, i) in zip(view.poses, picks, strict=True):

@@ -32,9 +32,9 @@ def _cloud(record: Any) -> dict[str, Any]:
 
 
 def _robot(record: Any) -> dict[str, Any] | None:
-    from designopt.studies.serial import drawing
+    from designopt.studies.serial import report
 
-    return drawing.report(record)
+    return report.report(record)
 
 
 def _aliases(s: SerialSettings) -> dict[str, str]:

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from designopt.core.errors import ConfigError
+from designopt.studies.serial.mechanism import set_values
 
 N_CHECK = 8
 """Random joint configurations of the import check."""
@@ -33,18 +34,6 @@ def design_values(s: Any, given: dict[str, float], where: str) -> dict[str, floa
         raise ConfigError(f"{where}: --design {bad[0]}: not a design variable "
                           f"(variables: {', '.join(s.variables)})")  # fmt: skip
     return {k: given.get(k, 0.5 * (lo + hi)) for k, (lo, hi) in s.variables.items()}
-
-
-def set_values(s: Any, design: dict[str, float]) -> dict[tuple[str, str], float]:
-    """{(joint, field): number in the URDF's units (rad, file lengths)} of ``set``."""
-    from designopt.kinematics.urdf import ANGLE_FIELDS
-
-    vals = design | {k: float(v) for k, v in s.fixed.items()}
-    out = {}
-    for (joint, fld), v in s.chain.bound().items():
-        x = vals[v] if isinstance(v, str) else float(v)
-        out[(joint, fld)] = math.radians(x) if fld in ANGLE_FIELDS else x
-    return out
 
 
 def _fmt(v: np.ndarray) -> str:
@@ -358,7 +347,8 @@ def cmd_view(args: argparse.Namespace, ctx: Any) -> int:
     fig = robot.figure(scenes, u, title)
     written = writer.publish_figures(lambda d: save(fig, d, png.stem), png.parent, swap=False)
     if html is not None:
-        from designopt.studies.serial.drawing import _budget, hover
+        from designopt.studies.serial.drawing import hover
+        from designopt.studies.serial.report import _budget
 
         ref = [drawing.original_arm(s, mech, q, budget=_budget(2))] if len(scenes) > 1 else []
         arm_h = drawing.arms(s, mech, [x], q, labels=["this design"], colors=["#ff7f0e"],
