@@ -223,7 +223,7 @@ class Study:
     """``cost(settings)``: Monte-Carlo samples, chunk and normalisation probes per design,
     for the pre-flight memory and time estimate (``designopt.app.preflight``)."""
     commands: tuple[Command, ...] = ()
-    """Extra subcommands of this study (e.g. the serial ``chain`` and ``export``)."""
+    """Extra subcommands of this study (e.g. the serial ``chain``, ``export`` and ``view``)."""
     ik: IKHook | None = None
     """``designopt ik CONFIG --poses FILE``: the study's inverse kinematics (an
     ``designopt.kinematics.ikjob.IKHook``: the design solved for with ``--design`` overrides, the

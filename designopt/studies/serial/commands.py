@@ -331,7 +331,7 @@ def cmd_view(args: argparse.Namespace, ctx: Any) -> int:
                                          title="original: the URDF's own numbers"))  # fmt: skip
     units = {k: ("deg" if k in s.angle_names() else u) for k in design}
     dtext = ", ".join(f"{k} = {v:.6g} {units[k]}" for k, v in design.items())
-    what = (f"{s.chain.urdf} ({s.chain.imported.base} -> {s.chain.imported.tip})" if urdf_chain
+    what = (f"{Path(s.chain.urdf).name} ({s.chain.imported.base} -> {s.chain.imported.tip})" if urdf_chain
             else f"DH chain ({s.chain.convention}, {len(s.chain.joints)} joints)")  # fmt: skip
     pose = drawing.joint_values(s, q) + (" (home pose: each joint at 0 where its limits allow, "
                                          "else mid-range)" if at_home else "")  # fmt: skip

@@ -220,7 +220,7 @@ def draw_robot(rec: RunRecord, folder: Path) -> list[Path]:
     note = drawing.meshes_note(s, design, q)
     scenes = [robot.Scene(arms=[orig], region=region, title="original: the URDF's own numbers"),
               robot.Scene(arms=[final], region=region, title="final design")]  # fmt: skip
-    title = (f"{s.chain.urdf} at the home pose ({drawing.joint_values(s, q)}; each joint at 0 "
+    title = (f"{Path(s.chain.urdf).name} at the home pose ({drawing.joint_values(s, q)}; each joint at 0 "
              "where its limits allow, else mid-range)")  # fmt: skip
     import textwrap
 
