@@ -361,3 +361,37 @@ def test_front_page_draws_the_hovered_designs_robot(front, tmp_path):
             b.screenshot(SHOTS / "front_page.png")
     finally:
         b.close()
+
+
+def test_task_figure_of_a_solid_task_draws_the_arms_in_3d(record, tmp_path, monkeypatch):
+    """configs/puma560_task.yaml's box task with a solution made from the forward
+    kinematics (random joints; a few targets marked unreached): the task figure's 3-D
+    panel draws the arm at the worst-conditioned, median and best-conditioned reached
+    targets, each with its tip on its target, and passes the figure checker."""
+    from types import SimpleNamespace
+
+    from designopt.studies.serial import figures as serial_figs
+
+    s = designopt.load_config(ROOT / "configs/puma560_task.yaml").study
+    mech = build(s)
+    x = np.array([0.45, 0.42])
+    rng = np.random.default_rng(4)
+    q = mech.lower + (mech.upper - mech.lower) * rng.random((64, 6))
+    P, _, R = drawing.joint_frames(mech, drawing.full(mech, [x]), q)
+    ok = np.ones(64, bool)
+    ok[:5] = False
+    sol = {"target_p": P[0, :, -1], "success": ok, "q": q,
+           "inv_k": np.where(ok, serial_figs.inv_k(mech, s, x, q), 0.0),
+           "manipulability": ok * 1.0, "joint_margin": ok * 0.5}  # fmt: skip
+    monkeypatch.setattr(serial_figs, "task_solution", lambda rec: sol)
+    rec = SimpleNamespace(config=SimpleNamespace(study=s), x={"a2": x[0], "d4": x[1]},
+                          warnings=[], indices={})  # fmt: skip
+    serial_figs.draw_task(rec, tmp_path)
+    assert_clean(record)
+    [(_, fig)] = record
+    ax3 = next(a for a in fig.axes if hasattr(a, "get_zlim"))
+    for k, (_, i) in enumerate(drawing.representatives(sol)):
+        got = _joints_read_back(ax3, k)
+        np.testing.assert_allclose(got[1:], P[0, i], atol=1e-12)  # the joints, then the tip
+        np.testing.assert_allclose(got[-1], sol["target_p"][i], atol=1e-12)
+    assert len(fig.axes) == 4  # top view, side view, colour bar, the 3-D panel
