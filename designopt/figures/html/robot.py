@@ -294,12 +294,13 @@ def front_plots(fv: FrontView, ids: _Ids) -> list[Plot]:
     lay = _layout(esc("the robot of the design hovered or clicked on the front (common axes: "
                       "the designs compare by size)"),
                   scene=_scene_layout(fv.unit, every), height=520)  # fmt: skip
-    lay["legend"] |= {"x": 0.0, "y": 1.0, "xanchor": "left", "yanchor": "top"}
+    lay["legend"] |= {"orientation": "h", "x": 0.0, "y": 0.0, "xanchor": "left",
+                      "yanchor": "bottom"}  # fmt: skip  # the design's label goes on top
     lay["uirevision"] = "robot"
     lay["annotations"] = [{"text": esc(f"design 0: {fv.hover[0]}"), "xref": "paper",
-                           "yref": "paper", "x": 1.0, "y": 1.0, "xanchor": "right",
+                           "yref": "paper", "x": 0.0, "y": 1.0, "xanchor": "left",
                            "yanchor": "top", "showarrow": False, "font": {"size": 11},
-                           "align": "right", "bgcolor": "rgba(255,255,255,0.8)"}]  # fmt: skip
+                           "align": "left", "bgcolor": "rgba(255,255,255,0.8)"}]  # fmt: skip
     rplot = Plot(ids("robot-design"), {"data": static + dyn, "layout": lay,
                                        "link": {"source": fid, "traces": idx,
                                                 "designs": designs}})  # fmt: skip
