@@ -24,9 +24,10 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 
-# config name -> (command, overrides merged into the YAML: small sample counts)
+# config name -> (command, overrides merged into the YAML: small sample counts; for
+# `view`, the command's arguments)
 OPT = {"n_particles": 8, "n_iters": 6, "n_runs": 2}
-CONFIGS: dict[str, tuple[str, dict]] = {
+CONFIGS: dict[str, tuple[str, dict | list]] = {
     "davinci": ("run", {"study": {"indices": {"n_samples": 512, "n_ik": 64}}, "optimizer": OPT}),
     "davinci_wrist": (
         "scan",
@@ -73,6 +74,11 @@ CONFIGS: dict[str, tuple[str, dict]] = {
         {"study": {"eta": {"n_samples": 8192}}, "scan": {"vary": {"c": {"num": 41}}, "batch": 41}},
     ),  # fmt: skip
     "rcm_teleop": ("run", {}),
+    "urdf_puma560_task": (
+        "run",
+        {"study": {"indices": {"n_samples": 256}, "task": {"ik": {"n_db": 512}}}, "optimizer": OPT},
+    ),  # fmt: skip
+    "urdf_mesh_arm": ("view", ["--design", "l_upper=0.4", "--q", "30,40,0.05"]),
     "sweep_ptpso": (
         "sweep",
         {
@@ -103,6 +109,10 @@ EXAMPLES = {
     "serial": ("puma560", "dexterity_map.png"),
     "scan": ("rcm_eta", "scan_c.png"),
     "bench": ("pso_benchmark", "convergence_curves.png"),
+    "task_robot": ("urdf_puma560_task", "task.png"),
+    "workspace_robot": ("urdf_puma560_task", "workspace.png"),
+    "robot_compare": ("urdf_puma560_task", "robot.png"),
+    "view": ("urdf_mesh_arm", "urdf_mesh_arm.png"),
 }
 
 
@@ -122,10 +132,17 @@ def generate(name: str, work: Path) -> Path:
     """Run config ``name`` small into ``work``; returns the folder of its figures."""
     cmd, over = CONFIGS[name]
     src = source(name)
+    if cmd == "view":  # the robot as configured: one figure, beside nothing
+        work.mkdir(parents=True, exist_ok=True)
+        args = ["designopt", "view", str(src), *over, "--out", str(work / f"{name}.png")]
+        subprocess.run(args, check=True)
+        return work
     raw = merge(yaml.safe_load(src.read_text()), over)
     st = raw.get("study", {})
     if "trajectory" in st:  # relative to the config's folder
         st["trajectory"] = str((src.parent / st["trajectory"]).resolve())
+    if "urdf" in st.get("chain", {}):  # the same
+        st["chain"]["urdf"] = str((src.parent / st["chain"]["urdf"]).resolve())
     raw.pop("output", None)
     work.mkdir(parents=True, exist_ok=True)
     cfg = work / f"{name}.yaml"

@@ -19,8 +19,8 @@ from PIL import Image
 
 import designopt
 from designopt.figures import canvas, html
+from designopt.studies.serial import drawing, report, taskindex
 from designopt.studies.serial import figures as serial_figs
-from designopt.studies.serial import taskindex
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -133,3 +133,84 @@ def test_plane_finds_the_targets_plane():
     np.testing.assert_allclose(E.T @ E, np.eye(2), atol=1e-12)
     np.testing.assert_allclose(E.T @ n, 0, atol=1e-12)
     assert serial_figs.plane(u) is None  # a solid region: two projections instead
+
+
+def _fk_2r(l1: float, l2: float, q: np.ndarray) -> np.ndarray:
+    """The planar 2R's drawn joints: base origin, joint 1, joint 2, tip (x, y)."""
+    e = np.array([l1 * np.cos(q[0]), l1 * np.sin(q[0])])
+    return np.array([[0, 0], [0, 0], e, e + [l2 * np.cos(q[0] + q[1]), l2 * np.sin(q[0] + q[1])]])
+
+
+def test_task_figure_draws_the_arm_at_its_representative_targets(run, record, tmp_path):
+    """The arm at the worst-conditioned, median and best-conditioned reached targets: its
+    drawn joints are the 2R's FK at the IK solution and its tip is the target; the disk's
+    outline is drawn; the legend gives each arm's 1/k."""
+    _, rec = run
+    serial_figs.draw_task(rec, tmp_path)
+    (fig,) = [f for n, f in record if n == "task"]
+    (ax,) = [a for a in fig.axes if not hasattr(a, "_colorbar")]
+    sol = taskindex.solution(rec.config.study, rec.x, rec.keys())
+    ok, ik = sol["success"], sol["inv_k"]
+    reps = drawing.representatives(sol)
+    assert [n for n, _ in reps] == ["worst-conditioned", "median", "best-conditioned"]
+    (_, w), (_, m), (_, b) = reps
+    assert ok[[w, m, b]].all() and ik[w] == ik[ok].min() and ik[b] == ik[ok].max()
+    assert ik[m] == np.sort(ik[ok])[(ok.sum() - 1) // 2]
+    for k, (_, i) in enumerate(reps):
+        (line,) = [ln for ln in ax.lines if ln.get_gid() == f"arm{k}-joints"]
+        want = _fk_2r(rec.x["l1"], rec.x["l2"], sol["q"][i])
+        np.testing.assert_allclose(np.stack(line.get_data(), -1), want, atol=1e-12)
+        assert np.abs(want[-1] - sol["target_p"][i, :2]).max() < 1e-8  # it reaches the target
+    labels = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert f"best-conditioned: 1/k = {ik[b]:.3g}" in labels and "unreached" in labels
+    rim = [ln for ln in ax.lines if len(ln.get_xdata()) == 49]  # the disk's outline
+    assert rim and np.allclose(np.hypot(rim[0].get_xdata() - 1.2, rim[0].get_ydata()), 0.5)
+
+
+def test_task_report_slider_moves_the_arm(run, tmp_path):
+    """The report's robot view: one slider step per 1/k quantile of the reached targets,
+    each pose the 2R's FK at that target's solution (its tip on the target); in headless
+    Chromium the page draws without console errors, the 3-D view has a WebGL canvas with
+    a size, and the slider's last step draws the arm at the best target."""
+    from test_html_report import CHROMIUM, Browser
+
+    from designopt.app import reporting
+    from designopt.figures.html import robot as hrobot
+
+    out, rec = run
+    sol = taskindex.solution(rec.config.study, rec.x, rec.keys())
+    view = report.run_view(rec)
+    picks = drawing.slider_targets(sol)
+    assert [p.label for p in view.poses] == [lab for lab, _ in picks] and len(picks) >= 5
+    for p, (_, i) in zip(view.poses, picks, strict=True):
+        want = _fk_2r(rec.x["l1"], rec.x["l2"], sol["q"][i])
+        np.testing.assert_allclose(p.arms[0].points()[:, :2], want, atol=1e-12)
+        np.testing.assert_allclose(p.mark, sol["target_p"][i], atol=1e-8)
+    plot = hrobot.view_plot(view, html.model._Ids())
+    assert len(plot.fig["frames"]) == len(picks) == len(plot.fig["layout"]["sliders"][0]["steps"])
+    page = reporting.write_html(out)
+    print(f"task page: {page.stat().st_size / 1e6:.2f} MB")
+    assert page.stat().st_size < 10e6
+    if CHROMIUM is None:
+        pytest.skip("chromium is not installed; the page was not opened in a browser")
+    b = Browser(tmp_path / "profile", tmp_path / "chromium.log")
+    try:
+        b.load(page, timeout=60)
+        assert b.errors() == []
+        rid = b.js("document.querySelector('div.plot[id$=\"-robot\"]').id")
+        assert max(b.js(f"Array.from(document.getElementById('{rid}').querySelectorAll("
+                        "'canvas')).map(c => c.width * c.height)")) > 0  # fmt: skip
+        last = view.poses[-1].label
+        got = b.js(f"""(async () => {{ const g = document.getElementById('{rid}');
+            await Plotly.animate(g, [{last!r}], {{mode: 'immediate', frame: {{duration: 0,
+                redraw: true}}, transition: {{duration: 0}}}});
+            const t = g._fullData.find(t => t.name === 'final design: joints');
+            return [Array.from(t.x), Array.from(t.y)]; }})()""")  # fmt: skip
+        np.testing.assert_allclose(np.array(got).T, view.poses[-1].arms[0].points()[:, :2],
+                                   atol=1e-12)  # fmt: skip
+        assert b.errors() == []
+        shots = Path("/tmp/view_shots")
+        if shots.is_dir():
+            b.screenshot(shots / "task_page.png")
+    finally:
+        b.close()

@@ -101,7 +101,7 @@ def draw_figures(path: Path, record: Record | None = None) -> list[Path]:
 def write_html(path: Path, record: Record | None = None) -> Path:
     """The interactive report of an archive: ``<stem>.html`` beside it, one self-contained
     page (``designopt.figures.html``), with the workspace of a run's final design when
-    the study draws one (``Study.cloud``)."""
+    the study draws one (``Study.cloud``) and the robot in 3-D (``Study.robot``)."""
     from designopt.figures import html
 
     path = Path(path)
@@ -114,4 +114,7 @@ def write_html(path: Path, record: Record | None = None) -> Path:
         has = isinstance(rec, RunRecord) and st is not None and st.cloud is not None
         cloud = st.cloud(rec) if has else None  # a run's final design has one workspace
         extra = rec.units() if isinstance(rec, FrontRecord) else None  # a front's objectives
-        return html.write(rec.to_tree(), out, cloud=cloud, units=extra, hints=hints(rec))
+        draws = isinstance(rec, RunRecord | FrontRecord) and st is not None and st.robot is not None
+        robot = st.robot(rec) if draws else None  # the robot in 3-D (a run's, a front's)
+        return html.write(rec.to_tree(), out, cloud=cloud, units=extra, hints=hints(rec),
+                          robot=robot)  # fmt: skip

@@ -223,7 +223,7 @@ class Study:
     """``cost(settings)``: Monte-Carlo samples, chunk and normalisation probes per design,
     for the pre-flight memory and time estimate (``designopt.app.preflight``)."""
     commands: tuple[Command, ...] = ()
-    """Extra subcommands of this study (e.g. the serial ``chain`` and ``export``)."""
+    """Extra subcommands of this study (e.g. the serial ``chain``, ``export`` and ``view``)."""
     ik: IKHook | None = None
     """``designopt ik CONFIG --poses FILE``: the study's inverse kinematics (an
     ``designopt.kinematics.ikjob.IKHook``: the design solved for with ``--design`` overrides, the
@@ -233,6 +233,11 @@ class Study:
     """``cloud(record)``: the workspace of a run's final design as a point cloud for the
     interactive report, {"xyz": (n, 3), "value": (n,), "label", "unit"} (e.g. coloured
     by 1/k); None: the study has none."""
+    robot: Callable[[Any], Mapping[str, Any] | None] | None = None
+    """``robot(record)``: the robot in 3-D for the interactive report, {"view":
+    ``designopt.figures.html.View``} for a run (the final design, a slider through
+    representative poses) or {"front": ``designopt.figures.html.FrontView``} for a Pareto
+    front (the robot of the design hovered or clicked); None: the study draws none."""
     replay: (
         Callable[[Any, Mapping[str, jax.Array], Any, str], tuple[dict[str, Any], list[str]]] | None
     ) = None

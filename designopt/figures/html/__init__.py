@@ -23,7 +23,10 @@ What a page shows, by the root attr ``kind``:
   curves (band: interquartile range), the hypervolume when the entries carry it, and the
   statistics table;
 - ``ik``: the success rate (Wilson interval) and histograms of the errors;
-- ``cloud`` (an argument): a 3-D point cloud of the workspace coloured by a value.
+- ``cloud`` (an argument): a 3-D point cloud of the workspace coloured by a value;
+- ``robot`` (an argument): the robot in 3-D (``robot.View``: in its task, a slider
+  through representative poses; ``robot.FrontView``: a front beside the robot of the
+  design hovered or clicked).
 
 Size: each plot keeps at most :data:`MAX_RUN_LINES` runs, :data:`MAX_LINE_POINTS` points
 per curve, :data:`MAX_MARKERS` designs per scatter, :data:`MAX_CLOUD` cloud points and
@@ -33,7 +36,8 @@ says so); then the whole page is thinned further until its plots hold at most
 
 The package: ``model`` (the page model, size caps, small helpers), ``plots`` (shared plot
 helpers), ``run``, ``front``, ``scan`` (with sweeps), ``bench`` (with ik and the cloud),
-``budget`` (the size budget) and ``page`` (sections by kind, the document, the writer).
+``robot`` (the robot's 3-D views), ``budget`` (the size budget) and ``page`` (sections by
+kind, the document, the writer).
 """
 
 from designopt.figures.html.budget import budget
@@ -54,12 +58,14 @@ from designopt.figures.html.model import (
     Z,
     esc,
 )
-from designopt.figures.html.page import CSS, JS_DRAW, page, sections, write
+from designopt.figures.html.page import CSS, JS_DRAW, document, page, sections, write
 from designopt.figures.html.plots import merged
+from designopt.figures.html.robot import FrontView, Pose, View, robot_section
 
 __all__ = [
     "CONFIG",
     "CSS",
+    "FrontView",
     "INFEASIBLE_MARKER",
     "JS_DRAW",
     "MAX_CELLS",
@@ -73,11 +79,15 @@ __all__ = [
     "Z",
     "Plot",
     "PageSection",
+    "Pose",
+    "View",
     "budget",
+    "document",
     "esc",
     "front_objectives",
     "merged",
     "page",
+    "robot_section",
     "sections",
     "write",
 ]

@@ -16,15 +16,18 @@ from designopt.figures.html.bench import _bench, _cloud, _ik
 from designopt.figures.html.budget import budget
 from designopt.figures.html.front import _front
 from designopt.figures.html.model import CONFIG, MAX_TEXT, PageSection, Plot, _Ids, _s, _table, esc
+from designopt.figures.html.robot import robot_section
 from designopt.figures.html.run import _run_sections
 from designopt.figures.html.scan import _scan, _sweep
 
 
 def sections(tree: Mapping[str, Any], *, cloud: Mapping[str, Any] | None = None,
-             units: Mapping[str, str] | None = None, hints: Hints = NONE) -> list[PageSection]:  # fmt: skip
+             units: Mapping[str, str] | None = None, hints: Hints = NONE,
+             robot: Mapping[str, Any] | None = None) -> list[PageSection]:  # fmt: skip
     """The page's sections for an archive (``archive.read``'s nested dict), before the
     size budget; ``hints`` the study's (units, rates), which ``units`` ({name: unit})
-    adds to or overrides."""
+    adds to or overrides; ``robot`` ({"view": View, "front": FrontView}, either
+    optional; ``designopt.figures.html.robot``) adds the robot's section."""
     mod = hints
     u = dict(hints.units) | dict(units or {})
     rates = set(getattr(mod, "RATES", ()))
@@ -45,6 +48,8 @@ def sections(tree: Mapping[str, Any], *, cloud: Mapping[str, Any] | None = None,
         out += _ik(tree, ids)
     if cloud is not None:
         out.append(_cloud(cloud, ids))
+    if robot and (robot.get("view") is not None or robot.get("front") is not None):
+        out.append(robot_section(robot.get("view"), robot.get("front"), ids))
     cfg = _config(tree)
     if cfg is not None:
         out.append(cfg)
@@ -167,14 +172,42 @@ JS_DRAW = """
 (function(){
   var figs = JSON.parse(document.getElementById('designopt-figures').textContent);
   var ids = Object.keys(figs), jobs = [];
+  function dec(o){  // base64 typed arrays (as the plots' JSON holds them) to arrays
+    if (o === null || typeof o !== 'object') return o;
+    if (Array.isArray(o)) return o.map(dec);
+    if (typeof o.bdata === 'string' && o.dtype === 'f8') {
+      var b = atob(o.bdata), u = new Uint8Array(b.length);
+      for (var i = 0; i < b.length; i++) u[i] = b.charCodeAt(i);
+      return Array.from(new Float64Array(u.buffer));
+    }
+    var r = {}; Object.keys(o).forEach(function(k){ r[k] = dec(o[k]); }); return r;
+  }
+  function link(el, f){  // hovering or clicking a point of f.link.source restyles el
+    var src = document.getElementById(f.link.source), ds = dec(f.link.designs), cur = -1;
+    function show(ev){
+      if (!ev || !ev.points || !ev.points.length) return;
+      var c = ev.points[0].customdata, i = Array.isArray(c) ? c[0] : c;
+      if (i === undefined || i === null || !ds[i] || i === cur) return;
+      cur = i;
+      Plotly.restyle(el, ds[i].data, f.link.traces).then(function(){
+        return Plotly.relayout(el, ds[i].layout || {}); }).then(function(){
+        el.setAttribute('data-design', String(i)); });
+    }
+    src.on('plotly_hover', show); src.on('plotly_click', show);
+  }
   ids.forEach(function(id){
     var f = figs[id], el = document.getElementById(id);
     try {
-      jobs.push(Plotly.newPlot(el, f.data, f.layout, f.config).catch(function(e){
+      jobs.push(Plotly.newPlot(el, f.data, f.layout, f.config).then(function(){
+        if (f.frames) return Plotly.addFrames(el, dec(f.frames));
+      }).catch(function(e){
         console.error('plot ' + id + ' failed: ' + e); el.textContent = 'plot failed: ' + e; }));
     } catch (e) { console.error('plot ' + id + ' failed: ' + e); el.textContent = 'plot failed: ' + e; }
   });
-  Promise.all(jobs).then(function(){ document.body.setAttribute('data-plots-drawn', String(ids.length)); });
+  Promise.all(jobs).then(function(){
+    ids.forEach(function(id){ if (figs[id].link) link(document.getElementById(id), figs[id]); });
+    document.body.setAttribute('data-plots-drawn', String(ids.length));
+  });
 })();
 """
 
@@ -187,17 +220,30 @@ def _plotly_js() -> str:
 
 def page(tree: Mapping[str, Any], *, title: str | None = None,
          cloud: Mapping[str, Any] | None = None, units: Mapping[str, str] | None = None,
-         hints: Hints = NONE) -> str:  # fmt: skip
+         hints: Hints = NONE, robot: Mapping[str, Any] | None = None) -> str:  # fmt: skip
     """One self-contained HTML document showing the archive ``tree`` (as
     ``designopt.io.archive.read`` returns it), with plotly.js embedded once; ``cloud``
     ({"xyz": (n, 3), "value": (n,), "label": str, "unit": str, optional "xyz_unit"})
     adds a 3-D point cloud; ``hints`` the study's units and rates (``Hints``); ``units``
-    ({name: unit}) labels axes beyond them."""
-    secs = sections(tree, cloud=cloud, units=units, hints=hints)
-    n_values = budget(secs)
+    ({name: unit}) labels axes beyond them; ``robot`` the robot's views (:func:`sections`)."""
+    secs = sections(tree, cloud=cloud, units=units, hints=hints, robot=robot)
     at = tree.get("attrs", {})
     kind, study = _s(at.get("kind", "archive")), _s(at.get("study", ""))
     title = title or f"designopt {kind}" + (f": {study}" if study else "")
+    banner = ""
+    if at.get("complete") is False or (
+        isinstance(at.get("complete"), np.bool_) and not at["complete"]
+    ):
+        banner = "<p class='banner'>This archive is a checkpoint (complete = false): a run in progress or interrupted.</p>"  # fmt: skip
+    about = f"<section id='about'><h2>Archive</h2>{_meta(tree)}</section>"
+    return document(secs, title, about=banner + about)
+
+
+def document(secs: list[PageSection], title: str, about: str = "") -> str:
+    """The HTML document of ``secs`` (thinned to the size budget first): plotly.js, the
+    sections with their plots' JSON, the drawing script; ``about`` (HTML, escaped by the
+    caller) before the sections."""
+    n_values = budget(secs)
     figs: dict[str, Any] = {}
     body = []
     for s in secs:
@@ -213,7 +259,10 @@ def page(tree: Mapping[str, Any], *, title: str | None = None,
                                      "yanchor": "bottom", "font": {"size": 10}}  # fmt: skip
                 h = lay.pop("height", None)
                 style_h = f' style="height:{int(h)}px"' if h else ""
-                figs[it.id] = _clean({"data": it.fig["data"], "layout": lay, "config": CONFIG})
+                extra = {k: it.fig[k] for k in ("frames", "link") if k in it.fig}
+                figs[it.id] = _clean(
+                    {"data": it.fig["data"], "layout": lay, "config": CONFIG} | extra
+                )
                 grid.append(f'<figure class="{"wide" if it.wide else ""}"><figcaption>{cap}</figcaption>'
                             f'<div id="{esc(it.id)}" class="plot"{style_h}></div></figure>')  # fmt: skip
             else:
@@ -225,19 +274,14 @@ def page(tree: Mapping[str, Any], *, title: str | None = None,
             chunks.append(f"<div class='grid'>{''.join(grid)}</div>")
         body.append(f'<section id="{esc(s.id)}"><h2>{esc(s.title)}</h2>{"".join(chunks)}</section>')
     nav = "".join(f'<a href="#{esc(s.id)}">{esc(s.title)}</a>' for s in secs)
-    banner = ""
-    if at.get("complete") is False or (
-        isinstance(at.get("complete"), np.bool_) and not at["complete"]
-    ):
-        banner = "<p class='banner'>This archive is a checkpoint (complete = false): a run in progress or interrupted.</p>"  # fmt: skip
     sub = f"{len(figs)} plots, {n_values} plotted numbers; offline page (plotly.js embedded)"
     return (
         "<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'>"
         "<meta name='viewport' content='width=device-width, initial-scale=1'>"
         f"<meta name='generator' content='designopt'><title>{esc(title)}</title>"
         f"<style>{CSS}</style><script>{_plotly_js()}</script></head><body>"
-        f"<header><h1>{esc(title)}</h1><p>{esc(sub)}</p></header><nav>{nav}</nav><main>{banner}"
-        f"<section id='about'><h2>Archive</h2>{_meta(tree)}</section>{''.join(body)}</main>"
+        f"<header><h1>{esc(title)}</h1><p>{esc(sub)}</p></header><nav>{nav}</nav><main>"
+        f"{about}{''.join(body)}</main>"
         f"<script type='application/json' id='designopt-figures'>{_script_json(figs)}</script>"
         f"<script>{JS_DRAW}</script></body></html>\n"
     )

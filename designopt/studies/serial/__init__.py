@@ -31,6 +31,12 @@ def _cloud(record: Any) -> dict[str, Any]:
     return figures.cloud(record)
 
 
+def _robot(record: Any) -> dict[str, Any] | None:
+    from designopt.studies.serial import report
+
+    return report.report(record)
+
+
 def _aliases(s: SerialSettings) -> dict[str, str]:
     out = {f"study.{k}": f"study.indices.{k}" for k in ("n_samples", "length_scale")}
     out |= {f"design.{k}": f"study.fixed.{k}" for k in s.fixed}
@@ -103,6 +109,7 @@ STUDY = Study(
     commands=COMMANDS,
     ik=ikhook.HOOK,
     cloud=_cloud,
+    robot=_robot,
     check=reach.check,
     warnings=reach.warnings,
     tiny={

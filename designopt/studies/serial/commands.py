@@ -1,6 +1,7 @@
 """``designopt chain`` (print a serial chain as imported and check a URDF import against
-the parser's own forward kinematics) and ``designopt export`` (a run's best design written
-back into the user's URDF). docs/urdf.md shows both."""
+the parser's own forward kinematics), ``designopt export`` (a run's best design written
+back into the user's URDF; docs/urdf.md shows both) and ``designopt view`` (the robot
+drawn as configured, without optimising; docs/figures.md)."""
 
 from __future__ import annotations
 
@@ -12,16 +13,17 @@ from typing import Any
 import numpy as np
 
 from designopt.core.errors import ConfigError
+from designopt.studies.serial.mechanism import set_values
 
 N_CHECK = 8
 """Random joint configurations of the import check."""
 
 
-def _serial(cfg: Any, where: str):
+def _serial(cfg: Any, where: str, command: str = "chain"):
     s = cfg.study
     if getattr(s, "name", None) != "serial":
-        raise ConfigError(f"{where}: key 'study.name': `designopt chain` needs a serial study, "
-                          f"got '{s.name}'")  # fmt: skip
+        raise ConfigError(f"{where}: key 'study.name': `designopt {command}` needs a serial "
+                          f"study, got '{s.name}'")  # fmt: skip
     return s
 
 
@@ -32,18 +34,6 @@ def design_values(s: Any, given: dict[str, float], where: str) -> dict[str, floa
         raise ConfigError(f"{where}: --design {bad[0]}: not a design variable "
                           f"(variables: {', '.join(s.variables)})")  # fmt: skip
     return {k: given.get(k, 0.5 * (lo + hi)) for k, (lo, hi) in s.variables.items()}
-
-
-def set_values(s: Any, design: dict[str, float]) -> dict[tuple[str, str], float]:
-    """{(joint, field): number in the URDF's units (rad, file lengths)} of ``set``."""
-    from designopt.kinematics.urdf import ANGLE_FIELDS
-
-    vals = design | {k: float(v) for k, v in s.fixed.items()}
-    out = {}
-    for (joint, fld), v in s.chain.bound().items():
-        x = vals[v] if isinstance(v, str) else float(v)
-        out[(joint, fld)] = math.radians(x) if fld in ANGLE_FIELDS else x
-    return out
 
 
 def _fmt(v: np.ndarray) -> str:
@@ -243,6 +233,139 @@ def cmd_export(args: argparse.Namespace, ctx: Any) -> int:
     return 0
 
 
+def view_arguments(v: argparse.ArgumentParser) -> None:
+    """The arguments of ``designopt view``."""
+    v.add_argument("config", help="config (YAML) with a serial study, e.g. configs/puma560.yaml")
+    v.add_argument("--design", action="extend", nargs="+", default=[], metavar="NAME=VALUE",
+                   help="a design variable's value (repeat; others: middle of their box)")  # fmt: skip
+    v.add_argument("--q", default=None, metavar="Q1,Q2,...",
+                   help="joint values (degrees for revolute, length units for prismatic); "
+                        "default: the home pose (0 where the limits allow, else mid-range)")  # fmt: skip
+    v.add_argument("--out", default=None, metavar="PATH.png",
+                   help="the figure (the PDF beside it); default: <config stem>_view.png "
+                        "beside the config's output archive")  # fmt: skip
+    v.add_argument(
+        "--html",
+        default=None,
+        metavar="OUT.html",
+        help="also write a self-contained 3-D view (offline, plotly embedded)",
+    )
+    v.add_argument("--no-cache", action="store_true", help="do not keep compiled programs")
+
+
+def _in_limits(q: np.ndarray, s: Any, mech: Any, text: str) -> None:
+    """--q within the joint limits (to 1e-9), else one line naming the joint."""
+    from designopt.studies.serial.drawing import joint_names
+    from designopt.studies.serial.settings import length_unit
+
+    for i, (name, j) in enumerate(zip(joint_names(s), s.chain.joints, strict=True)):
+        lo, hi = mech.lower[i], mech.upper[i]
+        tol = 1e-9 * max(1.0, hi - lo)
+        if not lo - tol <= q[i] <= hi + tol:
+            f, u = (180 / math.pi, "deg") if j.type == "R" else (1.0, length_unit(s))
+            raise ConfigError(f"--q {text}: {name} = {q[i] * f:.6g} {u} is outside its limits "
+                              f"[{lo * f:.6g}, {hi * f:.6g}] {u}")  # fmt: skip
+
+
+def _outputs(args: argparse.Namespace, cfg: Any) -> tuple[Path, Path | None]:
+    """(the figure's PNG, the HTML page or None), checked before anything is drawn."""
+    png = Path(args.out) if args.out else \
+        Path(cfg.output_path).with_name(f"{Path(args.config).stem}_view.png")  # fmt: skip
+    if png.suffix.lower() != ".png":
+        raise ConfigError(f"--out {args.out}: give a .png file name (the PDF is written beside "
+                          "it)")  # fmt: skip
+    html = Path(args.html) if args.html else None
+    if html is not None and html.suffix.lower() not in (".html", ".htm"):
+        raise ConfigError(f"--html {args.html}: give an .html file name")
+    return png, html
+
+
+def cmd_view(args: argparse.Namespace, ctx: Any) -> int:
+    """Draw the chain as configured, without optimising: a figure (PNG + PDF) of the robot
+    at ``--design`` (else the middle of the box) and ``--q`` (else the home pose), the
+    URDF's original robot beside it where the design changes the file's numbers, the task
+    region and tool-axis cone where the config has a task; ``--html``: a 3-D page too."""
+    loaded = ctx.load(args)
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+    from designopt.figures import html as page
+    from designopt.figures import robot, save
+    from designopt.io import writer
+    from designopt.studies.serial import drawing
+    from designopt.studies.serial.mechanism import build
+    from designopt.studies.serial.settings import UrdfChain, length_unit
+
+    cfg, _ = loaded
+    where = args.config
+    s = _serial(cfg, where, "view")
+    design = design_values(s, ctx.design(args.design), where)
+    mech = build(s)
+    q = _parse_q(args.q, tuple(j.type for j in s.chain.joints))
+    if q is not None:
+        _in_limits(q, s, mech, args.q)
+    at_home = q is None
+    q = drawing.home(mech) if q is None else q
+    png, html = _outputs(args, cfg)
+    for p in (png, html):
+        if p is not None:
+            writer.check(p, overwrite=True)
+    u = length_unit(s)
+    x = np.asarray([design[k] for k in s.variables], np.float64)
+    arm = drawing.arms(s, mech, [x], q, labels=["this design"], colors=["#ff7f0e"])[0][0]
+    region = s.task.region if s.task is not None else None
+    cone = None
+    if region is not None:
+        from designopt.figures.robot import scene_points
+
+        rp = scene_points(robot.Scene(arms=[], region=region))
+        cone = drawing.cone(s, rp, 0.4 * float(np.ptp(rp, 0).max()) if len(rp) > 1 else 0.1)
+    scenes = [robot.Scene(arms=[arm], region=region, cone=cone, title="this design")]
+    changed = ""
+    urdf_chain = isinstance(s.chain, UrdfChain)
+    if urdf_chain:
+        changed = drawing.changes_text(s, design)
+        if any(abs(a - b) > 1e-12 * max(1.0, abs(b)) for _, a, b, _ in drawing.changes(s, design)):
+            orig = drawing.original_arm(s, mech, q)
+            scenes.insert(0, robot.Scene(arms=[orig], region=region, cone=cone,
+                                         title="original: the URDF's own numbers"))  # fmt: skip
+    units = {k: ("deg" if k in s.angle_names() else u) for k in design}
+    dtext = ", ".join(f"{k} = {v:.6g} {units[k]}" for k, v in design.items())
+    what = (f"{Path(s.chain.urdf).name} ({s.chain.imported.base} -> {s.chain.imported.tip})" if urdf_chain
+            else f"DH chain ({s.chain.convention}, {len(s.chain.joints)} joints)")  # fmt: skip
+    pose = drawing.joint_values(s, q) + (" (home pose: each joint at 0 where its limits allow, "
+                                         "else mid-range)" if at_home else "")  # fmt: skip
+    import textwrap
+
+    lines = [f"{what}: design {dtext}", f"at {pose}"]
+    if changed:
+        lines.append("set numbers: " + changed.replace("\n", "; "))
+    note = drawing.meshes_note(s, design, q)
+    if note:
+        lines.append(note)
+    title = "\n".join(ln for line in lines for ln in textwrap.wrap(line, 110))
+    fig = robot.figure(scenes, u, title)
+    written = writer.publish_figures(lambda d: save(fig, d, png.stem), png.parent, swap=False)
+    if html is not None:
+        from designopt.studies.serial.drawing import hover
+        from designopt.studies.serial.report import _budget
+
+        ref = [drawing.original_arm(s, mech, q, budget=_budget(2))] if len(scenes) > 1 else []
+        arm_h = drawing.arms(s, mech, [x], q, labels=["this design"], colors=["#ff7f0e"],
+                             budget=_budget(1 + len(ref)))[0][0]  # fmt: skip
+        view = page.View(title=title.replace("\n", "; ") + "; drag to rotate", unit=u,
+                         scene=robot.Scene(arms=ref, region=region, cone=cone),
+                         poses=[page.Pose("this pose", [arm_h], [hover(s, "this design", q)])],
+                         note=(("blue: the original robot (the URDF's numbers); ") if ref else "")
+                         + "hover the joints for their values")  # fmt: skip
+        doc = page.document([page.robot_section(view)], f"designopt view: {Path(where).name}")
+        writer.write_file(html, doc.encode("utf-8"), "HTML view")
+        written.append(html)
+    for p in written:
+        print(p)
+    return 0
+
+
 def _commands() -> tuple[Any, ...]:
     from designopt.studies.base import Command
 
@@ -265,8 +388,22 @@ def _commands() -> tuple[Any, ...]:
         run=cmd_export,
         writes=True,
     )
-    return chain, export
+    view = Command(
+        name="view",
+        help="draw a serial study's robot as configured (PNG + PDF; --html: a 3-D page)",
+        description="Draw the chain of a serial study without optimising: the robot at "
+        "--design (else the middle of each variable's box) and --q (else the home pose: each "
+        "joint at 0 where its limits allow, else mid-range; degrees for revolute joints), with "
+        "the task region where the config has one and, for a URDF chain, the URDF's own robot "
+        "beside it where the design changes its numbers; --html also writes an offline 3-D "
+        "page (docs/figures.md).",
+        arguments=view_arguments,
+        run=cmd_view,
+        writes=True,
+    )
+    return chain, export, view
 
 
 COMMANDS = _commands()
-"""``designopt chain`` and ``designopt export``, declared in ``Study.commands``."""
+"""``designopt chain``, ``designopt export`` and ``designopt view``, declared in
+``Study.commands``."""

@@ -20,12 +20,11 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
-from matplotlib.ticker import MaxNLocator
 
-from designopt.figures import MAP_RESOLUTION, convergence, save, style
+from designopt.figures import MAP_RESOLUTION, convergence, robot, save, style
 from designopt.numerics import montecarlo as mc
 from designopt.results import RunRecord
-from designopt.studies.serial import taskindex
+from designopt.studies.serial import drawing, taskindex
 from designopt.studies.serial.mechanism import Mechanism, build
 from designopt.studies.serial.objective import measures
 from designopt.studies.serial.settings import ROWS, SerialSettings, UrdfChain, length_unit, units
@@ -126,7 +125,7 @@ def draw_run(rec: RunRecord, folder: Path, resolution: int = MAP_RESOLUTION) -> 
         X = _full(mech, designs["final"])
         z, P = _kernel(mech, s)(X, _uniform_q(mech, rec, 4000).astype(X.dtype))
         return out + draw_task(rec, folder) + _workspace(np.asarray(P[0]), np.asarray(z[0]),
-                                                         s, folder)  # fmt: skip
+                                                         s, folder, rec) + draw_robot(rec, folder)  # fmt: skip
 
     rows_txt = ", ".join(ROWS[r] for r in s.indices.rows())
     lo, hi = mech.lower, mech.upper
@@ -162,30 +161,74 @@ def draw_run(rec: RunRecord, folder: Path, resolution: int = MAP_RESOLUTION) -> 
                      fontsize=10)  # fmt: skip
         out += save(fig, folder, "dexterity_map")
 
-    return out + _workspace(P[-1, m2:], z[-1, m2:], s, folder)  # the final design's cloud
+    return out + _workspace(P[-1, m2:], z[-1, m2:], s, folder, rec) + draw_robot(rec, folder)
 
 
-def _workspace(p: np.ndarray, c: np.ndarray, s: SerialSettings, folder: Path) -> list[Path]:
-    """The final design's tip positions p (C, 3) coloured by 1/k c (C,)."""
+def _workspace(p: np.ndarray, c: np.ndarray, s: SerialSettings, folder: Path,
+               rec: RunRecord | None = None) -> list[Path]:  # fmt: skip
+    """The final design's tip positions p (C, 3) coloured by 1/k c (C,), with the final
+    design drawn at its home pose (``drawing.home``) and, under a task, the region."""
     planar = np.ptp(p[:, 2]) <= 1e-9 * max(np.ptp(p[:, :2]), 1e-300)
-    fig = style.figure(figsize=(5.4, 4.8))
+    fig = style.figure(figsize=(5.8, 5.4))
     L = STUDY_UNITS(s).get("__length__", "L")
+    arm, home_txt = [], ""
+    if rec is not None:
+        mech = build(s)
+        q = drawing.home(mech)
+        x = np.asarray(list(rec.x.values()), np.float64)
+        arm = drawing.arms(s, mech, [x], q, labels=["final design at its home pose"])[0]
+        home_txt = ("\nthe arm at its home pose (each joint at 0 where its limits\nallow, "
+                    "else mid-range)")  # fmt: skip
+    region = s.task.region if s.task is not None else None
     if planar:
         ax = fig.add_subplot(1, 1, 1)
         sc = ax.scatter(p[:, 0], p[:, 1], s=2, c=c, cmap="viridis", rasterized=True)
-        ax.set_aspect("equal")
+        robot.draw_2d(ax, arm, np.eye(3)[:, :2])
+        if region is not None:
+            robot.draw_region_2d(ax, region, np.eye(3)[:, :2])
+        ax.set_aspect("equal", adjustable="datalim")
     else:
         ax = fig.add_subplot(1, 1, 1, projection="3d")
-        sc = ax.scatter(p[:, 0], p[:, 1], p[:, 2], s=1, c=c, cmap="viridis", rasterized=True)
-        ax.set_zlabel(style.label("z", L))
-        for a_ in (ax.xaxis, ax.yaxis, ax.zaxis):
-            a_.set_major_locator(MaxNLocator(5))
+        scene = robot.Scene(arms=arm, region=region,
+                            targets=robot.Targets(p, c, np.ones(len(p), bool), size=1.5, alpha=1.0))  # fmt: skip
+        sc = robot.draw_3d(ax, scene, L, legend=False)
     ax.set_xlabel(style.label("x", L))
     ax.set_ylabel(style.label("y", L))
     fig.colorbar(sc, ax=ax, label=style.label("1/k", style.DIMENSIONLESS), shrink=0.7, pad=0.1)
-    ax.set_title("final design: tip positions of 4000 uniform joint samples"
-                 + ("\n(L: the chain's length unit)" if L == "L" else ""), fontsize=9)  # fmt: skip
+    ax.set_title(f"final design: tip positions of {len(p)} uniform joint samples" + home_txt
+                 + ("\n(L: the chain's length unit)" if L == "L" else ""), fontsize=9, y=1.0)  # fmt: skip
+    handles = robot.legend_handles(robot.Scene(arms=arm))
+    if handles:
+        fig.legend(handles=handles, loc="outside lower center", ncol=3, fontsize=7.5)
     return save(fig, folder, "workspace")
+
+
+def draw_robot(rec: RunRecord, folder: Path) -> list[Path]:
+    """A URDF chain's original robot (the file's numbers in every ``set`` field) beside
+    the final design at the same pose (the home pose), the changed numbers in m / deg;
+    nothing for a DH chain (it has no original)."""
+    s: SerialSettings = rec.config.study
+    if not isinstance(s.chain, UrdfChain):
+        return []
+    mech = build(s)
+    q = drawing.home(mech)
+    design = dict(rec.x)
+    x = np.asarray(list(design.values()), np.float64)
+    region = s.task.region if s.task is not None else None
+    orig = drawing.original_arm(s, mech, q)
+    final = drawing.arms(s, mech, [x], q, labels=["final design"], colors=["#ff7f0e"])[0][0]
+    note = drawing.meshes_note(s, design, q)
+    scenes = [robot.Scene(arms=[orig], region=region, title="original: the URDF's own numbers"),
+              robot.Scene(arms=[final], region=region, title="final design")]  # fmt: skip
+    title = (f"{Path(s.chain.urdf).name} at the home pose ({drawing.joint_values(s, q)}; each joint at 0 "
+             "where its limits allow, else mid-range)")  # fmt: skip
+    import textwrap
+
+    changed = "final design: " + drawing.changes_text(s, design).replace("\n", "; ")
+    title = "\n".join(textwrap.wrap(title, 110) + textwrap.wrap(changed, 110)
+                      + ([note] if note else []))  # fmt: skip
+    fig = robot.figure(scenes, length_unit(s), title)
+    return save(fig, folder, "robot")
 
 
 def _uniform_q(mech: Mechanism, rec: RunRecord, n: int) -> np.ndarray:
@@ -266,11 +309,22 @@ def _task_panel(ax, a: np.ndarray, b: np.ndarray, c: np.ndarray, ok: np.ndarray,
     return sc
 
 
+def _in_plane(pts: np.ndarray, p: np.ndarray, E: np.ndarray) -> bool:
+    """Whether every point of pts lies in the plane through p's mean spanned by E."""
+    n = np.cross(E[:, 0], E[:, 1])
+    ext = max(float(np.ptp(np.vstack([pts, p]), 0).max()), 1e-300)
+    return bool(np.all(np.abs((pts - p.mean(0)) @ n) <= 1e-9 * ext))
+
+
 def draw_task(rec: RunRecord, folder: Path) -> list[Path]:
     """The task figure: every target of the run coloured by 1/k at the final design's IK
     solution, unreached targets as grey crosses; a planar task in its plane, a 3-D one as
     a top view (x, y) and a side view (x or y, whichever spreads more, against z), the
-    least dexterous target on top along each line of sight."""
+    least dexterous target on top along each line of sight. The region's outline is
+    drawn in each view, and the final design at its worst-conditioned, median and
+    best-conditioned targets (``drawing.representatives``): in the task's plane when
+    the arms lie in it, else in a third, 3-D panel with the region, the tool-axis cone
+    and the targets."""
     s: SerialSettings = rec.config.study
     sol = task_solution(rec)
     p, ok = sol["target_p"], sol["success"]
@@ -278,20 +332,38 @@ def draw_task(rec: RunRecord, folder: Path) -> list[Path]:
     L = STUDY_UNITS(s).get("__length__", "L")
     N = len(ok)
     size = float(np.clip(6000.0 / max(N, 1), 2.0, 30.0))
+    mech = build(s)
+    scene = drawing.task_scene(s, mech, np.asarray(list(rec.x.values()), np.float64), sol)
+    arm_pts = np.vstack([a.points() for a in scene.arms]) if scene.arms else p[:1]
     pl = plane(p)
+    flat = pl is not None and _in_plane(arm_pts, p, pl[0])
     if pl is not None:
         E, names = pl
         uv = p @ E
-        fig, ax = style.subplots(1, 1, figsize=(6.2, 5.6))
-        axes, views = [ax], [(uv[:, 0], uv[:, 1], names)]
+        if flat:
+            fig, ax = style.subplots(1, 1, figsize=(6.2, 6.2))
+            axes = [ax]
+        else:
+            fig = style.figure(figsize=(12.5, 6.4))
+            gs = fig.add_gridspec(1, 2, width_ratios=[1.0, 1.2])
+            axes = [fig.add_subplot(gs[0, 0])]
+        views = [(uv[:, 0], uv[:, 1], names, E)]
     else:
         side = 0 if np.ptp(p[:, 0]) >= np.ptp(p[:, 1]) else 1
-        fig, axes = style.subplots(1, 2, figsize=(11.0, 5.2))
-        views = [(p[:, 0], p[:, 1], ("x", "y")), (p[:, side], p[:, 2], ("xy"[side], "z"))]
-        axes = list(axes)
+        fig = style.figure(figsize=(17.0, 6.2))
+        gs = fig.add_gridspec(1, 3, width_ratios=[1.0, 1.0, 1.35])
+        axes = [fig.add_subplot(gs[0, k]) for k in range(2)]
+        views = [(p[:, 0], p[:, 1], ("x", "y"), np.eye(3)[:, [0, 1]]),
+                 (p[:, side], p[:, 2], ("xy"[side], "z"), np.eye(3)[:, [side, 2]])]  # fmt: skip
     scs = []
-    for ax, (a, b, (na, nb)) in zip(axes, views, strict=True):
+    for ax, (a, b, (na, nb), E_) in zip(axes, views, strict=True):
         scs.append(_task_panel(ax, a, b, c, ok, size))
+        robot.draw_region_2d(ax, scene.region, E_)
+        if flat:
+            robot.draw_2d(ax, scene.arms, E_, alpha=0.35)
+            for pt, col in scene.marks:
+                uvp = pt @ E_
+                ax.plot(uvp[0], uvp[1], marker="*", ms=11, color=col, mec="k", mew=0.5, ls="none")
         ax.set_aspect("equal", adjustable="datalim")
         ax.set_xlabel(style.label(na, L))
         ax.set_ylabel(style.label(nb, L))
@@ -304,9 +376,22 @@ def draw_task(rec: RunRecord, folder: Path) -> list[Path]:
         axes[0].set_title(f"in the targets' plane: u = {_vec(E[:, 0])}, v = {_vec(E[:, 1])}",
                           fontsize=9, y=1.0)  # fmt: skip
     style.shared_scale(fig, scs, 0.0 if not ok.any() else None)
+    if not flat:  # the arms in 3-D, with the region, the tool-axis cone and the targets
+        ax3 = fig.add_subplot(gs[0, len(axes)], projection="3d")
+        scene.title = ("the final design at its worst-conditioned,\nmedian and best-conditioned "
+                       "targets (stars)" if scene.arms else "no target reached: no arm drawn")  # fmt: skip
+        m3 = robot.draw_3d(ax3, scene, L, legend=False)
+        if m3 is not None:
+            style.shared_scale(fig, [*scs, m3], *scs[0].get_clim())
     fig.colorbar(scs[0], ax=axes, label=style.label("1/k", style.DIMENSIONLESS), shrink=0.85)
+    handles = robot.legend_handles(scene)
     if (~ok).any():
-        axes[-1].legend(loc="lower right", fontsize=8, framealpha=0.85)
+        from matplotlib.lines import Line2D
+
+        handles.insert(0, Line2D([], [], marker="x", color="0.45", ls="none", label="unreached"))
+    if handles:
+        fig.legend(handles=handles, loc="outside lower center", ncol=2 if flat else 4,
+                   fontsize=8, framealpha=0.9)  # fmt: skip
     # a design far from what was asked (rec.warnings): the caption says so, in red
     fig.suptitle(_task_caption(rec, sol, L), fontsize=9,
                  color="crimson" if rec.warnings else "black")  # fmt: skip

@@ -9,7 +9,9 @@ entries named by a variable are given in degrees and converted by ``scale``.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -81,3 +83,15 @@ def build(s: SerialSettings) -> Mechanism:
     rev = np.array([j.type == "R" for j in joints])
     lim[rev] = np.deg2rad(lim[rev])
     return Mechanism(model, names, len(s.variables), scale, fixed, lim[:, 0], lim[:, 1])
+
+
+def set_values(s: Any, design: dict[str, float]) -> dict[tuple[str, str], float]:
+    """{(joint, field): number in the URDF's units (rad, file lengths)} of ``set``."""
+    from designopt.kinematics.urdf import ANGLE_FIELDS
+
+    vals = design | {k: float(v) for k, v in s.fixed.items()}
+    out = {}
+    for (joint, fld), v in s.chain.bound().items():
+        x = vals[v] if isinstance(v, str) else float(v)
+        out[(joint, fld)] = math.radians(x) if fld in ANGLE_FIELDS else x
+    return out

@@ -1,0 +1,292 @@
+"""The serial chain drawn (docs/figures.md, "The robot"): which design, which pose, which
+targets. The drawing itself is generic (``designopt.figures.robot``, the report's
+``designopt.figures.html.robot``); here the chain's ``SerialModel.joint_frames`` gives the
+joint origins, axes and tip frame, and a URDF chain's visuals are placed by
+``designopt.kinematics.meshes``.
+
+- The **home pose** (:func:`home`): each joint at 0 where its limits allow it (the pose
+  the DH table or the URDF is written in), else at the middle of its limits.
+- **Representative targets** of a task (:func:`representatives`): among the reached
+  targets, the best-conditioned (largest 1/k at the final design's solution), the
+  worst-conditioned and the median one; the report's slider goes through the 1/k
+  quantiles 0, 10, 25, 50, 75, 90 and 100 %.
+- The **original robot** of a URDF chain: the file's own numbers in every ``set`` field
+  (:func:`original_arm`), beside the design at the same pose.
+- Link radius: ``study.collision.radius`` where the config has one, else
+  ``designopt.figures.robot.THICKNESS`` × the arm's length. Meshes are drawn as the file
+  gives them, never stretched: a link whose origin numbers are design variables keeps
+  its mesh, moved with its frame (the figure says which links).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import jax
+import numpy as np
+
+from designopt.figures.robot import Arm, Cone, Scene, Targets
+from designopt.numerics import montecarlo as mc
+from designopt.studies.serial.mechanism import Mechanism
+from designopt.studies.serial.settings import ROWS, SerialSettings, UrdfChain, length_unit
+
+REPRESENTATIVE = (("worst-conditioned", "#9467bd"), ("median", "#1f77b4"),
+                  ("best-conditioned", "#2ca02c"))  # fmt: skip
+"""The representative targets of a task figure, and their arms' colours."""
+QUANTILES = (0.0, 0.1, 0.25, 0.5, 0.75, 0.9, 1.0)
+"""1/k quantiles (among reached targets) of the report's slider."""
+FIGURE_TRIANGLES = 5000
+"""Mesh triangles per robot in a static figure (matplotlib sorts every one)."""
+
+
+@jax.jit
+def _identity(x):
+    return x
+
+
+_JF = jax.jit(lambda m, X, q: m.joint_frames(X, q), static_argnums=0)
+
+
+def joint_frames(mech: Mechanism, X: np.ndarray, Q: np.ndarray, model: Any = None):
+    """(origins (M, C, n+1, 3), axes (M, C, n, 3), tip rotations (M, C, 3, 3)) as NumPy
+    for kernel designs X (M, P) and joint values Q (C, n): one jitted call per shape."""
+    m = mech.model if model is None else model
+    dt = mc.out_dtype()
+    X = np.atleast_2d(np.asarray(X, dt))
+    Q = np.atleast_2d(np.asarray(Q, dt))
+    return tuple(np.asarray(a, np.float64) for a in _JF(m, X, Q))
+
+
+def full(mech: Mechanism, x: Any) -> np.ndarray:
+    """(M, P) kernel parameters of designs x (M, variables) in the config's units."""
+    x = np.atleast_2d(np.asarray(x, np.float64))
+    fixed = np.broadcast_to(mech.fixed, (x.shape[0], len(mech.fixed)))
+    return np.concatenate([x, fixed], -1) * mech.scale
+
+
+def home(mech: Mechanism) -> np.ndarray:
+    """The home pose: each joint at 0 where its limits allow it, else mid-range."""
+    lo, hi = np.asarray(mech.lower), np.asarray(mech.upper)
+    return np.where((lo <= 0) & (0 <= hi), 0.0, (lo + hi) / 2)
+
+
+def joint_names(s: SerialSettings) -> list[str]:
+    """The active joints' names: the URDF's, or q1 … qn of a DH table."""
+    if isinstance(s.chain, UrdfChain):
+        return list(s.chain.imported.active)
+    return [f"q{i + 1}" for i in range(len(s.chain.joints))]
+
+
+def joint_values(s: SerialSettings, q: Sequence[float], sep: str = ", ") -> str:
+    """``q1 = 10 deg, q3 = 0.135 m``: degrees for R joints, the chain's length unit for
+    P joints."""
+    u = length_unit(s)
+    out = []
+    for name, j, v in zip(joint_names(s), s.chain.joints, q, strict=True):
+        out.append(
+            f"{name} = {math.degrees(v):.4g} deg" if j.type == "R" else f"{name} = {v:.4g} {u}"
+        )
+    return sep.join(out)
+
+
+def radius(s: SerialSettings) -> float | None:
+    """``study.collision.radius`` where the config has one (the capsules a collision
+    check uses), else None (the drawing's default thickness)."""
+    r = getattr(getattr(s, "collision", None), "radius", None)
+    return float(r) if isinstance(r, int | float) and not isinstance(r, bool) and r > 0 else None
+
+
+def set_values(s: SerialSettings, design: Mapping[str, float]) -> dict[tuple[str, str], float]:
+    """{(joint, field): number (rad, file lengths)} of a URDF chain's ``set`` fields."""
+    from designopt.studies.serial.mechanism import set_values as sv
+
+    return sv(s, dict(design))
+
+
+def _types(s: SerialSettings) -> str:
+    return "".join(j.type for j in s.chain.joints)
+
+
+def meshes(s: SerialSettings, design: Mapping[str, float] | None, q: np.ndarray,
+           budget: int | None):  # fmt: skip
+    """A URDF chain's visuals at joints q (``designopt.kinematics.meshes.Placed``) for
+    ``design`` (None: the file's own numbers); None for a DH chain or no budget."""
+    if not isinstance(s.chain, UrdfChain) or not budget:
+        return None
+    from designopt.kinematics import meshes as km
+
+    values = {} if design is None else set_values(s, design)
+    return km.placed(s.chain.imported, s.chain.urdf_text or "", s.chain.urdf_path, values, q,
+                     budget)  # fmt: skip
+
+
+def arms(s: SerialSettings, mech: Mechanism, x: Any, Q: np.ndarray, *, labels: Sequence[str] = (),
+         colors: Sequence[str] = (), budget: int | None = FIGURE_TRIANGLES,
+         model: Any = None, design: Any = "x") -> list[list[Arm]]:  # fmt: skip
+    """Arms [design][pose] of designs x (M, variables; config units) at joints Q (C, n):
+    ``labels`` and ``colors`` per pose (cycled), URDF meshes within ``budget`` triangles
+    per robot. ``model`` and ``design`` None: the original robot of a URDF chain."""
+    X = full(mech, x)
+    Q = np.atleast_2d(np.asarray(Q, np.float64))
+    P, A, R = joint_frames(mech, X, Q, model)
+    r = radius(s)
+    out = []
+    for i in range(X.shape[0]):
+        row = []
+        dsg = None if design is None else dict(zip(s.variables, np.atleast_2d(x)[i], strict=True))
+        for c in range(Q.shape[0]):
+            pm = meshes(s, dsg, Q[c], budget)
+            row.append(Arm(P[i, c], A[i, c], R[i, c], radius=r,
+                           color=colors[c % len(colors)] if colors else "#1f77b4",
+                           label=labels[c % len(labels)] if labels else "",
+                           meshes=[] if pm is None else [(V, F) for _, V, F in pm.meshes],
+                           types=_types(s)))  # fmt: skip
+        out.append(row)
+    return out
+
+
+def original_model(s: SerialSettings, mech: Mechanism):
+    """The kernel model of a URDF chain with the file's own numbers in every ``set``
+    field (the design columns unused)."""
+    from designopt.kinematics import urdf
+
+    return urdf.lower(s.chain.imported, {}, mech.names)  # type: ignore[union-attr]
+
+
+def original_arm(s: SerialSettings, mech: Mechanism, q: np.ndarray, label: str = "original (the URDF's numbers)",
+                 color: str = "#4c72b0", budget: int | None = FIGURE_TRIANGLES) -> Arm:  # fmt: skip
+    """The URDF's own robot at joints q."""
+    x0 = [0.5 * (lo + hi) for lo, hi in s.variables.values()]  # unused by the model
+    return arms(
+        s,
+        mech,
+        [x0],
+        q,
+        labels=[label],
+        colors=[color],
+        budget=budget,
+        model=original_model(s, mech),
+        design=None,
+    )[0][0]
+
+
+def changes(s: SerialSettings, design: Mapping[str, float]) -> list[tuple[str, float, float, str]]:
+    """Every ``set`` field of a URDF chain as (key, the file's number, the design's,
+    unit): lengths in m, angles in degrees."""
+    from designopt.kinematics import meshes as km
+
+    imp = s.chain.imported  # type: ignore[union-attr]
+    out = []
+    for (jn, f), v in set_values(s, design).items():
+        o = km.original(imp, jn, f)
+        ang = f in ("roll", "pitch", "yaw")
+        out.append((f"{jn}.origin.{f}", math.degrees(o) if ang else o,
+                    math.degrees(v) if ang else v, "deg" if ang else "m"))  # fmt: skip
+    return out
+
+
+def changes_text(s: SerialSettings, design: Mapping[str, float], width: int = 60) -> str:
+    """The changed ``set`` numbers, one a line (``key: file → design unit``), and how
+    many are unchanged."""
+    ch = changes(s, design)
+    lines = [f"{k}: {a:.4g} → {b:.4g} {u}" for k, a, b, u in ch
+             if abs(a - b) > 1e-12 * max(1.0, abs(b))]  # fmt: skip
+    same = len(ch) - len(lines)
+    if same:
+        lines.append(f"{same} other set number{'s' * (same > 1)} as in the file")
+    return "\n".join(lines) if lines else "every set number as in the file"
+
+
+def meshes_note(s: SerialSettings, design: Mapping[str, float] | None, q: np.ndarray,
+                budget: int | None = FIGURE_TRIANGLES) -> str:  # fmt: skip
+    """What the drawing says of a URDF chain's meshes: how many triangles, which links
+    keep their unscaled mesh though an origin they span changed, missing files."""
+    pm = meshes(s, design, q, budget)
+    if pm is None:
+        return ""
+    if not pm.meshes and not pm.missing:
+        return "no visual meshes in the URDF"
+    out = [
+        f"meshes: {pm.triangles} triangles"
+        + (f" (decimated from {pm.full})" if pm.triangles < pm.full else "")
+    ]
+    if pm.moved:
+        out.append("unscaled (their origins are design numbers): " + ", ".join(pm.moved))
+    if pm.missing:
+        out.append(f"{len(pm.missing)} mesh file(s) not found, e.g. {pm.missing[0]}")
+    return "; ".join(out)
+
+
+# ------------------------------------------------------------------------ tasks
+
+
+def representatives(sol: Mapping[str, np.ndarray]) -> list[tuple[str, int]]:
+    """[(name, target index)] of :data:`REPRESENTATIVE` among the reached targets (the
+    median: the lower middle of their 1/k order); [] when none is reached."""
+    ok = np.asarray(sol["success"], bool)
+    idx = np.flatnonzero(ok)
+    if not idx.size:
+        return []
+    order = idx[np.argsort(np.asarray(sol["inv_k"])[idx], kind="stable")]
+    picks = (order[0], order[(len(order) - 1) // 2], order[-1])
+    return [(name, int(i)) for (name, _), i in zip(REPRESENTATIVE, picks, strict=True)]
+
+
+def slider_targets(sol: Mapping[str, np.ndarray]) -> list[tuple[str, int]]:
+    """[(label, target index)] at the 1/k :data:`QUANTILES` among the reached targets."""
+    ok = np.asarray(sol["success"], bool)
+    idx = np.flatnonzero(ok)
+    if not idx.size:
+        return []
+    order = idx[np.argsort(np.asarray(sol["inv_k"])[idx], kind="stable")]
+    out, seen = [], set()
+    for qt in QUANTILES:
+        i = int(order[int(round(qt * (len(order) - 1)))])
+        if i not in seen:
+            seen.add(i)
+            name = {0.0: "worst", 0.5: "median", 1.0: "best"}.get(qt, f"{qt:.0%}")
+            out.append((f"{name} 1/k (target {i})", i))
+    return out
+
+
+def cone(s: SerialSettings, p: np.ndarray, size: float) -> Cone | None:
+    """The task's tool-axis cone drawn from the targets' centroid, ``size`` long."""
+    ta = s.task.tool_axis if s.task is not None else None
+    if ta is None:
+        return None
+    return Cone(np.asarray(p, np.float64).mean(0), np.asarray(ta.direction, np.float64),
+                float(ta.cone), size)  # fmt: skip
+
+
+def task_scene(s: SerialSettings, mech: Mechanism, x: Any, sol: Mapping[str, np.ndarray],
+               budget: int | None = FIGURE_TRIANGLES) -> Scene:  # fmt: skip
+    """The task drawn: region, tool-axis cone, targets by 1/k, the final design ``x`` at
+    its representative targets' solutions (stars: those targets)."""
+    reps = representatives(sol)
+    cols = dict(REPRESENTATIVE)
+    p = np.asarray(sol["target_p"], np.float64)
+    ik = np.asarray(sol["inv_k"])
+    out = []
+    if reps:
+        Q = np.stack([sol["q"][i] for _, i in reps])
+        labels = [f"{n}: 1/k = {ik[i]:.3g}" for n, i in reps]
+        out = arms(s, mech, [x], Q, labels=labels, colors=[cols[n] for n, _ in reps],
+                   budget=budget)[0]  # fmt: skip
+    ext = float(np.ptp(p, 0).max()) if len(p) > 1 else 0.0
+    size = 0.4 * ext if ext > 0 else 0.1 * max((a.length() for a in out), default=1.0)
+    return Scene(arms=out, region=s.task.region if s.task is not None else None,
+                 cone=cone(s, p, size),
+                 targets=Targets(p, ik, np.asarray(sol["success"], bool), "1/k"),
+                 marks=[(p[i], cols[n]) for n, i in reps])  # fmt: skip
+
+
+def hover(s: SerialSettings, label: str, q: np.ndarray, inv_k: float | None = None) -> str:
+    """The report's hover text of an arm: its label, 1/k, joint values."""
+    from designopt.figures.html import esc
+
+    rows = ", ".join(ROWS[r] for r in s.indices.rows())
+    k = "" if inv_k is None else f"<br>1/k ({s.indices.norm}-norm; rows {rows}) = {inv_k:.4g}"
+    return (f"<b>{esc(label)}</b>{k}<br>" + esc(joint_values(s, q, "<br>")).replace("&lt;br&gt;", "<br>")
+            + "<extra></extra>")  # fmt: skip

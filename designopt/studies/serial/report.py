@@ -1,0 +1,150 @@
+"""The serial study's robot in the interactive report (``Study.robot``): the final design
+of a run in its task with a slider through representative poses, or a Pareto front's
+designs beside their robots (docs/figures.md, "The robot in the report"). What is drawn
+is ``drawing``'s; this module picks the poses and designs."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from designopt.figures.robot import Scene
+from designopt.studies.serial import figures, taskindex
+from designopt.studies.serial.drawing import (
+    arms,
+    home,
+    hover,
+    joint_values,
+    meshes_note,
+    original_arm,
+    slider_targets,
+    task_scene,
+)
+from designopt.studies.serial.mechanism import Mechanism, build
+from designopt.studies.serial.settings import SerialSettings, UrdfChain, length_unit
+
+
+def _budget(n: int) -> int | None:
+    """Mesh triangles per robot when ``n`` robots share the report's budget (None
+    below 200 a robot: too coarse to show, the meshes are left out)."""
+    from designopt.figures.html.robot import TRIANGLES
+
+    b = TRIANGLES // max(n, 1)
+    return b if b >= 200 else None
+
+
+def _poses(s: SerialSettings, mech: Mechanism, x: np.ndarray, Q: np.ndarray,
+           labels: Sequence[str], inv_k: Sequence[float | None],
+           marks: Sequence[np.ndarray | None]):  # fmt: skip
+    from designopt.figures.html.robot import Pose
+
+    row = arms(s, mech, [x], Q, labels=["final design"], colors=["#ff7f0e"],
+               budget=_budget(len(Q)))[0]  # fmt: skip
+    return [Pose(lab, [a], [hover(s, lab, q, k)], m)
+            for lab, a, q, k, m in zip(labels, row, Q, inv_k, marks, strict=True)]  # fmt: skip
+
+
+def run_view(rec: Any):
+    """The report's view of a run's final design (``designopt.figures.html.View``).
+    Under a task: the region, the tool-axis cone, the targets by 1/k and a slider
+    through the reached targets at the 1/k :data:`QUANTILES`, the arm at each one's
+    solution. Otherwise: the home pose, then the worst, median and best 1/k of the
+    workspace figure's uniform joint samples."""
+    from designopt.figures.html.robot import View
+
+    s: SerialSettings = rec.config.study
+    mech = build(s)
+    x = np.asarray(list(rec.x.values()), np.float64)
+    u = length_unit(s)
+    q0 = home(mech)
+    scene = Scene(arms=[], region=s.task.region if s.task is not None else None)
+    if s.indices.measure == "task":
+        sol = taskindex.solution(s, rec.x, rec.keys())
+        p = np.asarray(sol["target_p"], np.float64)
+        ts = task_scene(s, mech, x, sol, budget=None)
+        scene.cone, scene.targets = ts.cone, ts.targets
+        picks = slider_targets(sol)
+        if picks:
+            Q = np.stack([sol["q"][i] for _, i in picks])
+            poses = _poses(s, mech, x, Q, [lab for lab, _ in picks],
+                           [float(sol["inv_k"][i]) for _, i in picks], [p[i] for _, i in picks])  # fmt: skip
+            what = "the reached targets at 1/k quantiles 0, 10, 25, 50, 75, 90, 100 %"
+        else:
+            poses = _poses(s, mech, x, q0[None], ["home pose"], [None], [None])
+            what = "no target reached: the home pose"
+    else:
+        Qs = figures._uniform_q(mech, rec, 4000)
+        z = figures.inv_k(mech, s, x, Qs)
+        o = np.argsort(z, kind="stable")
+        pick = [o[0], o[(len(o) - 1) // 2], o[-1]]
+        Q = np.vstack([q0[None], Qs[pick]])
+        labels = ["home pose"] + [f"{n} 1/k of 4000 samples" for n in ("worst", "median", "best")]
+        kz = [float(figures.inv_k(mech, s, x, q0[None])[0])] + [float(z[i]) for i in pick]
+        poses = _poses(s, mech, x, Q, labels, kz, [None] * 4)
+        what = "the home pose and the worst, median and best 1/k of the workspace's joint samples"
+    title = f"the final design ({_design_text(s, rec.x)}) at {what}; drag to rotate"
+    note = meshes_note(s, dict(rec.x), q0, _budget(len(poses)))
+    return View(title=title, unit=u, scene=scene, poses=poses,
+                note=(note + "; " if note else "") + "home pose: each joint at 0 where its "
+                "limits allow, else mid-range")  # fmt: skip
+
+
+def _design_text(s: SerialSettings, x: Mapping[str, float]) -> str:
+    u = length_unit(s)
+    ang = s.angle_names()
+    return ", ".join(f"{k} = {v:.4g} {'deg' if k in ang else u}" for k, v in x.items())
+
+
+def front_view(rec: Any):
+    """The report's front view (``designopt.figures.html.FrontView``): the front's
+    first two objectives, each design's robot at the home pose, the original robot of a
+    URDF chain for reference."""
+    from designopt.figures.html.robot import FrontView
+
+    s: SerialSettings = rec.config.study
+    mech = build(s)
+    q0 = home(mech)
+    X = rec.X
+    n = len(X)
+    objs = list(rec.objectives.items())[:2]
+    vals = rec.values
+    cols = []
+    for k, (name, sense) in enumerate(objs):
+        v = vals.get(name)
+        if v is None or np.shape(v) != (n,):
+            v = -rec.F[:, k] if sense == "max" else rec.F[:, k]
+        cols.append(np.asarray(v, np.float64))
+    units = rec.units() if hasattr(rec, "units") else {}
+    labels = [f"{name} ({sense}) [{units.get(name, '-')}]" for name, sense in objs]
+    budget = _budget(n + 1)
+    robots = [[a] for a in (r[0] for r in arms(s, mech, X, q0, labels=["design"],
+                                                colors=["#ff7f0e"], budget=budget))]  # fmt: skip
+    ref = []
+    if isinstance(s.chain, UrdfChain):
+        ref = [original_arm(s, mech, q0, budget=budget)]
+    hov = []
+    for i in range(n):
+        d = dict(zip(s.variables, X[i], strict=True))
+        objtxt = ", ".join(f"{name} = {c[i]:.4g}" for (name, _), c in zip(objs, cols, strict=True))
+        hov.append(f"{_design_text(s, d)}; {objtxt}")
+    note = (f"each design at the home pose ({joint_values(s, q0)}: each joint at 0 where its "
+            "limits allow, else mid-range)" + ("; blue: the original robot (the URDF's numbers)"
+                                               if ref else ""))  # fmt: skip
+    mn = meshes_note(s, dict(zip(s.variables, X[0], strict=True)), q0, budget)
+    return FrontView(title=f"Pareto front ({n} designs)", unit=length_unit(s), x=cols[0],
+                     y=cols[1], xlabel=labels[0], ylabel=labels[1], robots=robots, hover=hov,
+                     reference=ref, region=s.task.region if s.task is not None else None,
+                     note=note + (f"; {mn}" if mn else ""))  # fmt: skip
+
+
+def report(rec: Any) -> dict[str, Any] | None:
+    """``Study.robot``: the run's view or the front's (None for other records)."""
+    from designopt.results import FrontRecord, RunRecord
+
+    if isinstance(rec, FrontRecord):
+        return {"front": front_view(rec)}
+    if isinstance(rec, RunRecord):
+        return {"view": run_view(rec)}
+    return None
