@@ -389,7 +389,8 @@ class SerialSettings(StudySettings):
         if ind.normalized and ind.norm != "fro":
             raise ValueError("indices.normalized: applies to norm 'fro' only")
         self._check_task()
-        names = self.index_names()
+        # (volume is checked below, with its own message)
+        names = self.index_names() if ind.measure == "task" else INDEX_NAMES
         obj = self.objective
         for k, v in obj.items():
             if k in ("normalize",):
