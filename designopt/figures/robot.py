@@ -124,6 +124,8 @@ class Scene:
     targets: Targets | None = None
     marks: list[tuple[np.ndarray, str]] = field(default_factory=list)
     collisions: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
+    obstacles: list[Any] = field(default_factory=list)  # collision obstacle models
+    ports: list[np.ndarray] = field(default_factory=list)
 
 
 def thickness(arms: Sequence[Arm]) -> float:
@@ -237,6 +239,58 @@ def _frame(axis: Sequence[float]) -> np.ndarray:
     return np.stack([u, v, z], -1)
 
 
+OBSTACLE = "#7f7f7f"
+PORT = "#000000"
+
+
+def obstacle_mesh(ob: Any, center: np.ndarray, ext: float):
+    """An obstacle (``designopt.kinematics.collision`` model) as a triangle mesh
+    (vertices, faces): a ball, a capsule (tube and end balls), a box; a half-space as a
+    square of side 1.2·``ext`` in its plane, centred on ``center``'s projection."""
+    kind = ob.shape
+    if kind == "ball":
+        return ball(np.asarray(ob.center, np.float64), float(ob.radius), 16)
+    if kind == "capsule":
+        a, b, r = np.asarray(ob.a, np.float64), np.asarray(ob.b, np.float64), float(ob.radius)
+        return merge([tube(a, b, r), ball(a, r, 16), ball(b, r, 16)])
+    if kind == "box":
+        c, h = np.asarray(ob.center, np.float64), np.asarray(ob.size, np.float64) / 2
+        corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)])
+        V = c + corners * h
+        F = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
+                      [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])  # fmt: skip
+        return V, F
+    if kind == "halfspace":
+        n = np.asarray(ob.normal, np.float64)
+        n = n / np.linalg.norm(n)
+        p = np.asarray(ob.point, np.float64)
+        c = center - ((center - p) @ n) * n
+        u, v = _basis(n)
+        h = 0.6 * ext
+        V = np.array([c - h * u - h * v, c + h * u - h * v, c + h * u + h * v, c - h * u + h * v])
+        return V, np.array([[0, 1, 2], [0, 2, 3]])
+    raise ValueError(f"unknown obstacle shape {kind!r}")
+
+
+def hull_2d(P: np.ndarray) -> np.ndarray:
+    """The convex hull (k, 2) of points (n, 2), counter-clockwise (Andrew's monotone
+    chain): an obstacle's outline in a view."""
+    P = np.unique(np.round(np.asarray(P, np.float64), 12), axis=0)
+    if len(P) < 3:
+        return P
+
+    def half(pts):
+        out: list = []
+        for p in pts:
+            while len(out) >= 2 and np.cross(out[-1] - out[-2], p - out[-2]) <= 0:
+                out.pop()
+            out.append(p)
+        return out
+
+    lower, upper = half(P), half(P[::-1])
+    return np.asarray(lower[:-1] + upper[:-1])
+
+
 def region_wire(region: Any) -> list[np.ndarray]:
     """The region's edges as polylines (k, 3): a box's 12 edges, a ball's three great
     circles, a cylinder's end circles and 8 generators, a cone's (frustum's) end circles
@@ -333,6 +387,9 @@ def scene_points(scene: Scene) -> np.ndarray:
     if scene.targets is not None:
         pts.append(np.asarray(scene.targets.xyz, np.float64))
     pts += [np.atleast_2d(p) for p, _ in scene.marks]
+    pts += [np.atleast_2d(np.asarray(p, np.float64)) for p in scene.ports]
+    pts += [obstacle_mesh(o, np.zeros(3), 1.0)[0] for o in scene.obstacles
+            if o.shape != "halfspace"]  # fmt: skip
     return np.vstack(pts) if pts else np.zeros((1, 3))
 
 
@@ -361,6 +418,10 @@ def legend_handles(scene: Scene) -> list:
                          label=f"tool z axes within {scene.cone.half_angle:g}°"))  # fmt: skip
     if scene.collisions:
         hs.append(Line2D([], [], color=COLLIDING, marker="x", lw=1, label="colliding pair"))
+    if scene.obstacles:
+        hs.append(Patch(facecolor=OBSTACLE, alpha=0.35, label="obstacles"))
+    if scene.ports:
+        hs.append(Line2D([], [], color=PORT, marker="o", mfc="white", ls="none", label="port"))
     return hs
 
 
@@ -383,6 +444,14 @@ def draw_3d(ax: Any, scene: Scene, unit: str, legend: bool = True,
     if scene.cone is not None:
         for k, line in enumerate(cone_rays(scene.cone)):
             ax.plot(*line.T, color="#8c564b", lw=1.2 if k == 0 else 0.7, ls="--", zorder=1.5)
+    centre = scene_points(scene).mean(0)
+    for ob in scene.obstacles:
+        Vo, Fo = obstacle_mesh(ob, centre, ext)
+        ax.add_collection3d(Poly3DCollection(Vo[Fo], facecolor=OBSTACLE, alpha=0.18,
+                                             edgecolor="none", zorder=1))  # fmt: skip
+    for pt in scene.ports:
+        ax.scatter(*np.asarray(pt, np.float64)[:, None], marker="o", s=60, c="white",
+                   edgecolors=PORT, lw=1.5, depthshade=False, zorder=6)  # fmt: skip
     t, mappable = scene.targets, None
     if t is not None:
         ok = np.asarray(t.ok, bool)
@@ -493,6 +562,40 @@ def draw_region_2d(ax: Any, region: Any, E: np.ndarray) -> None:
     for line in region_wire(region):
         p = line @ E
         ax.plot(p[:, 0], p[:, 1], color="#3182bd", lw=0.8, alpha=0.8, zorder=1.5)
+
+
+def draw_obstacles_2d(ax: Any, scene: Scene, E: np.ndarray) -> None:
+    """The scene's obstacles (their outlines: the projections' convex hulls) and ports
+    in the plane of E."""
+    from matplotlib.collections import PolyCollection
+    from matplotlib.patches import Polygon
+
+    centre, ext = scene_points(scene).mean(0), _extent(scene)
+    for ob in scene.obstacles:
+        if ob.shape == "halfspace":  # its side of the line where the plane cuts the view
+            n = np.asarray(ob.normal, np.float64) / np.linalg.norm(ob.normal)
+            n2 = n @ E
+            if np.linalg.norm(n2) < 0.3:
+                continue  # seen face-on: it would fill the view and say nothing
+            n2 = n2 / np.linalg.norm(n2)
+            t2 = np.array([-n2[1], n2[0]])
+            c2 = np.asarray(ob.point, np.float64) @ E  # on the plane's trace in the view
+            c2 = c2 + ((centre @ E - c2) @ t2) * t2
+            h = 20 * ext  # far beyond the view; kept out of the autoscale
+            poly = [c2 - h * t2, c2 + h * t2, c2 + h * t2 - h * n2, c2 - h * t2 - h * n2]
+            ax.add_collection(PolyCollection([poly], facecolors=OBSTACLE, alpha=0.3,
+                                             edgecolors="0.35", linewidths=0.8, zorder=1.2),
+                              autolim=False)  # fmt: skip
+            continue
+        V, _ = obstacle_mesh(ob, centre, 3 * ext)
+        H = hull_2d(V @ E)
+        if len(H) >= 3:
+            ax.add_patch(Polygon(H, closed=True, fc=OBSTACLE, alpha=0.3, ec="0.35", lw=0.8,
+                                 zorder=1.2))  # fmt: skip
+    for pt in scene.ports:
+        uv = np.asarray(pt, np.float64) @ E
+        ax.plot(uv[0], uv[1], marker="o", ms=8, mfc="white", mec=PORT, mew=1.5, ls="none",
+                zorder=6)  # fmt: skip
 
 
 def figure(scenes: Sequence[Scene], unit: str, title: str = "", size: float = 5.0):

@@ -158,6 +158,22 @@ def _static(scene: Scene, unit: str) -> list[dict[str, Any]]:
         out.append({"type": "scatter3d", "mode": "lines", **_xyz(_segments(wire)),
                     "name": "task region", "hoverinfo": "skip",
                     "line": {"color": "#3182bd", "width": 2}})  # fmt: skip
+    if scene.obstacles or scene.ports:
+        from designopt.figures.robot import obstacle_mesh, scene_points
+
+        pts = scene_points(scene)
+        centre, ext = pts.mean(0), float(np.ptp(pts, 0).max()) or 1.0
+        for k, ob in enumerate(scene.obstacles):
+            Vo, Fo = obstacle_mesh(ob, centre, ext)
+            out.append({"type": "mesh3d", **_xyz(Vo), "i": Fo[:, 0], "j": Fo[:, 1],
+                        "k": Fo[:, 2], "color": "#7f7f7f", "opacity": 0.2,
+                        "name": f"obstacle {k}: {ob.shape}", "hoverinfo": "name",
+                        "showlegend": True})  # fmt: skip
+        if scene.ports:
+            out.append({"type": "scatter3d", "mode": "markers",
+                        **_xyz(np.asarray(scene.ports, np.float64)), "name": "port",
+                        "marker": {"size": 6, "color": "white",
+                                   "line": {"color": "black", "width": 3}}})  # fmt: skip
     if scene.cone is not None:
         out.append({"type": "scatter3d", "mode": "lines", **_xyz(_segments(cone_rays(scene.cone))),
                     "name": f"tool z axes within {scene.cone.half_angle:g}°", "hoverinfo": "skip",

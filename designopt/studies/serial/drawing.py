@@ -91,6 +91,107 @@ def joint_values(s: SerialSettings, q: Sequence[float], sep: str = ", ") -> str:
     return sep.join(out)
 
 
+def obstacles_and_ports(s: SerialSettings) -> dict[str, Any]:
+    """A scene's ``obstacles`` (``study.collision``) and ``ports`` (each arm's, or
+    ``task.port``) as :class:`Scene` keywords."""
+    obs = list(s.collision.obstacles) if s.collision is not None else []
+    ports = [np.asarray(p, np.float64) for p in dict.fromkeys(
+        tuple(p) for p in s.ports() if p is not None)] if s.task is not None else []  # fmt: skip
+    return {"obstacles": obs, "ports": ports}
+
+
+ARM_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#17becf",
+               "#bcbd22")  # fmt: skip
+"""The arms' colours in a multi-arm drawing."""
+
+
+def combined(sol: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """A multi-arm solution (arrays with a leading arm axis) as one per-target solution:
+    ``success`` where every arm reaches the target, ``inv_k`` the arms' mean 1/k there
+    (0 elsewhere), the targets; the joints of arm 0."""
+    ok = np.all(np.asarray(sol["success"], bool), 0)
+    ik = np.where(ok, np.mean(np.asarray(sol["inv_k"], np.float64), 0), 0.0)
+    return {"target_p": np.asarray(sol["target_p"]), "success": ok, "inv_k": ik,
+            "q": np.asarray(sol["q"])[0]}  # fmt: skip
+
+
+def _closest(sa: np.ndarray, sb: np.ndarray, n: int = 24) -> tuple[np.ndarray, np.ndarray, float]:
+    """Approximately the closest points of two arms' link segments (La, 2, 3), (Lb, 2, 3)
+    (each link sampled at n points) and their centre-line distance."""
+    t = np.linspace(0, 1, n)[:, None]
+    pa = (sa[:, None, 0] + t[None] * (sa[:, None, 1] - sa[:, None, 0])).reshape(-1, 3)
+    pb = (sb[:, None, 0] + t[None] * (sb[:, None, 1] - sb[:, None, 0])).reshape(-1, 3)
+    d = np.linalg.norm(pa[:, None] - pb[None], axis=-1)
+    i, j = np.unravel_index(np.argmin(d), d.shape)
+    return pa[i], pb[j], float(d[i, j])
+
+
+def arm_tuples(s: SerialSettings, mech: Mechanism, x: Any, sol: Mapping[str, np.ndarray],
+               keys: Mapping[str, Any], budget: int | None = FIGURE_TRIANGLES,
+               ) -> list[tuple[str, list[Arm], list[tuple[np.ndarray, np.ndarray]], list]]:  # fmt: skip
+    """Tuples of targets of a multi-arm run (one per arm, drawn as ``arms_free`` draws
+    them: arm k's tuple j is target π_k(j)) where every arm reaches its own: the tightest
+    (smallest gap between two arms: colliding if any collides), the median and the
+    loosest. Each: (label, the arms at their solutions with their bases and colours,
+    colliding pairs (their closest points), the arms' joints)."""
+    import jax.numpy as jnp
+
+    from designopt.kinematics.collision import arms_clearance
+    from designopt.studies.serial import bodies
+
+    A = len(s.arms)  # type: ignore[arg-type]
+    ok = np.asarray(sol["success"], bool)
+    N = ok.shape[1]
+    key = jax.random.fold_in(keys["samples"], 2)
+    perm = [np.arange(N)] + [np.asarray(jax.random.permutation(jax.random.fold_in(key, k), N))
+                             for k in range(1, A)]  # fmt: skip
+    both = np.all(np.stack([ok[k][perm[k]] for k in range(A)]), 0)
+    if not both.any():
+        return []
+    seg = [np.asarray(sol["segments"])[k][perm[k]] for k in range(A)]  # (N, L, 2, 3) world
+    g = bodies.geometry(s, mech)
+    r = jnp.asarray(g.radii)  # type: ignore[union-attr]
+    gap = np.full(N, np.inf)
+    for a in range(A):
+        for b in range(a + 1, A):
+            gap = np.minimum(gap, np.asarray(arms_clearance(seg[a], r, seg[b], r)))
+    idx = np.flatnonzero(both)
+    order = idx[np.argsort(gap[idx], kind="stable")]
+    picks = dict.fromkeys([int(order[0]), int(order[(len(order) - 1) // 2]), int(order[-1])])
+    X = full(mech, x)
+    p = bodies.base_params(s, mech, jnp.float64)
+    Rb, tb = (np.asarray(v, np.float64) for v in bodies.base_frames(p, jnp.asarray(X)))
+    out = []
+    for j, name in zip(picks, ("tightest", "median", "loosest"), strict=False):
+        arms_j, pairs, qs = [], [], []
+        for k in range(A):
+            T = np.eye(4)
+            T[:3, :3], T[:3, 3] = Rb[k, 0], tb[k, 0]
+            q = np.asarray(sol["q"])[k][perm[k][j]]
+            qs.append(q)
+            a = arms(s, mech, [x], q[None], labels=[f"arm {k}"], colors=[ARM_COLOURS[k % 8]],
+                     budget=budget)[0][0]  # fmt: skip
+            arms_j.append(_with_base(a, T))
+        coll = set()
+        for a in range(A):
+            for b in range(a + 1, A):
+                d = float(np.asarray(arms_clearance(seg[a][j], r, seg[b][j], r)))
+                if d < g.margin:  # type: ignore[union-attr]
+                    pa, pb, _ = _closest(seg[a][j], seg[b][j])
+                    pairs.append((pa, pb))
+                    coll |= {a, b}
+        arms_j = [_with_base(a, a.base, colliding=k in coll) for k, a in enumerate(arms_j)]
+        what = f"arms {sorted(coll)} collide" if coll else f"gap {gap[j]:.3g}"
+        out.append((f"{name} tuple {j}: {what}", arms_j, pairs, qs))
+    return out
+
+
+def _with_base(a: Arm, T: Any, colliding: bool | None = None) -> Arm:
+    from dataclasses import replace
+
+    return replace(a, base=T, colliding=a.colliding if colliding is None else colliding)
+
+
 def radius(s: SerialSettings) -> float | None:
     """``study.collision.radius`` where the config has one (the capsules a collision
     check uses), else None (the drawing's default thickness)."""
@@ -279,7 +380,21 @@ def task_scene(s: SerialSettings, mech: Mechanism, x: Any, sol: Mapping[str, np.
     return Scene(arms=out, region=s.task.region if s.task is not None else None,
                  cone=cone(s, p, size),
                  targets=Targets(p, ik, np.asarray(sol["success"], bool), "1/k"),
-                 marks=[(p[i], cols[n]) for n, i in reps])  # fmt: skip
+                 marks=[(p[i], cols[n]) for n, i in reps], **obstacles_and_ports(s))  # fmt: skip
+
+
+def arms_scene(s: SerialSettings, mech: Mechanism, x: Any, sol: Mapping[str, np.ndarray],
+               keys: Mapping[str, Any], budget: int | None = FIGURE_TRIANGLES) -> Scene:  # fmt: skip
+    """A multi-arm task drawn: region, obstacles, ports, the targets by the arms' mean 1/k
+    where every arm reaches them, and every arm at the tightest tuple of targets
+    (:func:`arm_tuples`), colliding pairs marked."""
+    c = combined(sol)
+    p = c["target_p"]
+    tup = arm_tuples(s, mech, x, sol, keys, budget)
+    arms_, pairs, title = ([], [], "") if not tup else (tup[0][1], tup[0][2], tup[0][0])
+    return Scene(arms=arms_, title=title, region=s.task.region if s.task is not None else None,
+                 targets=Targets(p, c["inv_k"], c["success"], "1/k"), collisions=pairs,
+                 **obstacles_and_ports(s))  # fmt: skip
 
 
 def hover(s: SerialSettings, label: str, q: np.ndarray, inv_k: float | None = None) -> str:

@@ -266,15 +266,17 @@ def _vec(v: np.ndarray) -> str:
     return "(" + ", ".join(f"{a:.3g}" for a in v) + ")"
 
 
-def _task_caption(rec: RunRecord, sol: dict[str, np.ndarray], L: str) -> str:
-    """Title lines: the design, reach ± SE and gci ± SE of the drawn solution (the
-    archive's own when they differ), what is drawn."""
+def _task_caption(rec: RunRecord, sol_all: dict[str, np.ndarray], sol: dict[str, np.ndarray],
+                  L: str) -> str:  # fmt: skip
+    """Title lines: the design, reach ± SE and gci ± SE of the solution ``sol_all`` (the
+    archive's own when they differ), what is drawn (``sol``: with several arms, the
+    targets every arm reaches)."""
     import textwrap
 
     s: SerialSettings = rec.config.study
     units = STUDY_UNITS(s)
     lead = (slice(None), None) if s.arms is not None else (None, None)  # (A, M = 1, N)
-    per = {k: sol[k][lead].astype(np.float64) for k in ("success", "inv_k",
+    per = {k: sol_all[k][lead].astype(np.float64) for k in ("success", "inv_k",
            "manipulability", "joint_margin")}  # fmt: skip
     est = jax.jit(taskindex.estimates)(per)
     est = {k: (float(v[0][0]), float(v[1][0])) for k, v in est.items()}
@@ -289,6 +291,11 @@ def _task_caption(rec: RunRecord, sol: dict[str, np.ndarray], L: str) -> str:
     N, bad = len(sol["success"]), int(np.sum(~sol["success"]))
     what = (f"1/k ({s.indices.norm}-norm; rows {rows_txt}) at the IK solution of each of {N} "
             f"targets; " + (f"unreached (grey crosses): {bad}" if bad else "every target reached"))  # fmt: skip
+    if s.arms is not None:
+        what = (f"{len(s.arms)} arms: the mean 1/k of the arms ({s.indices.norm}-norm; rows "
+                f"{rows_txt}) where every arm reaches the target, of {N}; not reached by "
+                f"every arm (grey crosses): {bad}; the arms drawn at one tuple of targets "
+                "(one per arm, as arms_free draws them): the tightest, colliding pairs in red")  # fmt: skip
     ta = s.task.tool_axis  # type: ignore[union-attr]
     if ta is not None:
         what += f"; tool axis within {ta.cone:g}° of {_vec(np.asarray(ta.direction))}"
@@ -326,14 +333,20 @@ def draw_task(rec: RunRecord, folder: Path) -> list[Path]:
     the arms lie in it, else in a third, 3-D panel with the region, the tool-axis cone
     and the targets."""
     s: SerialSettings = rec.config.study
-    sol = task_solution(rec)
+    sol_all = task_solution(rec)
+    mech = build(s)
+    x = np.asarray(list(rec.x.values()), np.float64)
+    if s.arms is not None:  # every arm at one tuple of targets; targets where all reach
+        sol = drawing.combined(sol_all)
+        scene = drawing.arms_scene(s, mech, x, sol_all, rec.keys())
+    else:
+        sol = sol_all
+        scene = drawing.task_scene(s, mech, x, sol)
     p, ok = sol["target_p"], sol["success"]
     c = sol["inv_k"]
     L = STUDY_UNITS(s).get("__length__", "L")
     N = len(ok)
     size = float(np.clip(6000.0 / max(N, 1), 2.0, 30.0))
-    mech = build(s)
-    scene = drawing.task_scene(s, mech, np.asarray(list(rec.x.values()), np.float64), sol)
     arm_pts = np.vstack([a.points() for a in scene.arms]) if scene.arms else p[:1]
     pl = plane(p)
     flat = pl is not None and _in_plane(arm_pts, p, pl[0])
@@ -359,6 +372,7 @@ def draw_task(rec: RunRecord, folder: Path) -> list[Path]:
     for ax, (a, b, (na, nb), E_) in zip(axes, views, strict=True):
         scs.append(_task_panel(ax, a, b, c, ok, size))
         robot.draw_region_2d(ax, scene.region, E_)
+        robot.draw_obstacles_2d(ax, scene, E_)
         if flat:
             robot.draw_2d(ax, scene.arms, E_, alpha=0.35)
             for pt, col in scene.marks:
@@ -378,8 +392,13 @@ def draw_task(rec: RunRecord, folder: Path) -> list[Path]:
     style.shared_scale(fig, scs, 0.0 if not ok.any() else None)
     if not flat:  # the arms in 3-D, with the region, the tool-axis cone and the targets
         ax3 = fig.add_subplot(gs[0, len(axes)], projection="3d")
-        scene.title = ("the final design at its worst-conditioned,\nmedian and best-conditioned "
-                       "targets (stars)" if scene.arms else "no target reached: no arm drawn")  # fmt: skip
+        if s.arms is not None:
+            scene.title = ("every arm at the " + scene.title.replace(": ", ":\n", 1)
+                           if scene.arms else "no tuple every arm reaches: no arm drawn")  # fmt: skip
+        else:
+            scene.title = ("the final design at its worst-conditioned,\nmedian and "
+                           "best-conditioned targets (stars)" if scene.arms else
+                           "no target reached: no arm drawn")  # fmt: skip
         m3 = robot.draw_3d(ax3, scene, L, legend=False)
         if m3 is not None:
             style.shared_scale(fig, [*scs, m3], *scs[0].get_clim())
@@ -393,7 +412,7 @@ def draw_task(rec: RunRecord, folder: Path) -> list[Path]:
         fig.legend(handles=handles, loc="outside lower center", ncol=2 if flat else 4,
                    fontsize=8, framealpha=0.9)  # fmt: skip
     # a design far from what was asked (rec.warnings): the caption says so, in red
-    fig.suptitle(_task_caption(rec, sol, L), fontsize=9,
+    fig.suptitle(_task_caption(rec, sol_all, sol, L), fontsize=9,
                  color="crimson" if rec.warnings else "black")  # fmt: skip
     return save(fig, folder, "task")
 

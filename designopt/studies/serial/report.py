@@ -60,7 +60,21 @@ def run_view(rec: Any):
     u = length_unit(s)
     q0 = home(mech)
     scene = Scene(arms=[], region=s.task.region if s.task is not None else None)
-    if s.indices.measure == "task":
+    if s.arms is not None:  # every arm at tuples of targets: the tightest, median, loosest
+        from designopt.studies.serial.drawing import arm_tuples, arms_scene
+
+        sol_all = taskindex.solution(s, rec.x, rec.keys())
+        ts = arms_scene(s, mech, x, sol_all, rec.keys(), budget=None)
+        scene.targets, scene.obstacles, scene.ports = ts.targets, ts.obstacles, ts.ports
+        tup = arm_tuples(s, mech, x, sol_all, rec.keys(), budget=None)
+        from designopt.figures.html.robot import Pose
+
+        poses = [Pose(lab, row, [hover(s, a.label, q, None) for a, q in zip(row, qs, strict=True)])
+                 for lab, row, _, qs in tup]  # fmt: skip
+        if not poses:
+            poses = _poses(s, mech, x, q0[None], ["home pose"], [None], [None])
+        what = "tuples of targets (one per arm): the tightest, the median and the loosest gap"
+    elif s.indices.measure == "task":
         sol = taskindex.solution(s, rec.x, rec.keys())
         p = np.asarray(sol["target_p"], np.float64)
         ts = task_scene(s, mech, x, sol, budget=None)

@@ -278,7 +278,8 @@ def estimates(per: dict[str, jax.Array], key: jax.Array | None = None,
         for k in range(A):
             out[f"reach_{k}"] = _share(per["success"][k])
         out["reach_all"] = _share(jnp.prod(per["success"], 0))
-        assert key is not None
+        if key is None or "segments" not in per:
+            return out  # arms_free needs the tuples' key and the kept capsules
         perm = [jnp.arange(N)] + [jax.random.permutation(jax.random.fold_in(key, k), N)
                                   for k in range(1, A)]  # fmt: skip
         ok = jnp.prod(jnp.stack([per["success"][k][:, perm[k]] for k in range(A)]), 0)
