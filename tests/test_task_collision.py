@@ -138,7 +138,7 @@ def test_two_facing_arms_reach_all_and_arms_free_match_the_enumeration():
     p = _disk(200_000, rng, 0.0)
     p2 = _disk(200_000, rng, 0.0)
     for m, (l1, l2) in enumerate(X):
-        def arm(pts, side):  # the arm's reach and its capsules in the world
+        def arm(pts, side, l1=l1, l2=l2):  # the arm's reach and its capsules in the world
             if side == 0:
                 local = pts - np.array([-0.8, 0, 0])
             else:
