@@ -138,9 +138,13 @@ def on_cpu(cpu, other):
     conditional inside the scan makes XLA copy the branch index to the host and wait for
     it, every iteration (and splits the loop body's CUDA graph), which costs far more than
     the few small branches it saves. ``lax.platform_dependent`` decides at lowering: the
-    compiled program holds one formulation only."""
+    compiled program holds one formulation only. Where the CPU is JAX's default backend
+    (designopt runs its programs on the default backend's devices) only ``cpu`` is
+    traced: both would double the step's tracing time, which every warm run pays."""
     if FORCE_PLATFORM is not None:
         return cpu() if FORCE_PLATFORM == "cpu" else other()
+    if jax.default_backend() == "cpu":
+        return cpu()
     return jax.lax.platform_dependent(cpu=cpu, default=other)
 
 
