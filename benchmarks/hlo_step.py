@@ -106,6 +106,12 @@ def kernels(comps, name: str) -> tuple[float, Counter, int]:
             kinds[f"conditional ({len(names)} branches)"] += 1
             kinds.update({f"  in branch: {a}": b for a, b in big[1].items()})
             conds += 1 + big[2]
+        elif op == "call" and _attr(rest, "to_apply") in comps:  # e.g. a GPU command buffer
+            t, k, c = kernels(comps, _attr(rest, "to_apply"))
+            total += t
+            kinds["call (its kernels counted inside)"] += 1
+            kinds.update({f"  in call: {a}": b for a, b in k.items()})
+            conds += c
         else:
             kind = op
             if op == "fusion":
@@ -116,17 +122,19 @@ def kernels(comps, name: str) -> tuple[float, Counter, int]:
 
 
 def scan_body(text: str) -> tuple[dict, str]:
-    """The computations and the body of the entry's longest-running ``while`` (the scan)."""
+    """The computations and the body of the longest-running ``while`` (the scan), in the
+    entry or in any computation it calls (a GPU's command buffers are called computations)."""
     comps, entry = computations(text)
     best, body = -1, None
-    for _, op, rest in comps[entry]:
-        if op == "while":
-            m = re.search(r'"known_trip_count":\{"n":"(\d+)"', rest)
-            n = int(m.group(1)) if m else 0
-            if n > best:
-                best, body = n, _attr(rest, "body")
+    for name in [entry, *(c for c in comps if c != entry)]:
+        for _, op, rest in comps[name]:
+            if op == "while":
+                m = re.search(r'"known_trip_count":\{"n":"(\d+)"', rest)
+                n = int(m.group(1)) if m else 0
+                if n > best:
+                    best, body = n, _attr(rest, "body")
     if body is None:
-        raise SystemExit("no while loop in the entry computation")
+        raise SystemExit("no while loop in the program")
     return comps, body
 
 
@@ -149,7 +157,8 @@ def ours(name: str, iters: int) -> str:
 def evosax(iters: int) -> str | None:
     try:
         from evosax.algorithms import PSO
-    except ImportError:
+    except Exception as e:  # noqa: BLE001 - missing, or not working with this JAX
+        print(f"  evosax: {type(e).__name__}: {e}")
         return None
     es = PSO(population_size=M, solution=jnp.zeros(D))
     params = es.default_params

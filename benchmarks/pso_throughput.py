@@ -103,6 +103,9 @@ def evosax_pso(runs: int, iters: int) -> Callable[[int], float] | None:
     except ImportError:
         print("  evosax not installed (pip install -e '.[bench]'): skipped")
         return None
+    except Exception as e:  # noqa: BLE001 - installed but not working with this JAX
+        print(f"  evosax does not import ({type(e).__name__}: {e}): skipped")
+        return None
     es = PSO(population_size=M, solution=jnp.zeros(D))
     params = es.default_params
 
