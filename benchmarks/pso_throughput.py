@@ -11,6 +11,10 @@ extensions and the load average are printed at the start and the end. The last l
 
     ptpso/evosax = R [min–max] (median of per-repeat ratios, ...), compile = T s
 
+``--formulations`` adds a row with PTPSO's step as the other backends compile it
+(``designopt.optim.pso.on_cpu``): on a GPU the CPU's step with its two conditionals, on
+the CPU the GPU's with selects.
+
 Not identical algorithms: evosax draws r1, r2 once per particle (shared across
 dimensions); seed 000 eq. (44) and designopt draw them per dimension (2·D numbers per
 particle, 3·D for PTPSO). pyswarms is numpy, one run at a time. ``--breakdown`` times the
@@ -22,6 +26,7 @@ parts of PTPSO's step (draws, objective, update) by swapping them out.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import logging
 import os
 import statistics
@@ -75,9 +80,15 @@ def interleaved(
     return ts
 
 
-def ours(name: str, runs: int, iters: int, **settings) -> Callable[[int], float]:
-    """designopt's ``name`` on Rastrigin-30: seed → mean best f of ``runs`` runs."""
+def ours(name: str, runs: int, iters: int, fresh: bool = False,
+         **settings) -> Callable[[int], float]:  # fmt: skip
+    """designopt's ``name`` on Rastrigin-30: seed → mean best f of ``runs`` runs.
+    ``fresh``: behind a new function object, so that its first call traces and compiles
+    anew (the benchmark functions are cached, and so are the programs compiled for them)."""
     P = benchmark("rastrigin", D)
+    if fresh:
+        base = P.fn
+        P = dataclasses.replace(P, fn=lambda p, X, key: base(p, X, key))
 
     def f(seed):
         r = optim.run(name, P, jax.random.key(seed), M, iters, runs, dtype=jnp.float32, **settings)
@@ -91,6 +102,9 @@ def evosax_pso(runs: int, iters: int) -> Callable[[int], float] | None:
         from evosax.algorithms import PSO
     except ImportError:
         print("  evosax not installed (pip install -e '.[bench]'): skipped")
+        return None
+    except Exception as e:  # noqa: BLE001 - installed but not working with this JAX
+        print(f"  evosax does not import ({type(e).__name__}: {e}): skipped")
         return None
     es = PSO(population_size=M, solution=jnp.zeros(D))
     params = es.default_params
@@ -190,10 +204,10 @@ def breakdown(runs: int, iters: int, repeat: int, evo) -> None:
     print("  breakdown of PTPSO's step (each row swaps one part out; interleaved repeats):")
     fns = {"p3": _compiled(ours("p3", runs, iters))[0]}
     orig = rng.uniform, rng.uniform_pair
-    try:  # compiled under the patch (a fresh problem closure forces a new trace)
+    try:  # compiled under the patch (a fresh problem function forces a new trace)
         rng.uniform = lambda kind, key, slot, shape, dt: jnp.full(shape, 0.5, dt)
         rng.uniform_pair = lambda kind, key, slot, shape, dt: (jnp.full(shape, 0.5, dt),) * 2
-        fns["p3, draws = constants"] = _compiled(ours("p3", runs, iters))[0]
+        fns["p3, draws = constants"] = _compiled(ours("p3", runs, iters, fresh=True))[0]
     finally:
         rng.uniform, rng.uniform_pair = orig
     fns["p2 (no penalty)"] = _compiled(ours("p2", runs, iters))[0]
@@ -224,6 +238,9 @@ def main() -> None:
     ap.add_argument("--suite", action="store_true", help="also time the seed's 7 × 4 suite")
     ap.add_argument("--breakdown", action="store_true", help="time the parts of PTPSO's step")
     ap.add_argument("--uniform", action="store_true", help="also time threefry draws")
+    ap.add_argument("--formulations", action="store_true",
+                    help="also time PTPSO's step as the other backends run it (pso.on_cpu: "
+                         "conditionals on the CPU, selects elsewhere)")  # fmt: skip
     a = ap.parse_args()
     header(f"PSO throughput: {a.runs} runs × {a.iters} iterations × {M} particles, Rastrigin "
            f"D={D}, float32, x64 {'on' if jax.config.jax_enable_x64 else 'off'}")  # fmt: skip
@@ -236,6 +253,17 @@ def main() -> None:
         rows["designopt PTPSO (draws: uniform)"] = _compiled(
             ours("ptpso", a.runs, a.iters, draws="uniform")
         )
+    if a.formulations:
+        from designopt.optim import pso
+
+        other = "other" if jax.default_backend() == "cpu" else "cpu"
+        pso.FORCE_PLATFORM = other  # read while tracing: the compiling call only
+        try:
+            rows[f"designopt PTPSO, {other} step"] = _compiled(
+                ours("ptpso", a.runs, a.iters, fresh=True)
+            )
+        finally:
+            pso.FORCE_PLATFORM = None
     rows["designopt p2 (defaults)"] = _compiled(ours("p2", a.runs, a.iters))
     evo = evosax_pso(a.runs, a.iters)
     if evo is not None:
@@ -257,7 +285,7 @@ def main() -> None:
             print(f"  CPU time (all threads) {k:<34} {statistics.median(c):5.2f} s "
                   f"[{min(c):.2f}–{max(c):.2f}]")  # fmt: skip
         _ratios("ptpso/evosax in CPU time", cpu[ptpso], cpu["evosax PSO"])
-    py = pyswarms_pso(a.pyswarms_runs, a.iters)
+    py = pyswarms_pso(a.pyswarms_runs, a.iters) if a.pyswarms_runs > 0 else None
     if py is not None:
         t, fmp = py
         per = t / a.pyswarms_runs

@@ -83,7 +83,8 @@ def test_single_run_equals_same_run_inside_batch():
     lo, hi = jnp.asarray(P.lower), jnp.asarray(P.upper)
     st = dict(opt=opt, fn=P.fn, cons=None)
     alone = runner._init(keys[3:4], par, P.params, lo, hi, **st)
-    _, (_, f, _) = runner._advance(alone, par, P.params, lo, hi, length=100, **st)
+    _, recs = runner._advance(alone, par, P.params, lo, hi, length=100, **st)
+    _, f, _ = runner._unpack(np.asarray(recs), 2)  # x, f, v of every iteration
     np.testing.assert_array_equal(np.asarray(f)[0], batch.history[3, 1:])
     chunked = optim.run("p5", P, key, 30, 100, 5, chunk_iters=7)
     np.testing.assert_array_equal(chunked.history, batch.history)

@@ -116,3 +116,26 @@ def test_violation_helpers():
     v = np.asarray(P.violation(X))
     assert v[0] == 0 and v[1] > 0
     assert np.all(np.asarray(benchmark("sphere", 2).violation(jnp.ones((3, 2)))) == 0)
+
+
+def test_argbest_is_the_two_pass_rule_in_one_reduction():
+    """``argbest`` (one reduction over (v, f, index)) gives the index of the rule it
+    replaced, ties, ±0, ±inf and NaN included: the least violation (a NaN one first), then
+    the least f (a NaN one first), then the first index."""
+    from designopt.optim.protocol import argbest
+
+    def two_pass(f, v):
+        vmin = jnp.min(v)
+        i = jnp.argmin(jnp.where(v == vmin, f, jnp.inf))
+        return jnp.where(v[i] == vmin, i, jnp.argmin(v))
+
+    rng = np.random.default_rng(0)
+    vs = np.array([0.0, -0.0, 1.0, 2.0, np.inf, np.nan, 0.5])
+    fs = np.array([0.0, -0.0, 1.0, -1.0, np.inf, -np.inf, np.nan, 3.0])
+    new, old = jax.jit(jax.vmap(argbest)), jax.jit(jax.vmap(two_pass))
+    for n in (1, 2, 5, 50):
+        v = rng.choice(vs, (3000, n))
+        for f in (rng.choice(fs, (3000, n)), rng.normal(size=(3000, n))):
+            for dt in (jnp.float32, jnp.float64):
+                a, b = jnp.asarray(f, dt), jnp.asarray(v, dt)
+                np.testing.assert_array_equal(new(a, b), old(a, b))

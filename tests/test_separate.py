@@ -105,3 +105,29 @@ def test_raw_keys_and_subclasses_with_their_own_step() -> None:
             return state  # never moves
 
     assert PSO.asks() and not Frozen.asks()
+
+
+def test_objective_program_key_and_rule() -> None:
+    """``optimizer.objective_program``: auto is separate up to SEPARATE_UP_TO_ITERS
+    iterations and fused beyond; separate and fused are taken as given; anything else is
+    refused at validation; a fused main job runs."""
+    from designopt.app.optimise import SEPARATE_UP_TO_ITERS, separate_objective
+    from designopt.core.errors import ConfigError
+
+    def opt(**kw):
+        over = {f"optimizer.{k}": v for k, v in kw.items()}
+        return api.load_config("configs/master9.yaml", over).optimizer
+
+    assert opt().objective_program == "auto" and separate_objective(opt())
+    assert not separate_objective(opt(n_iters=SEPARATE_UP_TO_ITERS + 1))
+    assert separate_objective(opt(n_iters=SEPARATE_UP_TO_ITERS + 1, objective_program="separate"))
+    assert not separate_objective(opt(objective_program="fused"))
+    with pytest.raises(ConfigError, match="objective_program"):
+        opt(objective_program="inline")
+    jax.config.update("jax_enable_x64", True)
+    cfg = api.load_config("configs/master9.yaml", {
+        "study.indices.n_samples": 2048, "study.indices.replicates": 2, "study.n_norm": 8,
+        "optimizer.n_particles": 6, "optimizer.n_iters": 3,
+        "optimizer.objective_program": "fused"})  # fmt: skip
+    rec = api.run(cfg)
+    assert np.isfinite(rec.final["f"])

@@ -63,6 +63,9 @@ class Optimizer(_Strict):
     bounds: Literal["clip", "reflect", "reinit"] = "clip"
     settings: dict[str, float | str] = {}
     constraints: Constraints = Constraints()
+    # the objective as a program of its own between ask and tell, or inside the runner's
+    # scan; auto: app.optimise.separate_objective's rule (docs/configs.md)
+    objective_program: Literal["auto", "separate", "fused"] = "auto"
 
 
 class Refine(_Strict):

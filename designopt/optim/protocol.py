@@ -86,10 +86,26 @@ def better(f1: Array, v1: Array, f2: Array, v2: Array) -> Array:
 
 
 def argbest(f: Array, v: Array) -> Array:
-    """Index of the best candidate by Deb's rules (least violation, then least f)."""
-    vmin = jnp.min(v)
-    i = jnp.argmin(jnp.where(v == vmin, f, jnp.inf))
-    return jnp.where(v[i] == vmin, i, jnp.argmin(v))
+    """Index of the best candidate by Deb's rules (least violation, then least f; the
+    first on ties), as one reduction over (v, f, index) in that order.
+
+    It gives the index that ``i = argmin(where(v == min(v), f, inf))``, falling back to
+    ``argmin(v)`` where ``v[i] != min(v)``, gives (a NaN violation, then a NaN f among
+    the least violations, counts as smallest, as jnp.argmin counts NaN; -0 equals 0), in
+    one pass instead of two dependent ones: a GPU launches one kernel instead of two."""
+    n = f.shape[0]
+
+    def pick(a, b):
+        (va, fa, ia), (vb, fb, ib) = a, b
+        an, bn, fan, fbn = jnp.isnan(va), jnp.isnan(vb), jnp.isnan(fa), jnp.isnan(fb)
+        first = ia < ib
+        by_f = jnp.where(fan | fbn, jnp.where(fan & fbn, first, fan),
+                         (fa < fb) | ((fa == fb) & first))  # fmt: skip
+        wins = jnp.where(an | bn, jnp.where(an & bn, first, an), (va < vb) | ((va == vb) & by_f))
+        return jnp.where(wins, va, vb), jnp.where(wins, fa, fb), jnp.where(wins, ia, ib)
+
+    init = (jnp.asarray(jnp.inf, v.dtype), jnp.asarray(jnp.inf, f.dtype), jnp.int32(n))
+    return jax.lax.reduce((v, f, jnp.arange(n, dtype=jnp.int32)), init, pick, (0,))[2]
 
 
 def order(f: Array, v: Array) -> Array:

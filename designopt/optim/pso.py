@@ -123,6 +123,31 @@ ALIASES = {
     "random_inertia": "p7",
 }
 
+FORCE_PLATFORM: str | None = None
+"""Tests only: ``"cpu"`` or ``"other"`` picks that formulation of ``on_cpu`` whatever the
+backend (the other one is what a GPU runs; CI has none)."""
+
+
+def on_cpu(cpu, other):
+    """``cpu()`` in a program lowered for the CPU, ``other()`` for any other platform.
+
+    Two formulations of the same arithmetic: the CPU's keeps PSO's per-step decisions
+    (inertia rule, penalty on or off) as ``lax.switch``/``lax.cond``, whose outputs XLA
+    materialises once and whose untaken branches cost nothing; the other computes every
+    branch and selects elementwise, so the step has no conditional. On a GPU each
+    conditional inside the scan makes XLA copy the branch index to the host and wait for
+    it, every iteration (and splits the loop body's CUDA graph), which costs far more than
+    the few small branches it saves. ``lax.platform_dependent`` decides at lowering: the
+    compiled program holds one formulation only. Where the CPU is JAX's default backend
+    (designopt runs its programs on the default backend's devices) only ``cpu`` is
+    traced: both would double the step's tracing time, which every warm run pays."""
+    if FORCE_PLATFORM is not None:
+        return cpu() if FORCE_PLATFORM == "cpu" else other()
+    if jax.default_backend() == "cpu":
+        return cpu()
+    return jax.lax.platform_dependent(cpu=cpu, default=other)
+
+
 # random-number streams of one step (protocol: the step key is fresh every iteration)
 _R1, _R2, _R3, _RW, _RB, _RX, _RV = range(7)
 
@@ -191,7 +216,13 @@ class PSO(Optimizer):
 
         branches = {"constant": constant, "nonlinear": nonlinear, "linear": linear,
                     "adaptive": adaptive, "random": random}  # fmt: skip
-        w = jax.lax.switch(p.rule, [branches[r] for r in INERTIA_RULES])
+        fns = [branches[r] for r in INERTIA_RULES]
+
+        def every_rule():  # all five (M,) vectors, one picked elementwise: no conditional
+            i = jnp.clip(p.rule, 0, len(fns) - 1)  # as lax.switch clamps its index
+            return jax.lax.select_n(i, *(f() for f in fns))
+
+        w = on_cpu(lambda: jax.lax.switch(p.rule, fns), every_rule)
         return w[:, None]
 
     def ask(self, key: jax.Array, s: State, p: Params, task: Task) -> tuple[Array, Array]:
@@ -227,12 +258,17 @@ class PSO(Optimizer):
 
             return new_v
 
-        # v is the output of a conditional, so XLA materialises it once: fused into its
-        # consumers (position, bounds, fitness, personal best) the draws and the update were
-        # recomputed in each of them (five times per step; an optimization_barrier no longer
-        # prevents that). The penalty branch runs only when the penalty is on (a real branch
-        # unless the settings are vmapped).
-        v = jax.lax.cond(p.penalty != 0, velocity(True), velocity(False))
+        def either():  # both as one select: no conditional
+            return jnp.where(p.penalty != 0, velocity(True)(), velocity(False)())
+
+        # On the CPU v is the output of a conditional, so XLA materialises it once: fused
+        # into its consumers (position, bounds, fitness, personal best) the draws and the
+        # update were recomputed in each of them (five times per step; an
+        # optimization_barrier no longer prevents that). The penalty branch runs only when
+        # the penalty is on (a real branch unless the settings are vmapped). On a GPU a
+        # conditional costs more than the recomputation: its branch index is copied to the
+        # host and waited for, every iteration (see ``on_cpu``).
+        v = on_cpu(lambda: jax.lax.cond(p.penalty != 0, velocity(True), velocity(False)), either)
         x = s.x + v
         out = (x < lower) | (x > upper)
         x = apply_bounds(

@@ -150,6 +150,23 @@ def _track(opt: Optimizer, state, ref) -> tuple[jax.Array, ...]:
     return jnp.zeros((0,), fr.x.dtype), hv, jnp.min(fr.v), hv_pop
 
 
+def _pack(track: tuple[jax.Array, ...]) -> jax.Array:
+    """One iteration's records (``_track``: x (…, D), then scalars of x's dtype) as one row
+    (…, D + k): the scan writes one history buffer per iteration instead of one per
+    record (a GPU launches one in-place update instead of three or four) and the host
+    reads one array per chunk. :func:`_unpack` splits it; the values are only copied."""
+    x, *rest = track
+    if any(r.dtype != x.dtype for r in rest):  # never promote: the history keeps its dtypes
+        raise TypeError(f"records of dtypes {[str(a.dtype) for a in track]}: expected one")
+    return jnp.concatenate([x, *(r[..., None] for r in rest)], axis=-1)
+
+
+def _unpack(rows: np.ndarray, k: int) -> list[np.ndarray]:
+    """``_pack``'s rows (…, D + k) back into x (…, D) and the k scalar records."""
+    D = rows.shape[-1] - k
+    return [rows[..., :D], *(rows[..., D + i] for i in range(k))]
+
+
 @partial(jax.jit, static_argnames=("opt", "fn", "cons", "length", "batched"))
 def _advance(carry, params, pparams, lower, upper, opt, fn, cons, length, batched=False, ref=None):
     task = _task(fn, cons, pparams, lower, upper)
@@ -159,7 +176,7 @@ def _advance(carry, params, pparams, lower, upper, opt, fn, cons, length, batche
             key, state = c
             key, k = jax.random.split(key)
             state = opt.step(k, state, p, task)
-            return (key, state), _track(opt, state, ref)
+            return (key, state), _pack(_track(opt, state, ref))
 
         return jax.lax.scan(body, c, None, length=length)
 
@@ -232,7 +249,7 @@ def _tell(carry, k, X, pending, f, v, params, lower, upper, opt, batched=False, 
     def one(run, p):
         (key, state), kr, x, pend, fr, vr = run
         state = opt.tell(kr, state, x, pend, clean(fr).astype(x.dtype), vr, p, task)
-        return (key, state), _track(opt, state, ref)
+        return (key, state), _pack(_track(opt, state, ref))
 
     f, v = _unflat(f, X), _unflat(v, X)
     return _over_runs(one, batched)((carry, k, X, pending, f, v), params)
@@ -359,6 +376,7 @@ def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress
             [host(bv)[..., None]],
         )
         hp = [host(b)[..., None] for b in bp]  # MO: the population's hypervolume
+        n_records = 2 + len(bp)  # f, v (MO: + the population's hypervolume) beside x
         done = 0
     else:
         template = jax.eval_shape(lambda: _template(keys, params, lower, upper, opt, batched,
@@ -384,6 +402,7 @@ def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress
             raise ValueError("checkpoint history does not match its iteration count")
         if progress is not None:
             progress(done)
+        n_records = 3 if mo else 2
     chunk = n_iters if chunk_iters is None else max(1, min(chunk_iters, n_iters))
     while done < n_iters:
         length = min(chunk, n_iters - done)
@@ -397,18 +416,19 @@ def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress
                 carry = place(carry)  # the same placement every iteration: one program
                 tracks.append(tr)
             axis = 2 if batched else 1  # (…runs, iterations, …) as _advance's scan gives
-            x, f, v, *p = (np.stack([host(t[i]) for t in tracks], axis=axis)
-                           for i in range(len(tracks[0])))  # fmt: skip
+            recs = np.stack([host(t) for t in tracks], axis=axis)
         else:
-            carry, (x, f, v, *p) = _advance(
+            carry, recs = _advance(
                 carry, params, pparams, lower, upper, length=length, ref=ref, **statics
             )
+            recs = host(recs)
+        x, f, v, *p = _unpack(recs, n_records)
         if plan is not None:
             carry = place(carry)  # the same placement every chunk: one compiled program
-        hf.append(host(f))
-        hx.append(host(x))
-        hv.append(host(v))
-        hp += [host(a) for a in p]
+        hf.append(f)
+        hx.append(x)
+        hv.append(v)
+        hp += p
         done += length
         if progress is not None:
             progress(length)
