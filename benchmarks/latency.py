@@ -51,11 +51,15 @@ COMMANDS: list[tuple[str, list[str]]] = [
     ("urdf_puma560", ["run", "configs/urdf_puma560.yaml", "--out", "{out}.h5"]),
     ("urdf_puma560_task", ["run", "configs/urdf_puma560_task.yaml", "--out", "{out}.h5"]),
     ("urdf_puma560_front", ["run", "configs/urdf_puma560_front.yaml", "--out", "{out}.h5"]),
+    ("urdf_puma560_port", ["run", "configs/urdf_puma560_port.yaml", "--out", "{out}.h5"]),
+    ("two_arms_front", ["run", "configs/two_arms_front.yaml", "--out", "{out}.h5"]),
+    ("urdf_mesh_arm", ["run", "configs/urdf_mesh_arm.yaml", "--out", "{out}.h5"]),
     ("sweep_ptpso", ["sweep", "configs/sweep_ptpso.yaml", "--out", "{out}.h5"]),
     ("mo_benchmark", ["bench", "configs/mo_benchmark.yaml", "--out", "{out}.h5"]),
     ("puma560-eval", ["eval", "configs/puma560.yaml", "--design", "a2=0.4", "d4=0.4"]),
     ("urdf_puma560_task-eval", ["eval", "configs/urdf_puma560_task.yaml", "--design",
                                 "a2=0.4318", "d4=0.4318"]),
+    ("urdf_puma560_view", ["view", "configs/urdf_puma560_task.yaml", "--out", "{out}.png"]),
 ]  # fmt: skip
 """The shipped configs' commands (`pso_benchmark.yaml` runs for minutes: not here)."""
 
