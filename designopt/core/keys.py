@@ -17,8 +17,13 @@ STREAMS = ("optimizer", "samples", "normalisation", "figures")
 
 def streams(seed: int) -> dict[str, jax.Array]:
     """One root key ``key(seed)`` split once into the named streams of :data:`STREAMS`."""
-    keys = jax.random.split(jax.random.key(seed), len(STREAMS))
-    return dict(zip(STREAMS, keys, strict=True))
+    return dict(zip(STREAMS, _split(np.uint32(seed)), strict=True))
+
+
+@jax.jit
+def _split(seed: Any) -> tuple[jax.Array, ...]:
+    # one program (op by op: four, making the root key, splitting it, taking it apart)
+    return tuple(jax.random.split(jax.random.key(seed), len(STREAMS)))
 
 
 def key_data(keys: Mapping[str, jax.Array]) -> dict[str, list[int]]:

@@ -250,34 +250,39 @@ def _frame(axis: Vec3) -> np.ndarray:
     return np.stack([x, np.cross(z, x), z], -1)
 
 
+def _arr(x: Any, dtype: Any) -> jax.Array:
+    return jnp.asarray(np.asarray(x, dtype))
+
+
 def region_params(region: Any, dtype=jnp.float64) -> dict[str, jax.Array]:
-    """The region's numbers as arrays (so one compiled sampler serves any values)."""
+    """The region's numbers as arrays (so one compiled sampler serves any values), made on
+    the host (``jnp.asarray`` of a list compiles a conversion program)."""
     if isinstance(region, Box):
         return {
-            "center": jnp.asarray(region.center, dtype),
-            "size": jnp.asarray(region.size, dtype),
+            "center": _arr(region.center, dtype),
+            "size": _arr(region.size, dtype),
         }
     if isinstance(region, Ball):
         return {
-            "center": jnp.asarray(region.center, dtype),
-            "radius": jnp.asarray(region.radius, dtype),
+            "center": _arr(region.center, dtype),
+            "radius": _arr(region.radius, dtype),
         }
     if isinstance(region, Cylinder):
         return {
-            "center": jnp.asarray(region.center, dtype),
-            "frame": jnp.asarray(_frame(region.axis), dtype),
-            "radius": jnp.asarray(region.radius, dtype),
-            "height": jnp.asarray(region.height, dtype),
+            "center": _arr(region.center, dtype),
+            "frame": _arr(_frame(region.axis), dtype),
+            "radius": _arr(region.radius, dtype),
+            "height": _arr(region.height, dtype),
         }
     if isinstance(region, Cone):
         return {
-            "apex": jnp.asarray(region.apex, dtype),
-            "frame": jnp.asarray(_frame(region.axis), dtype),
-            "tan": jnp.asarray(math.tan(math.radians(region.half_angle)), dtype),
-            "depth": jnp.asarray(region.depth, dtype),
+            "apex": _arr(region.apex, dtype),
+            "frame": _arr(_frame(region.axis), dtype),
+            "tan": _arr(math.tan(math.radians(region.half_angle)), dtype),
+            "depth": _arr(region.depth, dtype),
         }
     if isinstance(region, Points):
-        return {"points": jnp.asarray(region.xyz(), dtype)}
+        return {"points": _arr(region.xyz(), dtype)}
     raise TypeError(f"unknown region {type(region).__name__}")  # fmt: skip
 
 
@@ -362,10 +367,10 @@ def targets(task: Task, key: jax.Array, n: int, dtype=jnp.float64):
     frame's last column is the sampled tool axis, or with a port the unit vector from the
     port to the target (its roll is arbitrary: the IK leaves it free)."""
     ax = task.tool_axis
-    frame = None if ax is None else jnp.asarray(_frame(ax.direction), dtype)
-    cos_c = None if ax is None else jnp.cos(jnp.radians(jnp.asarray(ax.cone, dtype)))
+    frame = None if ax is None else _arr(_frame(ax.direction), dtype)
+    cone = None if ax is None else _arr(ax.cone, dtype)
     # one jitted call (op by op, the sampling compiled some fifteen one-op programs)
-    p, R = _targets(kind(task.region), region_params(task.region, dtype), key, n, frame, cos_c)
+    p, R = _targets(kind(task.region), region_params(task.region, dtype), key, n, frame, cone)
     if task.port is not None:
         R = port_frames(p, jnp.asarray(task.port, dtype))
     return p, R
@@ -427,9 +432,9 @@ def check_port(task: Task, n: int = 8192, port: Vec3 | None = None,
 
 @partial(jax.jit, static_argnames=("region_kind", "n"))
 def _targets(region_kind: str, rparams: dict[str, jax.Array], key: jax.Array, n: int,
-             frame: jax.Array | None, cos_c: jax.Array | None):  # fmt: skip
+             frame: jax.Array | None, cone: jax.Array | None):  # fmt: skip
     k_p, k_a = jax.random.split(key)
     p = sample_region(region_kind, rparams, k_p, n)
     if frame is None:
         return p, None
-    return p, _frames_of(_cap(frame, cos_c, k_a, p.shape[0]))
+    return p, _frames_of(_cap(frame, jnp.cos(jnp.radians(cone)), k_a, p.shape[0]))

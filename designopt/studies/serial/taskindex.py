@@ -335,14 +335,16 @@ def solution(s: SerialSettings, x: Any, keys: Any,
     # the params objective.problem gives per_target, made the same way: targets drawn
     # outside the jitted program (inside, XLA may fuse their arithmetic differently, and
     # a target an ulp away can send the IK to another of its solutions)
-    p = {"q_lower": jnp.asarray(mech.lower, dtype), "q_upper": jnp.asarray(mech.upper, dtype),
+    # (the small arrays made on the host: op by op, each compiled a program of its own)
+    dt = np.dtype(jnp.dtype(dtype))
+    p = {"q_lower": jnp.asarray(np.asarray(mech.lower, dt)),
+         "q_upper": jnp.asarray(np.asarray(mech.upper, dt)),
          "sample_key": keys["samples"]} | targets(s, keys["samples"], dtype)  # fmt: skip
     from designopt.studies.serial import bodies
 
     p |= bodies.base_params(s, mech, dtype)
     xv = np.asarray([x[k] for k in s.variables] if hasattr(x, "keys") else x, np.float64)
-    full = jnp.concatenate([jnp.asarray(xv, dtype), jnp.asarray(mech.fixed, dtype)])
-    full = (full * jnp.asarray(mech.scale, dtype))[None]
-    out = {k: np.asarray(v) for k, v in run(p, full).items()}
+    full = np.concatenate([xv.astype(dt), np.asarray(mech.fixed, dt)]) * np.asarray(mech.scale, dt)
+    out = {k: np.asarray(v) for k, v in run(p, jnp.asarray(full[None])).items()}
     out["success"] = out["success"] > 0.5
     return out | {k: np.asarray(p[k]) for k in ("target_p", "target_R") if k in p}
