@@ -754,7 +754,8 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         return best, jnp.where(take, sc, sc_best)
 
     z = jnp.zeros((M, T), dtype)
-    best0 = IKResult(jnp.zeros((M, T, n), dtype), z > 0, z, z, z, jnp.zeros((M, T), jnp.int32))
+    best0 = IKResult(jnp.zeros((M, T, n), dtype), z > 0, z, z, z, jnp.zeros((M, T), jnp.int32),
+                     z > 0)
     best, _ = jax.lax.fori_loop(0, nb, pick, (best0, jnp.full((M, T), -jnp.inf, dtype)))
     return _materialised(best)
 
