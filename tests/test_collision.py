@@ -392,10 +392,16 @@ def test_config_parses_and_params():
         C.obstacle_params([{"shape": "cone"}])
     empty = C.obstacle_params([])
     assert all(v.shape[0] == 0 for g in empty.values() for v in g.values())
-    lst = C.Collision.model_validate({"radius": [0.1, 0.2], "self": False, "links": "urdf"})
+    lst = C.Collision.model_validate({"radius": [0.1, 0.2], "self": False})
     assert lst.link_radii(2) == (0.1, 0.2) and lst.self_ is False
     with pytest.raises(ValueError, match="2 radii but the chain has 3 links"):
         lst.link_radii(3)
+    # links: urdf takes the URDF's shapes' radii; auto needs one
+    assert C.Collision.model_validate({"links": "urdf", "self": False}).radius is None
+    for bad, says in (({"links": "urdf", "radius": 0.1}, "shapes give the radii"),
+                      ({"links": "auto"}, "needs the capsules' radius")):  # fmt: skip
+        with pytest.raises(ValueError, match=says):
+            C.Collision.model_validate(bad)
     assert C.Collision(radius=0.1, self_=False).self_ is False  # by name from Python
 
 
