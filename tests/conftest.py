@@ -8,12 +8,23 @@ import tempfile
 import jax
 import pytest
 
+from designopt.cli.setup import use_cache
+
 jax.config.update("jax_enable_x64", True)
 
 # CLI calls in the tests keep compiled programs in a cache of this session's own, never in
 # the user's (~/.cache/designopt/jax): other processes writing there at the same time (a
 # run in another terminal, another test session) must not feed this one their entries.
+# pytest-xdist's workers inherit the controller's variable: they share the folder.
 os.environ.setdefault("DESIGNOPT_CACHE_DIR", tempfile.mkdtemp(prefix="designopt-test-cache-"))
+
+# The whole session keeps its compiled programs there from the first test on, as the CLI
+# does for its runs (designopt.cli.setup.use_cache): a program that another test module
+# (or a worker, or a child process given this folder) compiled already is loaded, not
+# compiled again, after _release_compiled_programs dropped it from memory. Loaded
+# programs are XLA's own serialized executables: the same numbers. (Without this, the
+# first in-process CLI call switched the cache on for the rest of the session anyway.)
+use_cache()
 
 
 @pytest.fixture(autouse=True, scope="module")

@@ -27,8 +27,10 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-def env(tmp: Path) -> dict[str, str]:
-    e = dict(os.environ, JAX_PLATFORMS="cpu", DESIGNOPT_CACHE_DIR=str(tmp / "cache"))
+def env() -> dict[str, str]:
+    """The children's environment: CPU, and the test session's compilation cache
+    ($DESIGNOPT_CACHE_DIR, tests/conftest.py), shared with the other tests' runs."""
+    e = dict(os.environ, JAX_PLATFORMS="cpu")
     e.pop("XLA_FLAGS", None)
     e.pop("JAX_COORDINATOR_ADDRESS", None)
     return e
@@ -36,7 +38,7 @@ def env(tmp: Path) -> dict[str, str]:
 
 def designopt(args: list[str], tmp: Path, **kw) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "designopt.cli", *args], cwd=ROOT,
-                            env=env(tmp), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            env=env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, **kw)  # fmt: skip
 
 

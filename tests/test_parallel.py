@@ -224,7 +224,7 @@ def test_config_section_validated(tmp_path: Path) -> None:
 
 
 def _cli(args: list[str], tmp: Path) -> subprocess.CompletedProcess:
-    env = dict(os.environ, JAX_PLATFORMS="cpu", DESIGNOPT_CACHE_DIR=str(tmp / "cache"))
+    env = dict(os.environ, JAX_PLATFORMS="cpu")  # the session's cache (tests/conftest.py)
     env.pop("XLA_FLAGS", None)
     return subprocess.run([sys.executable, "-m", "designopt.cli", *args], capture_output=True,
                           text=True, cwd=ROOT, env=env, timeout=300)  # fmt: skip

@@ -22,9 +22,10 @@ def reference(tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="session")
-def child_env(tmp_path_factory) -> dict[str, str]:
-    """The environment of child processes: one compilation cache for the suite."""
+def child_env() -> dict[str, str]:
+    """The environment of child processes: the test session's compilation cache
+    (tests/conftest.py), where the in-process ``reference`` run left TINY's programs."""
     env = dict(os.environ)
-    env["DESIGNOPT_CACHE_DIR"] = str(tmp_path_factory.mktemp("jax_cache"))
+    assert env.get("DESIGNOPT_CACHE_DIR"), "tests/conftest.py sets the session's cache"
     env["PYTHONPATH"] = str(Path(__file__).resolve().parents[2])
     return env
