@@ -322,12 +322,6 @@ def evaluate(cfg: Any, designs: Designs, where: str = "config") -> dict[str, np.
     given takes the middle of its box)."""
     job = Job.build(cfg, where, n_designs=1)
     X = matrix(job.problem, designs, where)
-    o = cfg.optimizer
-    if job.problem.norm_bounds is not None and getattr(cfg, "parallel", None) is None:
-        # the normalisation probe compiled the run's objective for (runs, particles)
-        # designs (job.build_problem): score through it rather than compile another
-        return score(job.problem, X, eval_shape=(o.n_runs, o.n_particles), dtype=job.dtype,
-                     compiled=True)  # fmt: skip
     return score(job.problem, X, batch=cfg.scan.batch if cfg.scan else 256)
 
 

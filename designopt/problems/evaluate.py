@@ -16,21 +16,18 @@ from designopt.problems.base import Problem, evaluate_batch
 
 
 def score(problem: Problem, X: np.ndarray, batch: int | None = None, plan: Any = None,
-          eval_shape: tuple[int, int] | None = None, dtype: Any = None,
-          compiled: bool = False) -> dict[str, np.ndarray]:  # fmt: skip
+          eval_shape: tuple[int, int] | None = None, dtype: Any = None
+          ) -> dict[str, np.ndarray]:  # fmt: skip
     """f and every index (with standard errors) of designs X (n, D), in vmapped batches of
     a fixed size (the last one padded), so one compiled program serves any n. ``plan``
     (``designopt.core.devices.scoring_plan``) splits each batch's designs over its devices.
     ``eval_shape`` (a run's ``RunResult.eval_shape``) and ``dtype`` (the run's): batches
     of that shape through the run's own compiled objective (``evaluate_batch``), so
-    scoring a run's designs compiles nothing new. ``compiled``: that program is compiled
-    already (a normalisation probe's): it scores however few designs (padded), since
-    compiling one of another shape costs more than the padded rows' arithmetic."""
+    scoring a run's designs compiles nothing new."""
     X = np.asarray(X, np.float64)
     # the run's program where at least half of its rows are real designs (a sweep's run
     # shape holds all members' runs: padding a member's few designs to it costs more)
-    full = eval_shape is not None and (compiled or 2 * len(X) >= eval_shape[0] * eval_shape[1])
-    if full and plan is None:
+    if eval_shape is not None and plan is None and 2 * len(X) >= eval_shape[0] * eval_shape[1]:
         return _score_groups(problem, X, eval_shape, dtype)
     n = X.shape[0]
     b = n if batch is None else max(1, min(batch, n))
