@@ -189,6 +189,12 @@ def test_max_minutes_stops_cleanly_and_the_printed_command_finishes(tmp_path, ch
     for _ in range(10):
         p = spawn([*args, "--max-minutes", f"{minutes:.6f}"], env)
         _, err = p.communicate(timeout=120)
+        if p.returncode == 0 and stops == 0:
+            # the whole run fitted the slot (the timing run met a busier machine): a
+            # shorter slot, on a fresh output
+            out.unlink()
+            minutes *= 0.5
+            continue
         if p.returncode == 0:
             break
         stops += 1
