@@ -61,12 +61,14 @@ def _cost(s) -> Cost:
       (1.9 kB measured for the PUMA's 6 × 6 with n_best 2, 0.4 kB for a planar 2R);
     - ``per_design`` (task): the FK database, n_db entries of joints, pose and Z-order
       key, 8 B × (joints + 6) each (91 B measured for 6 joints);
-    - ``program`` (task): compiling the batched IK. Its entry-wise LM step is unrolled
-      once per phase of the slot schedule (4096, 512, 64 slots: three for a swarm),
-      each phase some 40 MiB + 4.6 MiB × joints × residual rows (3 position, 6 with a
-      tool axis), on top of 250 MiB for the rest (database, seeds, final check, the
-      runtime's arenas): 0.45 GB measured for the planar 2R, 0.64-0.7 GB (two phases) and
-      0.83-0.97 GB (three) for the PUMA 560 with a tool axis (DH and URDF).
+    - ``program`` (task): compiling the batched IK, 250 MiB for the database, seeds,
+      final check and the runtime's arenas, plus 40 MiB + 4.6 MiB × joints × residual
+      rows (3 position, 6 with a tool axis) per term of ``ik._phases`` (4096, 512, 64
+      slots: three for a swarm). The terms were measured when the LM step was compiled
+      once per slot phase (0.45 GB for the planar 2R, 0.64-0.7 GB with two phases and
+      0.83-0.97 GB with three for the PUMA 560 with a tool axis); the step is one copy
+      now (busy chunks of B/8 slots, issue #36), so the estimate errs high, and
+      ``tests/test_preflight.py`` checks it within 1.5× of a measured peak.
 
     With ``arms`` every arm solves every target: the per-target and per-design bytes are
     A times one arm's (plus the arms' kept capsules, 48 B per joint and target)."""
@@ -79,7 +81,7 @@ def _cost(s) -> Cost:
         o = s.task.ik
         n, c = taskindex.n_targets(s), taskindex.chunk(s)
         r = 3 if taskindex.mode(s) == "position" else 6
-        phases = len(ik._phases(o.slots or 4096))  # a swarm fills the default's 4096 slots
+        phases = len(ik._phases(o.slots or 4096))  # the measured model's terms (errs high)
         A = 1 if s.arms is None else len(s.arms)  # each arm solves every target
         seg = 0 if s.arms is None else 8 * 6 * n_q  # the arms' kept capsules
         mem = {
