@@ -106,7 +106,9 @@ def one(argv: list[str], cache: Path, out: str) -> dict[str, float | str]:
     env = dict(os.environ, DESIGNOPT_CACHE_DIR=str(cache), PYTHONUNBUFFERED="1")
     exe = Path(sys.executable).with_name("designopt")
     cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "designopt.cli"]
-    cmd += [a.format(out=out) for a in argv] + (["--overwrite"] if argv[0] != "eval" else [])
+    cmd += [a.format(out=out) for a in argv] + (
+        ["--overwrite"] if argv[0] not in ("eval", "view") else []
+    )
     t0 = time.perf_counter()
     p = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, text=True)  # fmt: skip

@@ -24,19 +24,30 @@ N_POINTS = 3000
 RATES = ("coverage", "ik_success", "reach")  # success rates: clipped to [0, 1], Wilson band
 
 
-def _full(s: DavinciSettings, params, x: np.ndarray) -> jnp.ndarray:
-    return objective.full_designs(params, jnp.asarray(np.atleast_2d(x), mc.out_dtype()))[0]
+def _full(params, x: np.ndarray) -> np.ndarray:
+    """``objective.full_designs`` of one design, in NumPy (no one-op programs)."""
+    dt = np.dtype(mc.out_dtype())
+    full = np.array(params["fixed"], dt)
+    full[np.asarray(params["var_cols"])] = np.asarray(x, dt) * np.asarray(params["var_scale"], dt)
+    return full
+
+
+def _jaw_points(s: DavinciSettings, params, x: jnp.ndarray, dt) -> tuple[jnp.ndarray, ...]:
+    """The first N_POINTS dexterity samples of design x (its variables): jaw points
+    relative to H, their 1/k and whether they lie in the joint ranges."""
+    xf = objective.full_designs(params, x[None])[0]
+    q, inside = objective.workspace_samples(s, params, xf, dt)
+    q, inside = q[:N_POINTS], inside[:N_POINTS]
+    _, p = mech.ARM.fk(xf, q)
+    return p - mech.rcm_point(xf), objective.inv_k(s, xf, q), inside
 
 
 def workspace(s: DavinciSettings, params, x: np.ndarray, folder: Path, title: str) -> list[Path]:
     """Jaw points J of the dexterity samples around H, coloured by 1/k."""
     dt = mc.out_dtype()
-    xf = _full(s, params, x)
-    q, inside = objective.workspace_samples(s, params, xf, dt)
-    q, inside = q[:N_POINTS], np.asarray(inside[:N_POINTS])
-    c = np.asarray(objective.inv_k(s, xf, q))
-    _, p = mech.ARM.fk(xf, q)
-    p = np.asarray(p) - np.asarray(mech.rcm_point(xf))
+    # one jitted call (op by op, the samples, FK and Jacobian compiled ~100 small programs)
+    pts = jax.jit(lambda P, X: _jaw_points(s, P, X, dt))
+    p, c, inside = (np.asarray(a) for a in pts(params, jnp.asarray(x, dt)))
     fig = style.figure(figsize=(6.2, 5.2))
     ax = fig.add_subplot(1, 1, 1, projection="3d")
     sc = ax.scatter(p[inside, 0], p[inside, 1], p[inside, 2], s=1, c=c[inside], cmap="viridis",
@@ -65,7 +76,7 @@ def gci_line(s: DavinciSettings, params, x: np.ndarray, names: tuple[str, ...], 
     dt = mc.out_dtype()
     lo, hi = s.variables.get("l_IJ", (2.0, 30.0))
     ls = np.linspace(lo, hi, N_LINE)
-    base = np.asarray(_full(s, params, x))
+    base = _full(params, x)
     X = np.tile(base, (N_LINE, 1))
     X[:, 3] = ls
     est = jax.jit(jax.vmap(lambda xf: objective.dexterity(s, params, xf, dt)))(jnp.asarray(X, dt))
