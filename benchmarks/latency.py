@@ -15,6 +15,11 @@ A ``run`` prints its own split (``wall … end to end = start-up … + figures �
     python benchmarks/latency.py                   # every shipped config (about 30 min on 2 cores)
     python benchmarks/latency.py --only master9 --only puma560-eval
     python benchmarks/latency.py --list            # the commands it would run
+    python benchmarks/latency.py --only davinci --programs 5   # and where the compile goes
+
+``--programs N`` runs every command once more, cold, with ``JAX_LOG_COMPILES=1`` (the
+logging costs a little: not in the table's rows) and prints its N programs with the
+longest XLA compilation, and its tracing and lowering time in all.
 """
 
 from __future__ import annotations
@@ -28,6 +33,7 @@ import tempfile
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -69,6 +75,10 @@ END_TO_END = re.compile(
 )
 COMPILE = re.compile(r"compile (?P<compile>[\d.]+) s")
 PROGRAMS = re.compile(r"(?P<n>\d+) XLA compilations")
+LOGGED = re.compile(
+    r"Finished (?P<what>XLA compilation of|tracing|jaxpr to MLIR module conversion) "
+    r"(?P<name>\S+).* in (?P<s>[\d.e+-]+) sec"
+)
 FIRST_ITERATION = re.compile(r":\s+\d+%\|[^|]*\|\s*(?P<n>\d+)/\d+")
 
 
@@ -101,9 +111,12 @@ def _stream(pipe, t0: float, out: list[tuple[float, str]]) -> None:
         out.append((time.perf_counter() - t0, buf))
 
 
-def one(argv: list[str], cache: Path, out: str) -> dict[str, float | str]:
-    """One command in a fresh process with ``cache`` as its compilation cache."""
+def one(argv: list[str], cache: Path, out: str, log: bool = False) -> dict[str, Any]:
+    """One command in a fresh process with ``cache`` as its compilation cache (``log``:
+    with JAX's compile log, its lines in ``row["log"]``)."""
     env = dict(os.environ, DESIGNOPT_CACHE_DIR=str(cache), PYTHONUNBUFFERED="1")
+    if log:
+        env["JAX_LOG_COMPILES"] = "1"
     exe = Path(sys.executable).with_name("designopt")
     cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "designopt.cli"]
     cmd += [a.format(out=out) for a in argv] + (
@@ -125,7 +138,7 @@ def one(argv: list[str], cache: Path, out: str) -> dict[str, float | str]:
     if rc != 0:
         tail = "\n".join(ln for _, ln in (lines + errs)[-15:])
         raise SystemExit(f"{' '.join(cmd)} failed ({rc}):\n{tail}")
-    row: dict[str, float | str] = {"wall": wall}
+    row: dict[str, Any] = {"wall": wall, "log": [ln for _, ln in errs if "Finished" in ln]}
     text = "\n".join(ln for _, ln in lines)
     m = END_TO_END.search(text)
     if m:
@@ -155,6 +168,8 @@ def main() -> None:
     ap.add_argument("--only", action="append", default=[], metavar="NAME",
                     help="only this command (repeat); names: --list")  # fmt: skip
     ap.add_argument("--list", action="store_true", help="print the commands and stop")
+    ap.add_argument("--programs", type=int, default=0, metavar="N",
+                    help="also a logged cold run of each: its N longest XLA compilations")  # fmt: skip
     args = ap.parse_args()
     todo = [(n, c) for n, c in COMMANDS if not args.only or n in args.only]
     if args.list or not todo:
@@ -174,6 +189,30 @@ def main() -> None:
                 row = one(argv, cache, str(Path(tmp) / f"{name}-{which}"))
                 print(f"| {name} | {which} | " + " | ".join(fmt(row, k) for k in keys) + " |",
                       flush=True)  # fmt: skip
+        for name, argv in todo if args.programs else ():
+            row = one(argv, Path(tmp) / f"log-{name}", str(Path(tmp) / f"{name}-log"), log=True)
+            print(f"\n{name}, cold, logged: {profile(row['log'], args.programs)}", flush=True)
+
+
+def profile(lines: list[str], n: int) -> str:
+    """The n programs with the longest XLA compilation (seconds, × how many of that name)
+    and the tracing and lowering time in all, from JAX's compile log."""
+    xla: dict[str, list[float]] = {}
+    trace = 0.0
+    for ln in lines:
+        m = LOGGED.search(ln)
+        if m and m["what"] == "XLA compilation of":
+            xla.setdefault(m["name"], []).append(float(m["s"]))
+        elif m:
+            trace += float(m["s"])
+    top = sorted(xla.items(), key=lambda kv: -sum(kv[1]))[:n]
+    total = sum(sum(v) for v in xla.values())
+    parts = ", ".join(f"{k} {sum(v):.1f}" + (f" ({len(v)}×)" if len(v) > 1 else "")
+                      for k, v in top)  # fmt: skip
+    return (
+        f"XLA {total:.1f} s in {sum(len(v) for v in xla.values())} programs ({parts}); "
+        f"tracing and lowering {trace:.1f} s"
+    )
 
 
 if __name__ == "__main__":

@@ -47,6 +47,12 @@ def _origins(model: Any, X: jax.Array, q: jax.Array) -> jax.Array:
     return model.joint_frames(X, q)[0]
 
 
+@partial(jax.jit, static_argnums=(0, 3))
+def _ends(model: Any, X: jax.Array, q: jax.Array, links: tuple[int, ...]) -> jax.Array:
+    """Capsule end points (M, C, L, 2, 3) of the kept links: one compiled call."""
+    return _segments(model.joint_frames(X, q)[0], links)
+
+
 @partial(jax.jit, static_argnums=2)
 def _pair_gaps(seg: jax.Array, radii: jax.Array, pairs: tuple) -> jax.Array:
     """Capsule distances (C, len(pairs)) of the link pairs of segments (C, L, 2, 3)."""
@@ -88,7 +94,7 @@ class Geometry:
     def outer(self, model: Any, X: jax.Array, q: jax.Array) -> jax.Array:
         """Capsule end points (M, C, L, 2, 3) for designs X (M, P) and joints q (C, n)."""
         if self.urdf is None:
-            return _segments(_origins(model, X, q), self.links)
+            return _ends(model, X, q, self.links)
         from designopt.kinematics.urdf_collision import world_capsules
 
         imp, bindings, caps = self.urdf
@@ -111,8 +117,13 @@ def geometry(s: SerialSettings, mech: Mechanism) -> Geometry | None:
         return None
     key = s.model_dump_json()
     if key not in _GEOMETRY:
-        with jax.ensure_compile_time_eval():
+        try:  # at set-up: the jitted helpers run as compiled programs
             _GEOMETRY[key] = _geometry(s, mech)
+        except (jax.errors.TracerArrayConversionError, jax.errors.ConcretizationTypeError):
+            # first asked while a program is traced: evaluated op by op (some fifty
+            # one-op programs, hence not the first choice)
+            with jax.ensure_compile_time_eval():
+                _GEOMETRY[key] = _geometry(s, mech)
     return _GEOMETRY[key]
 
 
@@ -180,8 +191,8 @@ def _drop_always(g: Geometry, s: SerialSettings, mech: Mechanism, pairs: tuple,
     if not pairs:
         return g
     q = mech.lower + (mech.upper - mech.lower) * rng.uniform(size=(512, mech.n))
-    seg = g.outer(mech.model, jnp.asarray(_middle(mech, s))[None], jnp.asarray(q))[0]
-    d = np.asarray(_pair_gaps(seg, jnp.asarray(g.radii), tuple(pairs)))
+    seg = np.asarray(g.outer(mech.model, jnp.asarray(_middle(mech, s))[None], jnp.asarray(q)))[0]
+    d = np.asarray(_pair_gaps(seg, np.asarray(g.radii), tuple(pairs)))
     keep, always = [], []
     for p, ij in enumerate(pairs):
         (always if np.mean(d[:, p] < g.margin) >= ALWAYS else keep).append(ij)
