@@ -169,3 +169,22 @@ def test_a_run_prints_its_wall_time_end_to_end(tmp_path, capsys):
     parts = [float(x) for x in re.findall(r"(?:start-up|setup|optimizer|scoring|figures|rest) "
                                           r"([\d.]+) s", last)]  # fmt: skip
     assert len(parts) == 6 and abs(sum(parts) - total) <= 0.35  # each rounded to 0.1 s
+
+
+def test_start_up_counts_from_this_process_even_when_a_shell_execs_it():
+    """A shell's last command is ``exec``-ed into the shell's process, whose /proc start
+    is the shell's: the start-up of ``bash -c 'pip install … && designopt run …'`` must
+    not include the install (2 s of sleep stand in for it)."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    code = "from designopt.cli.commands import process_age as a; print(a())"
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]))
+    r = subprocess.run(["bash", "-c", f'sleep 2; exec "{sys.executable}" -c "{code}"'],
+                       capture_output=True, text=True, env=env, check=True)  # fmt: skip
+    assert 0.0 <= float(r.stdout) < 1.0, r.stdout
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
+                       check=True)  # fmt: skip
+    assert 0.0 < float(r.stdout) < 1.0, r.stdout

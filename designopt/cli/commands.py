@@ -81,19 +81,28 @@ def wall_line(attrs: dict, clock, figures_s: float) -> str:
             f"{clock.compile:.1f} s of it ({clock.compilations} XLA programs)")
 
 
+EXEC_GAP_S = 1.0
+"""Python's own start before it imports the CLI takes some 0.04 s: a process whose /proc
+age exceeds its time since that import by more than this was started by a shell that
+``exec``-ed it (``bash -c 'pip install … && designopt run …'``, the last command of a
+subshell), and /proc dates it from the shell's fork."""
+
+
 def process_age() -> float:
-    """Seconds since this process started (Linux: /proc; elsewhere since designopt's CLI
-    was imported)."""
+    """Seconds since this process started (Linux: /proc; elsewhere, or when the process
+    was ``exec``-ed from an older one, since designopt's CLI was imported)."""
     import os
     import time
 
+    imported = time.perf_counter() - _IMPORTED
     try:
         with open("/proc/self/stat") as f:
             start = int(f.read().rsplit(")", 1)[1].split()[19]) / os.sysconf("SC_CLK_TCK")
         with open("/proc/uptime") as f:
-            return max(float(f.read().split()[0]) - start, 0.0)
+            age = max(float(f.read().split()[0]) - start, 0.0)
     except (OSError, ValueError, IndexError):
-        return time.perf_counter() - _IMPORTED
+        return imported
+    return age if age - imported <= EXEC_GAP_S else imported
 
 
 def cmd_run(args: argparse.Namespace) -> int:
