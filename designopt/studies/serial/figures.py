@@ -218,8 +218,10 @@ def draw_robot(rec: RunRecord, folder: Path) -> list[Path]:
     orig = drawing.original_arm(s, mech, q)
     final = drawing.arms(s, mech, [x], q, labels=["final design"], colors=["#ff7f0e"])[0][0]
     note = drawing.meshes_note(s, design, q)
-    scenes = [robot.Scene(arms=[orig], region=region, title="original: the URDF's own numbers"),
-              robot.Scene(arms=[final], region=region, title="final design")]  # fmt: skip
+    around = drawing.obstacles_and_ports(s)  # the patient and the port, where configured
+    scenes = [robot.Scene(arms=[orig], region=region, title="original: the URDF's own numbers",
+                          **around),
+              robot.Scene(arms=[final], region=region, title="final design", **around)]  # fmt: skip
     title = (f"{Path(s.chain.urdf).name} at the home pose ({drawing.joint_values(s, q)}; each joint at 0 "
              "where its limits allow, else mid-range)")  # fmt: skip
     import textwrap
