@@ -24,14 +24,6 @@ N_POINTS = 3000
 RATES = ("coverage", "ik_success", "reach")  # success rates: clipped to [0, 1], Wilson band
 
 
-def _full(params, x: np.ndarray) -> np.ndarray:
-    """``objective.full_designs`` of one design, in NumPy (no one-op programs)."""
-    dt = np.dtype(mc.out_dtype())
-    full = np.array(params["fixed"], dt)
-    full[np.asarray(params["var_cols"])] = np.asarray(x, dt) * np.asarray(params["var_scale"], dt)
-    return full
-
-
 def _jaw_points(s: DavinciSettings, params, x: jnp.ndarray, dt) -> tuple[jnp.ndarray, ...]:
     """The first N_POINTS dexterity samples of design x (its variables): jaw points
     relative to H, their 1/k and whether they lie in the joint ranges."""
@@ -76,11 +68,14 @@ def gci_line(s: DavinciSettings, params, x: np.ndarray, names: tuple[str, ...], 
     dt = mc.out_dtype()
     lo, hi = s.variables.get("l_IJ", (2.0, 30.0))
     ls = np.linspace(lo, hi, N_LINE)
-    base = _full(params, x)
-    X = np.tile(base, (N_LINE, 1))
-    X[:, 3] = ls
-    est = jax.jit(jax.vmap(lambda xf: objective.dexterity(s, params, xf, dt)))(jnp.asarray(X, dt))
-    g, se = np.asarray(est[0]), np.asarray(est[1])
+
+    def line(P, x, ls):  # one jitted call: the design row, then l_IJ along the line
+        base = objective.full_designs(P, x[None])[0]
+        est = jax.vmap(lambda v: objective.dexterity(s, P, base.at[3].set(v), dt))(ls)
+        return est[0], est[1], base
+
+    g, se, base = (np.asarray(a) for a in jax.jit(line)(params, jnp.asarray(x, dt),
+                                                          jnp.asarray(ls, dt)))  # fmt: skip
     fig, ax = style.subplots(figsize=(5.6, 3.8))
     style.band(ax, ls, g, se, lw=1.2, label="GCI ± 2 SE")
     for (lab, v), ls_ in zip(marks.items(), ("--", ":"), strict=False):
