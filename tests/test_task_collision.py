@@ -168,6 +168,9 @@ def test_two_facing_arms_reach_all_and_arms_free_match_the_enumeration():
         want_free = np.mean((gap >= 2 * R_LINK)[both])
         assert 0 < want_free < 1  # the arms do meet in part of the shared disk
         assert abs(got["arms_free"][m] - want_free) <= 4 * got["arms_free_se"][m], (m, got)
+        want_ok = np.mean((gap >= 2 * R_LINK) & both)  # unconditional: over every tuple
+        assert abs(got["arms_ok"][m] - want_ok) <= 4 * got["arms_ok_se"][m], (m, got)
+        assert got["arms_free_of"][m] == 4096 and got["arms_free_n"][m] > 30
 
 
 def _seg_seg(a0, a1, b0, b1, n: int = 64):

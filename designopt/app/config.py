@@ -389,6 +389,10 @@ _MESSAGES = {
     "extra_forbidden": "unknown key",
     "missing": "missing",
     "literal_error": "must be one of {expected}",
+    "string_pattern_mismatch": "must be one word without spaces or brackets",
+    "string_too_short": "must not be empty",
+    "string_too_long": "takes at most {max_length} characters",
+    "enum": "must be one of {expected}",
 }
 """Pydantic's messages in the words of a config file (no type internals)."""
 
@@ -404,6 +408,10 @@ def _input_path(err: dict, raw: Any) -> tuple[list[str], int]:
     out, node, depth = [], raw, 0
     loc = err["loc"]
     for n, x in enumerate(loc):
+        nxt = loc[n + 1] if n + 1 < len(loc) else None
+        if isinstance(node, dict) and x in node and not isinstance(node[x], dict | list) \
+                and isinstance(nxt, str) and nxt in node:  # fmt: skip
+            continue  # a union tag named like a key beside it (a URDF chain's "urdf")
         if isinstance(node, dict) and x in node:
             node, depth = node[x], depth + 1
             out.append(str(x))

@@ -26,7 +26,7 @@ import numpy as np
 
 from designopt.app.config import linear, senses
 from designopt.core.errors import ConfigError
-from designopt.problems.base import Problem
+from designopt.problems.base import Problem, na_worst
 
 FRONT_STREAM = 0x46524F4E  # "FRON"
 """The re-scoring samples: ``fold_in(key(seed), FRONT_STREAM)``, apart from the named
@@ -59,11 +59,13 @@ def objective_problem(problem: Problem, front: Mapping[str, Any]) -> Problem:
     names, sg = tuple(front), signs(front)
     lin = weights(front, problem.names)
     fn0 = problem.fn
+    na = problem.na_range  # an n/a index ranks worst (the archive keeps its NaN)
 
     def fn(params, X, key):
         f, aux = fn0(params, X, key)
         aux = {"f": f, **aux, **{k: X @ jnp.asarray(w, X.dtype) for k, w in lin.items()}}
-        F = jnp.stack([aux[k] for k in names], -1)
+        F = jnp.stack([na_worst(aux[k], *na[k], g > 0) if k in na else aux[k]
+                       for k, g in zip(names, sg, strict=True)], -1)  # fmt: skip
         return F * jnp.asarray(sg, F.dtype), aux
 
     return dataclasses.replace(problem, fn=fn, n_objectives=len(names), shard_samples=None)
@@ -153,14 +155,18 @@ def groups(job: Any, problem: Problem, res: Any) -> dict[str, Any]:
     vals = score(rescore, X)
     for k, w in weights(front, problem.names).items():  # exact: no samples behind them
         vals[k], vals[k + "_se"] = X @ w, np.zeros(len(X))
-    check_finite(vals, where, "the re-scored front", problem.names, X)
-    F = np.stack([vals[k] for k in names], -1)
+    na = problem.na_range
+    check_finite(vals, where, "the re-scored front", problem.names, X, na=tuple(na))
+    F = np.stack([vals[k] for k in names], -1)  # n/a stays NaN in the archive
     se = np.stack([vals.get(k + "_se", np.zeros(len(X))) for k in names], -1)
-    order = np.lexsort(F.T[::-1] * sg[::-1, None])
-    X, F, se = X[order], F[order], se[order]
+    Fs = np.stack([np.asarray(na_worst(jnp.asarray(F[:, j]), *na[k], g > 0)) if k in na
+                   else F[:, j] for j, (k, g) in enumerate(zip(names, sg, strict=True))],
+                  -1)  # fmt: skip  # what the search ranked: an n/a value at its worst
+    order = np.lexsort(Fs.T[::-1] * sg[::-1, None])
+    X, F, se, Fs = X[order], F[order], se[order], Fs[order]
     vals = {k: v[order] for k, v in vals.items()}
     ref = np.asarray(res.ref_point, np.float64)  # minimised space
-    Fmin = F * sg
+    Fmin = Fs * sg
     rank = pareto.front_ranks_np(Fmin, vals.get("violation"))
     hv = pareto.hypervolume(Fmin[rank == 0], ref)
     opt = {"hypervolume": res.history, "final_hypervolume": res.best_f,

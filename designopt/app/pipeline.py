@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import contextlib
 import math
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -118,7 +118,7 @@ class Single:
         return groups
 
     def check(self, job: Job, groups: dict[str, Any]) -> None:
-        check_finite(groups["final"], job.where, "the final design")
+        check_finite(groups["final"], job.where, "the final design", na=tuple(job.problem.na_range))
 
     def lines(self, rec: Any) -> list[str]:
         return [*rec.design_lines(), rec.run_line()]
@@ -290,7 +290,7 @@ def sweep(cfg: Any, text: str | None = None, where: str = "config", out: Path | 
                 res = optimise(job, job.problem, members=opt_sets, progress=bar)
                 for j, (i, m) in enumerate(mem):
                     t = run_groups(job.cfg, job.problem, res.member(j), job.dtype)
-                    check_finite(t["final"], where, f"sweep member {i} {m}")
+                    check_finite(t["final"], where, f"sweep member {i} {m}", na=tuple(job.problem.na_range))
                     t["attrs"] = {"overrides": m,
                                   "config_resolved_yaml": sw.resolved(cfg, m)}  # fmt: skip
                     tree["members"][f"{i:03d}"] = t
@@ -325,6 +325,16 @@ def evaluate(cfg: Any, designs: Designs, where: str = "config") -> dict[str, np.
     return score(job.problem, X, batch=cfg.scan.batch if cfg.scan else 256)
 
 
+def evaluate_one(cfg: Any, design: Mapping[str, float], where: str = "config"
+                 ) -> tuple[dict[str, float], list[str]]:  # fmt: skip
+    """One design's indices (:func:`evaluate`) as floats, with the study's warnings on
+    them, the lines ``run`` prints for its final design (``Study.warnings``)."""
+    job = Job.build(cfg, where, n_designs=1)
+    X = matrix(job.problem, design, where)
+    res = {k: float(v[0]) for k, v in score(job.problem, X, batch=1).items()}
+    return res, list(job.study.warnings(cfg.study, res))
+
+
 def scan(cfg: Any, text: str | None = None, where: str = "config", out: Path | None = None,
          progress: Progress = no_progress, dry_run: bool = False) -> Report:  # fmt: skip
     """Score the designs of the config's ``scan:`` section in vmapped batches → ScanRecord
@@ -349,7 +359,7 @@ def scan(cfg: Any, text: str | None = None, where: str = "config", out: Path | N
                     parts.append(score(problem, X[i : i + b], batch=b, plan=plan))
                     bar(min(b, X.shape[0] - i))
             res = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
-        check_finite(res, where, "scan", problem.names, X)
+        check_finite(res, where, "scan", problem.names, X, na=tuple(problem.na_range))
         tree = {"scan": {"names": np.array(problem.names, dtype="S"), "x": X,
                          "varied": np.array(varied, dtype="S"), **res,
                          "attrs": {"mode": cfg.scan.mode, "shape": sizes}},

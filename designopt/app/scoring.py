@@ -15,12 +15,17 @@ from designopt.problems.evaluate import score
 
 
 def check_finite(values: Mapping[str, Any], where: str, what: str,
-                 names: Sequence[str] = (), X: np.ndarray | None = None) -> None:  # fmt: skip
+                 names: Sequence[str] = (), X: np.ndarray | None = None,
+                 na: Sequence[str] = ()) -> None:  # fmt: skip
     """ConfigError (exit 2, nothing written) when a result holds NaN or inf: numbers a
     config let through that the arithmetic cannot take (lengths so large their powers
-    overflow in the run's precision). ``X`` (n, D): name the first design affected."""
+    overflow in the run's precision). ``X`` (n, D): name the first design affected.
+    ``na``: indices that may be n/a (``Problem.na_range``): NaN is their honest value
+    there (and their SE's), inf is not."""
     for k, v in values.items():
         a = np.asarray(v) if k != "attrs" else np.zeros(0)
+        if k.removesuffix("_se") in na and a.dtype.kind == "f":
+            a = np.nan_to_num(a, nan=0.0, posinf=np.inf, neginf=-np.inf)
         if a.dtype.kind != "f" or np.all(np.isfinite(a)):
             continue
         at = ""

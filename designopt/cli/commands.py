@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import math
 import sys
 import time
 from pathlib import Path
@@ -139,25 +140,32 @@ def cmd_scan(args: argparse.Namespace) -> int:
 
 def cmd_eval(args: argparse.Namespace) -> int:
     from designopt.app import pipeline
+    from designopt.results.base import value_text
 
     cfg, _ = _load(args)
     design = _parse_design(args.design)
-    res = {k: float(v[0]) for k, v in pipeline.evaluate(cfg, design, where=args.config).items()}
+    res, warns = pipeline.evaluate_one(cfg, design, where=args.config)
     feasible = None if "violation" not in res else bool(res["violation"] <= 0)
-    if args.json:
-        print(json.dumps(res | ({} if feasible is None else {"feasible": feasible})))
+    if args.json:  # valid JSON always: a value that is n/a (NaN) is null
+        out = {k: (v if math.isfinite(v) else None) for k, v in res.items()}
+        out |= ({} if feasible is None else {"feasible": feasible}) | {"warnings": warns}
+        print(json.dumps(out, allow_nan=False))
         return 0
     box = cfg.study.variables
     design = {k: design.get(k, 0.5 * (lo + hi)) for k, (lo, hi) in box.items()}
+    counts = ("_se", "_n", "_of")  # an index's SE and a ratio's counts: printed with it
     for k, v in res.items():
-        if k.endswith("_se"):
+        if k.endswith(counts) and k.rsplit("_", 1)[0] in res:
             continue
-        se = res.get(k + "_se")
-        print(f"{k:>15} = {v:.6g}" + (f" ± {se:.2g}" if se is not None else ""))
+        txt = value_text(v, res.get(k + "_se"), ".6g", ".2g", res.get(k + "_n"),
+                         res.get(k + "_of"))  # fmt: skip
+        print(f"{k:>15} = {txt}")
     print("design: " + ", ".join(f"{k} = {v:g}" for k, v in design.items()))
     if feasible is not None:
         print("constraints: " + ("feasible" if feasible else
                                  f"violated by {res['violation']:.3g} (an infeasible design)"))  # fmt: skip
+    for w in warns:
+        print(f"warning: {w}")
     return 0
 
 

@@ -122,6 +122,9 @@ class Points(Section):
         if not p.is_absolute() and ctx.get("config_dir") is not None:
             p = Path(ctx["config_dir"]) / p
         self._xyz = read_points(p)
+        if len(self._xyz) < 2:
+            raise ValueError(f"points file {p}: {len(self._xyz)} target(s); a task needs at "
+                             "least 2 (every index carries a standard error)")  # fmt: skip
         self.points = str(p)
         return self
 
@@ -229,8 +232,6 @@ class Task(Section):
             raise ValueError("port and tool_axis exclude each other: with a port, each "
                              "target's tool axis is the line from the port to the target; "
                              "remove one of them")  # fmt: skip
-        if self.insertion is not None and self.port is None:
-            raise ValueError("insertion: is the tool's depth past a port; give task.port")
         return self
 
     def depth_range(self) -> tuple[float, float]:
@@ -405,11 +406,13 @@ def depths(p: np.ndarray, port: Vec3) -> np.ndarray:
 
 
 def check_port(task: Task, n: int = 8192, port: Vec3 | None = None,
-               where: str = "task.port") -> None:  # fmt: skip
+               where: str = "task.port", insertion: tuple[float, float] | None = None,
+               insertion_key: str = "task.insertion") -> None:  # fmt: skip
     """ValueError naming ``task.insertion`` when no point of the region lies at a depth
     past the port (``port``, else ``task.port``) within the insertion range (checked on
     n samples of the region, or every point of a points file): then no target could ever
-    be reached."""
+    be reached. ``insertion`` (named ``insertion_key``): an arm's own range, else
+    ``task.insertion``."""
     port = task.port if port is None else port
     if port is None:
         return
@@ -420,9 +423,10 @@ def check_port(task: Task, n: int = 8192, port: Vec3 | None = None,
         p = np.asarray(_targets(kind(task.region), region_params(task.region, dt),
                                 jax.random.key(0), n, None, None)[0], np.float64)  # fmt: skip
     d = depths(p, port)
-    d0, d1 = task.depth_range()
+    ins = task.insertion if insertion is None else insertion
+    d0, d1 = (0.0, math.inf) if ins is None else ins
     if not np.any((d >= d0) & (d <= d1) & (d > 0)):
-        key = "task.insertion" if task.insertion is not None else where
+        key = insertion_key if ins is not None else where
         raise ValueError(
             f"{key}: no target of the region lies at a depth in [{d0:g}, {d1:g}] past the "
             f"port {list(port)} ({where}): the region's depths run from {d.min():.4g} to "

@@ -21,7 +21,7 @@ mesh's ``samples`` axis (``designopt.numerics.montecarlo.scan_chunks``); None: n
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from functools import partial
 from typing import Any
@@ -62,6 +62,10 @@ class Problem:
     norm_bounds: np.ndarray | None = None
     """(k, 2) min/max of the normalised indices (the Halton probe), archived with the
     run; the same numbers travel in ``params`` for the trace."""
+    na_range: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    """Indices that may be n/a (NaN, with NaN SE: a ratio over too few items) and the
+    range of each: a search ranks an n/a value at the end of its range that is worst
+    for its sense (:func:`na_worst`); the archive keeps the NaN."""
 
     def __post_init__(self) -> None:
         lo, hi = np.asarray(self.lower, np.float64), np.asarray(self.upper, np.float64)
@@ -96,6 +100,12 @@ class Problem:
         if getattr(self.constraints, "reads_indices", False):
             return scored(self.fn, self.constraints, self.params, X, jax.random.key(0))[2]
         return violation_of(self.constraints, self.params, X)
+
+
+def na_worst(v: Array, lo: float, hi: float, minimised: bool) -> Array:
+    """``v`` with NaN replaced by the worst value of [lo, hi] for a search that minimises
+    (hi) or maximises (lo) it."""
+    return jnp.where(jnp.isnan(v), jnp.asarray(hi if minimised else lo, v.dtype), v)
 
 
 def reads_indices(fn: Callable[[Any, Array, dict[str, Array]], Array]) -> Callable:

@@ -63,7 +63,9 @@ def probe_bounds(
     the swarm function ``fn`` with the Monte-Carlo key ``keys["samples"]`` (within
     :func:`evaluation_shape`: through ``problems.evaluate.score``, key 0, as the run's scoring; the
     studies' functions draw their samples from ``params`` and ignore the key). An index
-    that is flat over the sample gets max = min + 1 (no scaling, never a division by 0)."""
+    that is flat over the sample gets max = min + 1 (no scaling, never a division by 0);
+    n/a values (NaN: a ratio over too few items) are left out, and an index n/a at every
+    design gets [0, 1]."""
     Xn = mc.box_samples(keys["normalisation"], lower, upper, n_norm, "halton", dtype)
     shape = _SHAPE.get()
     if shape is None:
@@ -76,7 +78,8 @@ def probe_bounds(
         box = Problem(tuple(f"x{i}" for i in range(len(lower))), lower, upper, fn, params)
         sub = score(box, np.asarray(Xn), eval_shape=shape, dtype=dtype)
         vals = [sub[k] for k in names]
-    b = np.array([[float(v.min()), float(v.max())] for v in vals])
+    b = np.array([[float(np.nanmin(v)), float(np.nanmax(v))] if np.any(np.isfinite(v))
+                  else [0.0, 1.0] for v in vals])  # fmt: skip  # n/a values (NaN) left out
     b[:, 1] = np.where(b[:, 1] > b[:, 0], b[:, 1], b[:, 0] + 1.0)
     return b
 

@@ -34,6 +34,20 @@ def measured(key: str) -> bool:
     return key in MEASURED or key.endswith("_time_s") or key.endswith("_s")
 
 
+def value_text(v: Any, se: Any = None, vfmt: str = ".5f", sefmt: str = ".1e",
+               n: Any = None, of: Any = None) -> str:
+    """``v ± se`` for print; an n/a value (NaN: a ratio over too few items) as ``n/a``,
+    with ``(n of N)`` where its denominator's count is known; never a ``nan``."""
+    v = float(np.asarray(v)) + 0.0  # no "-0"
+    if np.isnan(v):
+        if n is not None and of is not None and np.isfinite(float(np.asarray(n))):
+            return f"n/a ({float(np.asarray(n)):.0f} of {float(np.asarray(of)):.0f})"
+        return "n/a"
+    if se is None or not np.isfinite(float(np.asarray(se))):
+        return f"{v:{vfmt}}"
+    return f"{v:{vfmt}} ± {float(np.asarray(se)):{sefmt}}"
+
+
 def text(v: Any) -> str:
     """A name as ``str`` (HDF5 gives bytes)."""
     return v.decode() if isinstance(v, bytes | np.bytes_) else str(v)

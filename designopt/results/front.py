@@ -64,7 +64,11 @@ class FrontRecord(Record):
         for every front design: e.g. the reach of a task front of gci and length), the
         study's summary indices first, then the rest by name, the violation last."""
         vals = self.values
-        own = [k for k in vals if not (k.endswith("_se") and k[:-3] in vals)]
+        def companion(k: str) -> bool:  # an index's SE, a ratio's counts (_n of _of)
+            stem, _, tail = k.rpartition("_")
+            return tail in ("se", "n", "of") and stem in vals
+
+        own = [k for k in vals if not companion(k)]
         rest = [k for k in own if k not in self.objectives]
         first = [k for k in self.hint("summary", ()) if k in rest and k != "violation"]
         later = sorted((k for k in rest if k not in first), key=lambda k: (k == "violation", k))
@@ -124,9 +128,14 @@ class FrontRecord(Record):
             return f"{k if u in ('-', '') else f'{k} [{u}]':>{w}}"
 
         def pm(v: np.ndarray, se: np.ndarray | None):
-            if se is None:
-                return lambda i: f"{v[i]:11.5g}".ljust(_PM)
-            return lambda i: f"{v[i]:11.5g} ± {se[i]:7.1e}"
+            def one(i: int) -> str:  # n/a (NaN: a ratio over too few items) as "n/a"
+                if np.isnan(v[i]):
+                    return f"{'n/a':>11}".ljust(_PM)
+                if se is None or not np.isfinite(se[i]):
+                    return f"{v[i] + 0.0:11.5g}".ljust(_PM)
+                return f"{v[i] + 0.0:11.5g} ± {se[i]:7.1e}"
+
+            return one
 
         cols = [
             (head(n, 10), lambda i, a=a: f"{self.X[i, a]:10.4g}") for a, n in enumerate(self.names)

@@ -9,13 +9,18 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from designopt.results.base import Record
+from designopt.results.base import Record, value_text
 
 
-def _pm(name: str, v: float, se: float | None) -> str:
+def _pm(name: str, v: float, se: float | None, fin: Any = None) -> str:
+    if np.isnan(v):  # n/a: a ratio over too few items
+        fin = {} if fin is None else fin
+        return f"  {name:<5} = " + value_text(v, se, n=fin.get(name + "_n"),
+                                               of=fin.get(name + "_of"))  # fmt: skip
+    v = v + 0.0  # no "-0"
     if se is None:
         return f"  {name:<5} = {v:.5g}"
-    rel = f"({100 * se / abs(v):.2f} %)" if v else ""
+    rel = f"({100 * se / abs(v):.2f} %)" if abs(v) > se else ""  # no ratio on a tiny value
     return f"  {name:<5} = {v:.5f} ± {se:.1e} {rel}"
 
 
@@ -106,7 +111,7 @@ class RunRecord(Record):
                          f"gained Δf = {np.max(r['gain']):.2e}")  # fmt: skip
         for k in self.hint("summary", ()):
             se = fin.get(k + "_se")
-            lines.append(_pm(k, float(fin[k]), None if se is None else float(se)))
+            lines.append(_pm(k, float(fin[k]), None if se is None else float(se), fin))
         if "violation" in fin:
             v = float(fin["violation"])
             ok = "feasible" if v <= 0 else f"violated by {v:.3g} (no feasible design found)"
@@ -129,7 +134,8 @@ class RunRecord(Record):
         if summary is not None:
             subs = [k for k in summary if k + "_se" in fin]
         lines.append(f"f = {self.f:.5f} (stage {self.stage}); "
-                     + "; ".join(f"{k} = {float(fin[k]):.5f} ± {float(fin[k + '_se']):.1e}"
+                     + "; ".join(f"{k} = " + value_text(fin[k], fin[k + "_se"], n=fin.get(k + "_n"),
+                                                        of=fin.get(k + "_of"))
                                  for k in subs))  # fmt: skip
         lines += [f"warning: {w}" for w in self.warnings]
         return lines

@@ -30,7 +30,7 @@ import numpy as np
 from designopt.kinematics.conditioning import inv_cond
 from designopt.numerics import montecarlo as mc
 from designopt.problems import normalise
-from designopt.problems.base import Problem, reads_indices
+from designopt.problems.base import Problem, na_worst, reads_indices
 from designopt.studies.serial import taskindex
 from designopt.studies.serial.mechanism import Mechanism, build
 from designopt.studies.serial.settings import IndexConstraint, SerialSettings
@@ -82,8 +82,11 @@ def build_task_fn(mech: Mechanism, s: SerialSettings, dtype: Any):
         out = {}
         for k, (v, se) in est.items():
             out[k], out[k + "_se"] = v, se
+        for k, (n, of) in taskindex.counts_of(s, mech, per, params).items():
+            out[k + "_n"], out[k + "_of"] = n.astype(dtype), jnp.full_like(n, of, dtype)
         b = params["bounds"]
-        f = normalise.weighted_sum([est[k][0] for k in names], b, w)
+        f = normalise.weighted_sum([search_value(k, est[k][0], wk > 0)
+                                    for k, wk in zip(names, w, strict=True)], b, w)  # fmt: skip
         lin = [i for i, k in enumerate(names) if taskindex.mean_type(k)]
         f_se = jnp.zeros_like(f)
         if lin:
@@ -91,11 +94,20 @@ def build_task_fn(mech: Mechanism, s: SerialSettings, dtype: Any):
                                        b[jnp.asarray(lin)], [w[i] for i in lin])  # fmt: skip
             f_se = jnp.std(c, -1, ddof=1) / np.sqrt(c.shape[-1])
         for i, k in enumerate(names):
-            if not taskindex.mean_type(k):
-                f_se = f_se + abs(w[i]) * out[k + "_se"] / jnp.abs(b[i, 1] - b[i, 0])
+            if not taskindex.mean_type(k):  # an n/a term is a search value: no SE
+                se = jnp.nan_to_num(out[k + "_se"], nan=0.0)
+                f_se = f_se + abs(w[i]) * se / jnp.abs(b[i, 1] - b[i, 0])
         return f, out | {"f_se": f_se}
 
     return fn
+
+
+def search_value(name: str, v: jax.Array, minimised: bool) -> jax.Array:
+    """The value a search ranks: an n/a ratio (NaN, ``taskindex.NA_WORST``) at the worst
+    end of its range for the search's sense, any other index as it is."""
+    if name not in taskindex.NA_WORST:
+        return v
+    return na_worst(v, *taskindex.NA_WORST[name], minimised)
 
 
 def constraints_fn(s: SerialSettings, names: tuple[str, ...], params: dict[str, Any],
@@ -122,7 +134,8 @@ def constraints_fn(s: SerialSettings, names: tuple[str, ...], params: dict[str, 
         return X @ p["lin_A"].astype(X.dtype).T - p["lin_b"].astype(X.dtype)
 
     def bound(c: IndexConstraint, aux: Mapping[str, jax.Array]) -> jax.Array:
-        return c.ge - aux[c.index] if c.ge is not None else aux[c.index] - c.le
+        v = search_value(c.index, aux[c.index], c.le is not None)  # n/a: violated most
+        return c.ge - v if c.ge is not None else v - c.le
 
     archived = [c.model_dump(exclude_none=True) for c in s.constraints]
     if not idx:
@@ -231,7 +244,8 @@ def problem(s: SerialSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Pro
         info["constraints"] = archived
     if task:
         info["task"] = {"mode": taskindex.mode(s), "n_targets": n_used}
-    typed = {"n_samples_used": n_used, "norm_bounds": b}
+    typed = {"n_samples_used": n_used, "norm_bounds": b,
+             "na_range": {k: v for k, v in taskindex.NA_WORST.items() if k in s.index_names()}}  # fmt: skip
     if task:  # the targets' indices need every target at once: no sample sharding
         return Problem(names, lower, upper, fn, params, info, cons, **typed)
 

@@ -89,6 +89,21 @@ class UrdfChain(Section):
     urdf_text: str | None = None
     _imported: Any = PrivateAttr(default=None)
 
+    @field_validator("set", mode="before")
+    @classmethod
+    def _flat(cls, v: Any) -> Any:
+        """``set`` as nested YAML (``joint3: {origin: {x: a2}}``) is the dotted
+        ``joint3.origin.x: a2``."""
+        if not isinstance(v, dict):
+            return v
+        out: dict[Any, Any] = {}
+        for k, x in v.items():
+            if isinstance(x, dict) and x:
+                out |= {f"{k}.{kk}": xx for kk, xx in cls._flat(x).items()}
+            else:
+                out[k] = x
+        return out
+
     @model_validator(mode="after")
     def _load(self, info: ValidationInfo) -> UrdfChain:
         from designopt.kinematics import urdf
@@ -308,9 +323,19 @@ class Arm(Section):
 
     base: ArmBase = ArmBase()
     port: tuple[float, float, float] | None = None
+    insertion: tuple[float, float] | None = None
+    """[d0, d1]: this arm's tool depth past its port (else ``task.insertion``)."""
+
+    @field_validator("insertion")
+    @classmethod
+    def _insertion(cls, v: tuple[float, float] | None) -> tuple[float, float] | None:
+        if v is not None and not (math.isfinite(v[0]) and math.isfinite(v[1])
+                                  and 0 <= v[0] < v[1]):  # fmt: skip
+            raise ValueError(f"needs 0 ≤ d0 < d1 (the depth past the port), got {list(v)}")
+        return v
 
 
-ARM_INDEX_NAMES = ("reach_all", "arms_free")
+ARM_INDEX_NAMES = ("reach_all", "arms_ok", "arms_free")
 """Indices of a multi-arm study beside ``reach_<k>`` per arm (docs/task.md)."""
 COLLISION_INDEX_NAMES = ("clearance", "collision_free")
 """Indices under ``study.collision`` (docs/task.md)."""
@@ -459,9 +484,14 @@ class SerialSettings(StudySettings):
                                  "default for arms without one)")  # fmt: skip
             if all(given) and self.task.port is not None:  # type: ignore[union-attr]
                 raise ValueError("arms: every arm has its own port; remove task.port")
-            d = self.task.insertion  # type: ignore[union-attr]
-            if d is not None and self.task.port is None and not any(given):  # type: ignore[union-attr]
-                raise ValueError("task.insertion: needs a port")
+            for k, a in enumerate(self.arms):
+                if a.insertion is not None and self.ports()[k] is None:
+                    raise ValueError(f"arms.{k}.insertion: is the tool's depth past a port; "
+                                     f"give arms.{k}.port or task.port")  # fmt: skip
+        if self.task is not None and self.task.insertion is not None \
+                and all(p is None for p in self.ports()):  # fmt: skip
+            raise ValueError("task.insertion: is the tool's depth past a port; give "
+                             "task.port" + (" or every arm's port" if self.arms else ""))  # fmt: skip
         c = self.collision
         if c is not None and isinstance(c.radius, list):
             n = len(self.chain.joints)
@@ -522,6 +552,14 @@ class SerialSettings(StudySettings):
 
     def _arm_angles(self) -> set[str]:
         return {v.removeprefix("-") for a in self.arms or [] for v in a.base.rpy if isinstance(v, str)}
+
+    def insertions(self) -> list[tuple[float, float]]:
+        """The insertion range [d0, d1] of each arm (one entry without ``arms``): its own,
+        else ``task.insertion``, else [0, ∞)."""
+        d = (0.0, math.inf) if self.task is None else self.task.depth_range()
+        if self.arms is None:
+            return [d]
+        return [a.insertion if a.insertion is not None else d for a in self.arms]
 
     def ports(self) -> list[tuple[float, float, float] | None]:
         """The port of each arm (one entry without ``arms``): its own, else ``task.port``."""

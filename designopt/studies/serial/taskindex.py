@@ -54,6 +54,16 @@ def estimates_of(s: SerialSettings, mech: Mechanism, per: dict[str, jax.Array],
     return estimates(per, key, g.radii, g.margin)
 
 
+def counts_of(s: SerialSettings, mech: Mechanism, per: dict[str, jax.Array],
+              params: dict[str, Any]) -> dict[str, tuple[jax.Array, int]]:  # fmt: skip
+    """:func:`counts` with the arms' target tuples of :func:`estimates_of`."""
+    from designopt.studies.serial import bodies
+
+    if bodies.geometry(s, mech) is None:
+        return counts(per)
+    return counts(per, jax.random.fold_in(params["sample_key"], 2))
+
+
 def options(s: SerialSettings) -> ik.IKOptions:
     """The IK settings of ``study.task.ik`` as solver options (every field: the schema's
     defaults are the solver's, but for ``n_best`` = 2 where the solver's is 1)."""
@@ -123,7 +133,8 @@ def per_target(mech: Mechanism, s: SerialSettings, params: dict[str, Any], full:
     obst = None if geo is None else obstacle_params(s.collision.obstacles, dtype)  # type: ignore[union-attr]
     ports = s.ports()
     has_port = ports[0] is not None
-    d0, d1 = s.task.depth_range()  # type: ignore[union-attr]
+    ins = np.asarray(s.insertions(), np.float64)  # (A or 1, 2): each arm's [d0, d1]
+    d0, d1 = jnp.asarray(ins[:, :1], dtype), jnp.asarray(ins[:, 1:], dtype)
     if arms:
         Rb, tb = bodies.base_frames(params, full)  # (A, M, 3, 3), (A, M, 3)
         port = params["arm_port"].astype(dtype) if has_port else None  # (A, 3)
@@ -184,6 +195,7 @@ def per_target(mech: Mechanism, s: SerialSettings, params: dict[str, Any], full:
         ok, conv = res.success, res.converged
         if port is not None:  # the insertion depth |target − port| of each arm
             depth = jnp.linalg.norm(pt[None] - port[:, None, :], axis=-1)  # (A or 1, C)
+            # each arm's own insertion range
             inside = (depth >= d0) & (depth <= d1) & (depth > 0)
             inside = jnp.repeat(inside, M, 0) if arms else inside
             ok, conv = ok & inside, conv & inside
@@ -235,15 +247,55 @@ def _share(x: jax.Array) -> tuple[jax.Array, jax.Array]:
     return jnp.mean(x, -1), jnp.sqrt(pt * (1.0 - pt) / (N + 4.0))
 
 
-def ratio(y: jax.Array, x: jax.Array) -> tuple[jax.Array, jax.Array]:
+N_MIN = 30
+"""A ratio estimator whose denominator counts fewer items (tuples every arm reaches,
+converged targets) is not reported: its value and SE are NaN (printed ``n/a``), and a
+search ranks it worst (``NA_WORST``)."""
+RATIOS = ("collision_free", "arms_free")
+"""The ratio estimators among the indices: each archived with ``<name>_n``, its
+denominator's count, and ``<name>_of``, the count it is out of."""
+NA_WORST = {k: (0.0, 1.0) for k in RATIOS}
+"""The range of each index that can be n/a: a search puts an n/a value at the end of it
+that its sense ranks worst (0 when maximised, 1 when minimised)."""
+
+
+def ratio(y: jax.Array, x: jax.Array, n_min: int = N_MIN) -> tuple[jax.Array, jax.Array]:
     """The ratio estimator Σy/Σx along the last axis with its delta-method SE
-    √(Σ(y − r x)² / (N (N − 1))) / x̄ (0 and 0 where Σx = 0: nothing to count)."""
+    √(Σ(y − r x)² / (N (N − 1))) / x̄; NaN and NaN where Σx < ``n_min`` (a ratio over a
+    handful of items claims what the sample cannot show)."""
     N = y.shape[-1]
     sx = jnp.sum(x, -1)
-    r = jnp.where(sx > 0, jnp.sum(y, -1) / jnp.where(sx > 0, sx, 1.0), 0.0)
+    ok = sx >= max(n_min, 1)
+    r = jnp.where(ok, jnp.sum(y, -1) / jnp.where(ok, sx, 1.0), 0.0)
     res = y - r[..., None] * x
-    se = jnp.sqrt(jnp.sum(res * res, -1) / (N * (N - 1))) / jnp.where(sx > 0, sx / N, 1.0)
-    return r, jnp.where(sx > 0, se, 0.0)
+    se = jnp.sqrt(jnp.sum(res * res, -1) / (N * (N - 1))) / jnp.where(ok, sx / N, 1.0)
+    return jnp.where(ok, r, jnp.nan), jnp.where(ok, se, jnp.nan)
+
+
+def counts(per: dict[str, jax.Array], key: jax.Array | None = None
+           ) -> dict[str, tuple[jax.Array, int]]:  # fmt: skip
+    """(denominator count (M,), out of) of each ratio estimator :func:`estimates` gives:
+    ``collision_free``: converged targets of A·N; ``arms_free``: tuples every arm reaches
+    of N."""
+    A, M, N = per["success"].shape
+    out = {}
+    if "clearance" in per:
+        out["collision_free"] = (jnp.sum(per["converged"], (0, 2)), A * N)
+    if A > 1 and key is not None and "segments" in per:
+        out["arms_free"] = (jnp.sum(_tuples(per, key)[0], -1), N)
+    return out
+
+
+def _tuples(per: dict[str, jax.Array], key: jax.Array) -> tuple[jax.Array, list[jax.Array]]:
+    """(every arm reaches its target of the tuple (M, N), the arms' kept capsules per tuple
+    [(M, N, L, 2, 3)] × A): tuple j takes arm k's target π_k(j), π_0 the identity and π_k
+    the k-th independent permutation drawn from ``key``."""
+    A, M, N = per["success"].shape
+    perm = [jnp.arange(N)] + [jax.random.permutation(jax.random.fold_in(key, k), N)
+                              for k in range(1, A)]  # fmt: skip
+    ok = jnp.prod(jnp.stack([per["success"][k][:, perm[k]] for k in range(A)]), 0)
+    seg = [per["segments"][k][:, perm[k]] for k in range(A)]
+    return ok, seg
 
 
 def estimates(per: dict[str, jax.Array], key: jax.Array | None = None,
@@ -258,7 +310,12 @@ def estimates(per: dict[str, jax.Array], key: jax.Array | None = None,
     the arms' ``radii`` and the ``margin``): one target per arm, arm k's the k-th
     independent permutation of the targets (arm 0's the identity), and among the tuples
     every arm reaches, the share whose kept solutions keep every arm at least ``margin``
-    from every other (capsule against capsule), a ratio estimator."""
+    from every other (capsule against capsule), a ratio estimator (n/a under
+    :data:`N_MIN` such tuples); ``arms_ok`` the unconditional share of the tuples that
+    every arm reaches and whose arms keep that margin (Agresti–Coull SE): what a front or
+    an objective should trade, since a ratio's denominator is the optimiser's to shrink.
+    ``collision_free``: of the converged targets, the share whose solution is also free
+    of collisions (n/a under :data:`N_MIN` converged targets)."""
     A, M, N = per["success"].shape
     out = {}
     for k in MEANS + (("clearance",) if "clearance" in per else ()):
@@ -280,10 +337,7 @@ def estimates(per: dict[str, jax.Array], key: jax.Array | None = None,
         out["reach_all"] = _share(jnp.prod(per["success"], 0))
         if key is None or "segments" not in per:
             return out  # arms_free needs the tuples' key and the kept capsules
-        perm = [jnp.arange(N)] + [jax.random.permutation(jax.random.fold_in(key, k), N)
-                                  for k in range(1, A)]  # fmt: skip
-        ok = jnp.prod(jnp.stack([per["success"][k][:, perm[k]] for k in range(A)]), 0)
-        seg = [per["segments"][k][:, perm[k]] for k in range(A)]
+        ok, seg = _tuples(per, key)
         r = jnp.asarray(radii, seg[0].dtype)
         gap = None
         for a in range(A):
@@ -291,6 +345,7 @@ def estimates(per: dict[str, jax.Array], key: jax.Array | None = None,
                 d = arms_clearance(seg[a], r, seg[b], r)
                 gap = d if gap is None else jnp.minimum(gap, d)
         free = (gap >= margin).astype(ok.dtype)  # type: ignore[operator]
+        out["arms_ok"] = _share(ok * free)
         out["arms_free"] = ratio(ok * free, ok)
     return out
 
