@@ -5,7 +5,6 @@ unconditional share, and a task of one target is refused before anything runs.""
 
 from __future__ import annotations
 
-import copy
 import json
 import math
 from pathlib import Path

@@ -112,6 +112,11 @@ class Single:
 
     def groups(self, job: Job, problem: Any, res: Any) -> dict[str, Any]:
         groups = run_groups(job.cfg, problem, res, job.dtype)
+        if job.study.targets is not None:  # the final design at every target (a task's)
+            tg = job.study.targets(job.cfg.study, np.asarray(groups["final"]["x"]), job.keys,
+                                   job.dtype)  # fmt: skip
+            if tg is not None:
+                groups["targets"] = tg
         warn = job.study.warnings(job.cfg.study, groups["final"])
         if warn:  # far from what was asked: archived, printed, shown, marked on figures
             groups["final"]["attrs"]["warnings"] = list(warn)

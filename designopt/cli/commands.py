@@ -221,6 +221,18 @@ def cmd_show(args: argparse.Namespace) -> int:
           f"complete {bool(at.get('complete'))}")  # fmt: skip
     for line in rec.summary():
         print(line)
+    if args.csv is not None:
+        from designopt.io import writer
+        from designopt.results.run import targets_csv_text
+
+        if "targets" not in rec:
+            raise ConfigError(f"{p}: --csv writes the final design at every target of a task "
+                              "run (the archive's targets group); this archive has none")  # fmt: skip
+        out = Path(args.csv) if args.csv else p.with_name(f"{p.stem}_targets.csv")
+        if out.suffix.lower() != ".csv":
+            raise ConfigError(f"--csv {args.csv}: give a .csv file name")
+        writer.write_file(out, targets_csv_text(rec["targets"]).encode(), "targets CSV")
+        print(f"wrote {out}")
     return 0
 
 
@@ -393,6 +405,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_report)
     s = sub.add_parser("show", help="print the summary of an archive")
     s.add_argument("archive")
+    s.add_argument("--csv", nargs="?", const="", default=None, metavar="PATH.csv",
+                   help="also write the final design at every target of a task run (joints "
+                        "in degrees, reached, 1/k, clearance; per arm) to PATH.csv, default "
+                        "<archive stem>_targets.csv beside the archive")  # fmt: skip
     s.set_defaults(func=cmd_show)
     return ap
 

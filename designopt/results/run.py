@@ -4,6 +4,9 @@ an interrupted run's checkpoint (``CheckpointRecord``) and a study whose run is 
 
 from __future__ import annotations
 
+import csv
+import io
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -22,6 +25,37 @@ def _pm(name: str, v: float, se: float | None, fin: Any = None) -> str:
         return f"  {name:<5} = {v:.5g}"
     rel = f"({100 * se / abs(v):.2f} %)" if abs(v) > se else ""  # no ratio on a tiny value
     return f"  {name:<5} = {v:.5f} ± {se:.1e} {rel}"
+
+
+def targets_csv_text(g: Mapping[str, Any]) -> str:
+    """The ``targets`` group (the final design at every target) as CSV: one row per arm
+    and target, each column headed with its unit: arm, target (from 1), x, y, z, reached
+    (0/1), the joints (degrees for a revolute joint; the archive keeps radians), inv_k,
+    clearance; full float precision (``repr``)."""
+    at = g.get("attrs", {})
+    u = str(at.get("length_unit", ""))
+    names = [str(n) for n in at.get("joints", [])]
+    q_units = [str(x) for x in at.get("q_units", [])]
+    p = np.asarray(g["target_p"], np.float64)
+    ok = np.asarray(g["success"])
+    q = np.asarray(g["q"], np.float64)
+    A, N = ok.shape
+    names = names or [f"q{i + 1}" for i in range(q.shape[-1])]
+    q_units = q_units or ["rad"] * q.shape[-1]
+    head = ["arm", "target", f"x [{u}]", f"y [{u}]", f"z [{u}]", "reached"]
+    head += [f"{n} [{'deg' if qu == 'rad' else qu}]" for n, qu in zip(names, q_units, strict=True)]
+    q = np.where(np.asarray(q_units) == "rad", np.rad2deg(q), q)
+    extra = [(k, f"{k} [{u}]" if k == "clearance" else k) for k in ("inv_k", "clearance") if k in g]
+    head += [h for _, h in extra]
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(head)
+    for a in range(A):
+        for i in range(N):
+            w.writerow([a, i + 1, *(repr(float(c)) for c in p[i]), int(ok[a, i]),
+                        *(repr(float(c)) for c in q[a, i]),
+                        *(repr(float(np.asarray(g[k])[a, i])) for k, _ in extra)])  # fmt: skip
+    return buf.getvalue()
 
 
 @dataclass(eq=False)

@@ -238,6 +238,10 @@ class Study:
     ``designopt.figures.html.View``} for a run (the final design, a slider through
     representative poses) or {"front": ``designopt.figures.html.FrontView``} for a Pareto
     front (the robot of the design hovered or clicked); None: the study draws none."""
+    targets: Callable[[Any, Any, Mapping[str, jax.Array], Any], dict[str, Any] | None] | None = None
+    """``targets(settings, x, keys, dtype)``: the final design ``x`` (variables in order)
+    at every target of a task run, for the archive's ``targets`` group (per arm and
+    target: the joints, reached, 1/k, clearance; docs/archive.md); None: no such group."""
     replay: (
         Callable[[Any, Mapping[str, jax.Array], Any, str], tuple[dict[str, Any], list[str]]] | None
     ) = None

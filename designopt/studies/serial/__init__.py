@@ -37,6 +37,37 @@ def _robot(record: Any) -> dict[str, Any] | None:
     return report.report(record)
 
 
+def _targets(s: SerialSettings, x: Any, keys: Any, dtype: Any) -> dict[str, Any] | None:
+    """The final design at every target of a task run (``Study.targets``): per arm (A = 1
+    without ``arms``) and target ``success`` (A, N) 0/1, ``q`` (A, N, n) in the kernel's
+    units (rad for a revolute joint, the chain's length unit for a prismatic one),
+    ``inv_k`` and, under ``collision``, ``clearance`` (A, N), beside ``target_p`` (N, 3)
+    in the world frame; the run's own targets and IK seeds (``taskindex.solution``, the
+    program the figures use)."""
+    if s.indices.measure != "task":
+        return None
+    import numpy as np
+
+    from designopt.studies.serial import taskindex
+    from designopt.studies.serial.drawing import joint_names
+    from designopt.studies.serial.settings import length_unit
+
+    sol = taskindex.solution(s, x, keys, dtype)
+
+    def per_arm(v: Any) -> Any:  # (N, ...) of one arm → (1, N, ...)
+        return v if s.arms is not None else v[None]
+
+    out = {"target_p": sol["target_p"], "success": per_arm(sol["success"]).astype(np.int8),
+           "q": per_arm(sol["q"]), "inv_k": per_arm(sol["inv_k"])}  # fmt: skip
+    if "clearance" in sol:
+        out["clearance"] = per_arm(sol["clearance"])
+    types = [j.type for j in s.chain.joints]
+    out["attrs"] = {"joints": list(joint_names(s)), "types": types,
+                    "length_unit": length_unit(s),
+                    "q_units": ["rad" if t == "R" else length_unit(s) for t in types]}  # fmt: skip
+    return out
+
+
 def _aliases(s: SerialSettings) -> dict[str, str]:
     out = {f"study.{k}": f"study.indices.{k}" for k in ("n_samples", "length_scale")}
     out |= {f"design.{k}": f"study.fixed.{k}" for k in s.fixed}
@@ -112,6 +143,7 @@ STUDY = Study(
     ik=ikhook.HOOK,
     cloud=_cloud,
     robot=_robot,
+    targets=_targets,
     check=reach.check,
     warnings=reach.warnings,
     tiny={
