@@ -207,17 +207,29 @@ def set_key(raw: dict[str, Any], key: str, value: Any, where: str = "config") ->
     the file's own keys."""
     if not isinstance(key, str) or not key:
         raise ConfigError(f"{where}: override key {key!r}: give a dotted key, e.g. 'seed'")
-    node = raw
+    node: Any = raw
     *head, last = key.split(".")
     for i, part in enumerate(head):
-        nxt = node.get(part)
-        if nxt is None:
-            nxt = node[part] = {}
-        if not isinstance(nxt, dict):
+        if isinstance(node, list):  # an entry of a list (``study.arms.1.port``)
+            nxt = node[int(part)] if part.isdigit() and int(part) < len(node) else None
+            if nxt is None:
+                raise ConfigError(f"{where}: override '{key}': '{'.'.join(head[: i + 1])}': "
+                                  f"the list has {len(node)} entries (from 0)")  # fmt: skip
+        else:
+            nxt = node.get(part)
+            if nxt is None:
+                nxt = node[part] = {}
+        if not isinstance(nxt, dict | list):
             raise ConfigError(f"{where}: override '{key}': '{'.'.join(head[: i + 1])}' is not a "
                               "section")  # fmt: skip
         node = nxt
-    node[last] = value
+    if isinstance(node, list):
+        if not (last.isdigit() and int(last) < len(node)):
+            raise ConfigError(f"{where}: override '{key}': '{last}': the list has {len(node)} "
+                              "entries (from 0)")  # fmt: skip
+        node[int(last)] = value
+    else:
+        node[last] = value
 
 
 def parse(path: str | Path) -> tuple[Any, str]:

@@ -15,7 +15,7 @@ import sys
 import time
 from pathlib import Path
 
-from designopt.cli.setup import DESIGN_FLAG, design_argument, use_cache
+from designopt.cli.setup import DESIGN_FLAG, design_argument, set_argument, use_cache
 from designopt.cli.setup import load_args as _load
 from designopt.cli.setup import out_path as _out
 from designopt.cli.setup import parallel_flags as _parallel
@@ -331,6 +331,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     def common(p, seed=True, out=True, quiet=True, figures=True, dry=True):
         p.add_argument("config", help="config (YAML), e.g. configs/<study>.yaml")
+        set_argument(p)
         if seed:
             p.add_argument("--seed", type=int, default=None, help="override the config's seed")
         if out:

@@ -24,7 +24,7 @@ def load_args(args: argparse.Namespace):
     from designopt.core.validation import check_seed
     from designopt.io import writer
 
-    over: dict[str, object] = {}
+    over: dict[str, object] = parse_sets(getattr(args, "set_keys", None) or [])
     if getattr(args, "seed", None) is not None:
         over["seed"] = check_seed(args.seed, f"--seed {args.seed}")
     if getattr(args, "overwrite", False):
@@ -246,10 +246,43 @@ def resume_command(args: argparse.Namespace, cfg) -> str:
         parts += ["--max-minutes", f"{args.max_minutes:g}"]
     if getattr(args, "devices", None) is not None:
         parts += ["--devices", str(args.devices)]
+    for item in getattr(args, "set_keys", None) or []:
+        parts += ["--set", item]
     return shlex.join(parts)
 
 
 DESIGN_FLAG = "--design"
+
+
+def set_argument(p: argparse.ArgumentParser) -> None:
+    """``--set KEY=VALUE`` (repeat): any key of the config, dotted from its top
+    (``study.task.port=[0.5,0.1,-0.2]``, ``optimizer.n_iters=5``, ``study.arms.1.port=...``),
+    the value read as YAML; applied through ``config.set_key`` like the file's own keys."""
+    p.add_argument("--set", dest="set_keys", action="append", default=[], metavar="KEY=VALUE",
+                   help="override one config key (dotted from the top, the value as YAML; "
+                        "repeat), e.g. --set study.task.port=[0.5,0.1,-0.2]")  # fmt: skip
+
+
+def parse_sets(items: list[str]) -> dict[str, object]:
+    """--set KEY=VALUE items as {dotted key: value parsed as YAML}; ConfigError naming
+    the item for a missing '=', an empty key or a value that is not YAML."""
+    import yaml
+
+    out: dict[str, object] = {}
+    for item in items:
+        key, eq, text = item.partition("=")
+        key = key.strip()
+        if not eq or not key or any(not part for part in key.split(".")):
+            raise ConfigError(f"--set {item}: give KEY=VALUE with a dotted key from the "
+                              "config's top, e.g. --set study.task.port=[0.5,0.1,-0.2]")  # fmt: skip
+        try:
+            out[key] = yaml.safe_load(text) if text.strip() else None
+        except yaml.YAMLError:
+            raise ConfigError(f"--set {item}: the value is not YAML (a number, a word, a "
+                              "[list] or a {mapping})") from None  # fmt: skip
+        if out[key] is None:
+            raise ConfigError(f"--set {item}: give a value after '='")
+    return out
 
 
 def design_argument(p: argparse.ArgumentParser | argparse._ArgumentGroup, help: str) -> None:
