@@ -135,19 +135,54 @@ def _archive(opt: Optimizer, state) -> tuple[Front, jax.Array] | None:
     return None if get is None else get(state)
 
 
-def _track(opt: Optimizer, state, ref) -> tuple[jax.Array, ...]:
+HV_EVERY = 10
+"""A multi-objective run measures its hypervolumes (the archive's and the population's)
+at every HV_EVERY-th iteration and at the last one; the iterations between hold the
+last value measured (the 3-objective hypervolume is O(n²) in the archive's size: every
+iteration, it took over half of a DTLZ2 run). The search and its fronts are the same."""
+
+
+def _hv_due(i: jax.Array | int, n_iters: jax.Array | int) -> jax.Array:
+    """Whether iteration ``i`` (from 1) of ``n_iters`` measures the hypervolume."""
+    return (i % HV_EVERY == 0) | (i >= n_iters)
+
+
+def _track(opt: Optimizer, state, ref, due: jax.Array | bool = True) -> tuple[jax.Array, ...]:
     """What the runner keeps per iteration: the best so far (x, f, v), or for a
     multi-objective entry (an empty x, the hypervolume of the archive (else of the
-    feasible population), the least violation, the feasible population's hypervolume)."""
+    feasible population), the least violation, the feasible population's hypervolume);
+    the hypervolumes NaN where ``due`` is false (:data:`HV_EVERY`; the host fills them
+    with the last measured value, :func:`_fill`)."""
     if not opt.multi_objective:
         return tuple(opt.best(state))
     fr = opt.front(state)
-    hv_pop = hypervolume_jax(fr.f, ref, fr.v == 0).astype(fr.x.dtype)
     arch = _archive(opt, state)
-    hv = hv_pop
-    if arch is not None:  # a cut archive may have lost volume the population still holds
-        hv = jnp.maximum(hypervolume_jax(arch[0].f, ref, arch[0].v == 0).astype(hv.dtype), hv)
+
+    def measure(_):
+        hv_pop = hypervolume_jax(fr.f, ref, fr.v == 0).astype(fr.x.dtype)
+        hv = hv_pop
+        if arch is not None:  # a cut archive may have lost volume the population still holds
+            hv = jnp.maximum(hypervolume_jax(arch[0].f, ref, arch[0].v == 0).astype(hv.dtype),
+                             hv)  # fmt: skip
+        return hv, hv_pop
+
+    if due is True:
+        hv, hv_pop = measure(None)
+    else:  # an unbatched predicate: a real branch, the O(n²) volume skipped
+        nan = jnp.full((), jnp.nan, fr.x.dtype)
+        hv, hv_pop = jax.lax.cond(due, measure, lambda _: (nan, nan), None)
     return jnp.zeros((0,), fr.x.dtype), hv, jnp.min(fr.v), hv_pop
+
+
+def _fill(a: np.ndarray) -> np.ndarray:
+    """NaN entries along the last axis (iterations) replaced by the last value before
+    them (the hypervolumes measured every :data:`HV_EVERY` iterations); leading NaN (and
+    a history of NaN: more than 3 objectives) kept."""
+    a = np.asarray(a)
+    idx = np.where(np.isnan(a), 0, np.arange(a.shape[-1]))
+    np.maximum.accumulate(idx, axis=-1, out=idx)
+    out = np.take_along_axis(a, idx, axis=-1)
+    return out
 
 
 def _pack(track: tuple[jax.Array, ...]) -> jax.Array:
@@ -168,17 +203,20 @@ def _unpack(rows: np.ndarray, k: int) -> list[np.ndarray]:
 
 
 @partial(jax.jit, static_argnames=("opt", "fn", "cons", "length", "batched"))
-def _advance(carry, params, pparams, lower, upper, opt, fn, cons, length, batched=False, ref=None):
+def _advance(carry, params, pparams, lower, upper, opt, fn, cons, length, batched=False, ref=None,
+             done=0, n_iters=0):  # fmt: skip
+    """``length`` iterations of every run; ``done`` of ``n_iters`` before them (traced:
+    where a chunk starts compiles nothing new; they time the hypervolume, ``_hv_due``)."""
     task = _task(fn, cons, pparams, lower, upper)
 
     def one(c, p):
-        def body(c, _):
+        def body(c, i):
             key, state = c
             key, k = jax.random.split(key)
             state = opt.step(k, state, p, task)
-            return (key, state), _pack(_track(opt, state, ref))
+            return (key, state), _pack(_track(opt, state, ref, _hv_due(i, n_iters)))
 
-        return jax.lax.scan(body, c, None, length=length)
+        return jax.lax.scan(body, c, done + 1 + jnp.arange(length))
 
     return _over_runs(one, batched)(carry, params)
 
@@ -243,13 +281,15 @@ def _ask(carry, params, lower, upper, opt, batched=False, rows=1):
 
 
 @partial(jax.jit, static_argnames=("opt", "batched"))
-def _tell(carry, k, X, pending, f, v, params, lower, upper, opt, batched=False, ref=None):
+def _tell(carry, k, X, pending, f, v, params, lower, upper, opt, batched=False, ref=None,
+          due=True):  # fmt: skip
     task = Task(None, lower, upper)
+    due = jnp.asarray(due)
 
     def one(run, p):
         (key, state), kr, x, pend, fr, vr = run
         state = opt.tell(kr, state, x, pend, clean(fr).astype(x.dtype), vr, p, task)
-        return (key, state), _pack(_track(opt, state, ref))
+        return (key, state), _pack(_track(opt, state, ref, due))
 
     f, v = _unflat(f, X), _unflat(v, X)
     return _over_runs(one, batched)((carry, k, X, pending, f, v), params)
@@ -408,18 +448,20 @@ def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress
         length = min(chunk, n_iters - done)
         if separate:  # ask, the objective program, tell: one iteration at a time
             tracks = []  # on the device until the chunk ends: no host sync per iteration
-            for _ in range(length):
+            for j in range(length):
                 keys1, k, X, pending, Xf, ek = _ask(carry, params, lower, upper, opt=opt,
                                                     batched=batched, rows=rows)  # fmt: skip
+                due = np.bool_(bool(_hv_due(done + 1 + j, n_iters)))
                 carry, tr = _tell((keys1, carry[1]), k, X, pending, *objective(Xf, ek), params,
-                                  lower, upper, opt=opt, batched=batched, ref=ref)  # fmt: skip
+                                  lower, upper, opt=opt, batched=batched, ref=ref, due=due)  # fmt: skip
                 carry = place(carry)  # the same placement every iteration: one program
                 tracks.append(tr)
             axis = 2 if batched else 1  # (…runs, iterations, …) as _advance's scan gives
             recs = np.stack([host(t) for t in tracks], axis=axis)
         else:
             carry, recs = _advance(
-                carry, params, pparams, lower, upper, length=length, ref=ref, **statics
+                carry, params, pparams, lower, upper, length=length, ref=ref,
+                done=np.int32(done), n_iters=np.int32(n_iters), **statics
             )
             recs = host(recs)
         x, f, v, *p = _unpack(recs, n_records)
@@ -443,6 +485,9 @@ def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress
                 state["runner.history_population"] = hp[0]
             checkpoint(Checkpoint(state, hf[0], hx[0], done))
     history = np.concatenate(hf, axis=-1)
+    if mo:  # the hypervolumes between two measured iterations (HV_EVERY) hold the last
+        history = _fill(history)
+        hp = [_fill(np.concatenate(hp, axis=-1))]
     history_x = np.concatenate(hx, axis=-2)
     history_v = np.concatenate(hv, axis=-1)
     front = Front(*(host(a) for a in _fronts(carry, opt, batched))) if mo else None
