@@ -5,18 +5,28 @@ joint's origin to the next joint's origin (the tip for the last), of the configu
 radius, so the shapes follow the design variables. Links of zero length in every design
 (e.g. between the coincident joints of a spherical wrist) are points inside their
 neighbours' capsules and are left out. The self-collision pairs are the non-adjacent
-pairs of the remaining links, less the pairs that overlap in nearly every configuration
-(≥ :data:`ALWAYS` of 512 joint draws at the middle design: two links that meet at a short
-offset link, whose capsules overlap wherever the joints are) — the "always in
-collision" pairs a MoveIt set-up also disables; they are listed by :func:`describe`.
+pairs of the remaining links (``links: urdf``: the shapes of links that are not
+neighbours on the path), less the pairs whose sampled distances say they cannot inform
+the check (:func:`select_pairs`, as a MoveIt set-up disables pairs): "always in
+collision" (overlapping in ≥ :data:`ALWAYS` of 512 joint draws at the middle design: two
+links that meet at a short offset link), "always near" (within :data:`NEAR` × (r_i + r_j)
+of touching in every draw of every sampled design: the capsules of two shapes with one
+short link between them, whose distance the joints hardly change and whose overlaps are
+the slack of the bounding capsules, not a collision of the shapes) and "never near"
+(never within that distance: they cannot collide). They are listed by :func:`describe`
+and :func:`pair_lines`.
 
-With a port the instrument passes through the body wall there: the part of the chain
-beyond the port plane (through the port, normal to the tool axis) is inside the patient
-and is not checked against the obstacles (the patient's body, the table). The link that
-crosses the plane is cut twice its radius before it: its capsule touches the body wall
-at the port, and that neighbourhood (the trocar's) is not checked. So a tool leaning more
-than 60° from a half-space's normal at the port reads as touching it. Links before it
-are checked in full, and every link in the self-collision check.
+With a port the instrument passes through the body wall there: the distal part of the
+chain, from the last capsule (in path order) that has a part on the outer side of the
+port plane (through the port, normal to the tool axis) to the tip, is inside the patient
+and is not checked against the obstacles (the patient's body, the table): every capsule
+after that one lies wholly beyond the plane, and that one, the capsule through the port,
+is cut twice its radius before the plane: it touches the body wall at the port, and that
+neighbourhood (the trocar's) is not checked. So a tool leaning more than 60° from a
+half-space's normal at the port reads as touching it. Every capsule before it is checked
+in full, also where it lies beyond the port plane: an elbow that dips below the plane
+away from the port is not in the port, and may touch the patient or the table. Every
+capsule counts in the self-collision check.
 
 Several arms (``study.arms``) are copies of the chain at base frames T_k(x) (their
 ``xyz``/``rpy`` entries numbers or design variables): each arm solves the task in its own
@@ -27,6 +37,7 @@ arm-against-arm checks.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import partial
 from typing import Any
@@ -34,6 +45,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
 
 from designopt.kinematics import collision as col
 from designopt.studies.serial.mechanism import Mechanism
@@ -71,6 +83,20 @@ def _link_gaps(seg: jax.Array, radii: jax.Array, obst: Any) -> jax.Array:
 ALWAYS = 0.95
 """A link pair whose capsules overlap in at least this share of random configurations
 (at the middle design) is not checked (it would collide everywhere)."""
+NEAR = 0.25
+"""A self-collision pair is *near* in a configuration when its capsules' signed distance is
+below ``margin + NEAR·(r_i + r_j)`` (a quarter of the two radii: a length in the
+capsules' own scale, so in any length unit). A pair near in every sampled configuration
+of every sampled design is left out as "always near", one near in none as "never near"
+(:func:`select_pairs`)."""
+PAIR_CONFIGS = 512
+"""Random joint configurations per sampled design for the choice of the pairs."""
+PAIR_DESIGNS = 8
+"""Random designs in the box sampled beside the middle one (and the box's corners, up to
+:data:`PAIR_CORNERS` of them) for the choice of the pairs."""
+PAIR_CORNERS = 16
+"""The box's 2^P corners are sampled too when there are at most this many (P ≤ 4): a
+pair comes closest where the links between its shapes are shortest or longest."""
 
 
 @dataclass(frozen=True)
@@ -90,6 +116,9 @@ class Geometry:
     cap: float  # the longest reach of any design: a clearance counts at most this much
     names: tuple[str, ...] = ()  # what each capsule is, for messages
     urdf: Any = None
+    near: tuple[tuple[int, int], ...] = ()  # left out: near in every sampled configuration
+    never: tuple[tuple[int, int], ...] = ()  # left out: near in none
+    bands: tuple[tuple[int, int, float, float], ...] = ()  # (i, j, least, largest distance)
 
     def outer(self, model: Any, X: jax.Array, q: jax.Array) -> jax.Array:
         """Capsule end points (M, C, L, 2, 3) for designs X (M, P) and joints q (C, n)."""
@@ -184,19 +213,63 @@ def _urdf_geometry(s: SerialSettings, mech: Mechanism, c: Any, cap: float) -> Ge
 
 def _drop_always(g: Geometry, s: SerialSettings, mech: Mechanism, pairs: tuple,
                  rng: np.random.Generator) -> Geometry:  # fmt: skip
-    """``g`` with the self-collision ``pairs``, less those overlapping in ≥ ALWAYS of 512
-    random configurations at the middle design."""
+    """``g`` with the self-collision ``pairs`` that :func:`select_pairs` keeps."""
     from dataclasses import replace
 
     if not pairs:
         return g
-    q = mech.lower + (mech.upper - mech.lower) * rng.uniform(size=(512, mech.n))
-    seg = np.asarray(g.outer(mech.model, jnp.asarray(_middle(mech, s))[None], jnp.asarray(q)))[0]
-    d = np.asarray(_pair_gaps(seg, np.asarray(g.radii), tuple(pairs)))
-    keep, always = [], []
-    for p, ij in enumerate(pairs):
-        (always if np.mean(d[:, p] < g.margin) >= ALWAYS else keep).append(ij)
-    return replace(g, pairs=tuple(keep), always=tuple(always))
+    return replace(g, **select_pairs(g, s, mech, pairs, rng))
+
+
+def select_pairs(g: Geometry, s: SerialSettings, mech: Mechanism,
+                 pairs: tuple[tuple[int, int], ...],
+                 rng: np.random.Generator) -> dict[str, tuple]:  # fmt: skip
+    """Which candidate self-collision ``pairs`` (index pairs into ``g``'s capsules) are
+    checked: ``{"pairs", "always", "near", "never", "bands"}``.
+
+    The capsules are placed at :data:`PAIR_CONFIGS` random joint configurations (uniform
+    in the limits) at the middle design, the box's corners (up to :data:`PAIR_CORNERS`)
+    and :data:`PAIR_DESIGNS` random designs of the box; d is a pair's signed distance, m
+    the margin, δ = :data:`NEAR`·(r_i + r_j). A pair is left out when it is
+
+    - *always in collision*: d < m in ≥ :data:`ALWAYS` of the configurations at the
+      middle design (two links meeting at a short offset link overlap wherever the joints
+      are; MoveIt's set-up disables these too);
+    - *always near*: d < m + δ in every sampled configuration of every sampled design.
+      Its distance is pinned by the shapes, not by the joints or the design (two shapes
+      with one short link between them, e.g. a UR5's wrist 1 and wrist 3): it would set
+      the clearance's minimum to a few millimetres everywhere, and its overlaps are the
+      slack of the bounding capsules rather than a collision of the shapes;
+    - *never near*: d ≥ m + δ everywhere: it cannot collide (MoveIt's "never in
+      collision", with δ as a buffer for the configurations not drawn).
+
+    ``bands`` holds every candidate's (i, j, least d, largest d) over the sample."""
+    q = mech.lower + (mech.upper - mech.lower) * rng.uniform(size=(PAIR_CONFIGS, mech.n))
+    lo, hi = (np.asarray(v, np.float64) for v in s.box()[1:])
+    V = lo + (hi - lo) * rng.uniform(size=(PAIR_DESIGNS, len(lo)))
+    if 0 < 2 ** len(lo) <= PAIR_CORNERS:
+        bits = (np.arange(2 ** len(lo))[:, None] >> np.arange(len(lo))) & 1
+        V = np.concatenate([np.where(bits == 1, hi, lo), V])
+    X = np.concatenate([V, np.broadcast_to(mech.fixed, (len(V), len(mech.fixed)))], 1)
+    X = np.concatenate([_middle(mech, s)[None], X * mech.scale])  # the middle design first
+    seg = np.asarray(g.outer(mech.model, jnp.asarray(X), jnp.asarray(q)))  # (D, C, L, 2, 3)
+    r = np.asarray(g.radii, np.float64)
+    d = np.asarray(_pair_gaps(jnp.asarray(seg.reshape(-1, *seg.shape[2:])), jnp.asarray(r),
+                              tuple(pairs))).reshape(len(X), len(q), len(pairs))  # fmt: skip
+    out: dict[str, list] = {"pairs": [], "always": [], "near": [], "never": [], "bands": []}
+    for p, (i, j) in enumerate(pairs):
+        near = g.margin + NEAR * (r[i] + r[j])
+        dp = d[..., p]
+        out["bands"].append((i, j, float(dp.min()), float(dp.max())))
+        if np.mean(dp[0] < g.margin) >= ALWAYS:
+            out["always"].append((i, j))
+        elif dp.max() < near:
+            out["near"].append((i, j))
+        elif dp.min() >= near:
+            out["never"].append((i, j))
+        else:
+            out["pairs"].append((i, j))
+    return {k: tuple(v) for k, v in out.items()}
 
 
 def _segments(P: Any, links: tuple[int, ...]) -> Any:
@@ -208,9 +281,107 @@ def _segments(P: Any, links: tuple[int, ...]) -> Any:
 
 def describe(g: Geometry) -> str:
     """One line on the capsules: links, radii, pairs checked and left out."""
-    left = f"; left out as always overlapping: {list(g.always)}" if g.always else ""
+    left = "".join(f"; left out as {what}: {list(v)}" for what, v in (
+        ("always overlapping", g.always), ("always near", g.near), ("never near", g.never))
+        if v)  # fmt: skip
     return (f"capsules on {', '.join(g.names)} (radii {list(g.radii)}), "
             f"{len(g.pairs)} self-collision pair(s){left}")  # fmt: skip
+
+
+def capsule_labels(g: Geometry) -> list[str]:
+    """A name for each capsule: ``link i`` (``links: auto``), or the URDF link's name, with
+    ``#k`` when the link has several shapes, and the shape it bounds (a mesh's file)."""
+    if g.urdf is None:
+        return list(g.names)
+    caps = g.urdf[2]
+    out = []
+    for k, c in enumerate(caps):
+        same = [m for m, d in enumerate(caps) if d.link == c.link]
+        tag = f"#{same.index(k)}" if len(same) > 1 else ""
+        what = c.kind + (f" {c.filename.rsplit('/', 1)[-1]}" if c.filename else "")
+        out.append(f"{c.link}{tag} ({what})" if what else f"{c.link}{tag}")
+    return out
+
+
+def pair_lines(s: SerialSettings, mech: Mechanism | None = None,
+               design: Mapping[str, float] | None = None,
+               q: ArrayLike | None = None, top: int = 3) -> list[str]:  # fmt: skip
+    """Lines on the collision check for ``designopt chain``/``view``: the capsules and
+    their radii; every candidate self-collision pair, checked or left out and why
+    (:func:`select_pairs`), with its least and largest sampled distance; then, at
+    ``design`` (variables in the config's units; those not given at the middle of their
+    box) and joints ``q`` (active joints, rad for R and length units for P, as the kernel
+    takes them; default the home pose), the clearance and the ``top`` least terms that
+    set it (self-collision pairs, and each capsule against each obstacle, in each arm's
+    base frame; the port's exemption is not applied: it depends on the target).
+    No ``study.collision``: one line saying so."""
+    from designopt.studies.serial.drawing import home, joint_values
+    from designopt.studies.serial.mechanism import build
+    from designopt.studies.serial.settings import length_unit
+
+    mech = build(s) if mech is None else mech
+    g = geometry(s, mech)
+    c = s.collision
+    if g is None or c is None:
+        return ["collision: none (no study.collision section): nothing is checked"]
+    u = length_unit(s)
+    lab = capsule_labels(g)
+    kind = "the URDF's <collision> shapes" if g.urdf is not None else "the chain's links"
+    lines = [f"collision: {len(g.radii)} capsules on {kind}, margin {g.margin:g} {u}"]
+    lines += [f"  [{k}] {lab[k]}: radius {r:.4g} {u}" for k, r in enumerate(g.radii)]
+    band = {(i, j): (lo, hi) for i, j, lo, hi in g.bands}
+    if not g.self_check:
+        lines.append("self-collision: off (collision.self: false)")
+    else:
+        groups = (("checked", g.pairs), ("always in collision", g.always),
+                  ("always near", g.near), ("never near", g.never))  # fmt: skip
+        n = sum(len(v) for _, v in groups)
+        lines.append(
+            f"self-collision pairs: {len(g.pairs)} checked of {n} candidates (near: closer than "
+            f"margin + {NEAR:g}·(r_i + r_j); sampled at {PAIR_CONFIGS} random configurations "
+            f"of the middle design, the box's corners (up to {PAIR_CORNERS}) and "
+            f"{PAIR_DESIGNS} random designs)"
+        )
+        for what, P in groups:
+            for i, j in P:
+                lo, hi = band.get((i, j), (math.nan, math.nan))
+                lines.append(f"  {what:<19} {lab[i]} × {lab[j]}: sampled distance "
+                             f"[{lo:+.4g}, {hi:+.4g}] {u}")  # fmt: skip
+    x = dict(design or {})
+    lo, hi = s.box()[1:]
+    xv = [float(x[k]) if k in x else (float(a) + float(b)) / 2
+          for k, a, b in zip(s.variables, lo, hi, strict=True)]  # fmt: skip
+    full = np.concatenate([xv, mech.fixed]) * mech.scale
+    qv = home(mech) if q is None else np.asarray(q, np.float64).reshape(mech.n)
+    seg = np.asarray(g.outer(mech.model, jnp.asarray(full[None]), jnp.asarray(qv[None])))[0]
+    r = jnp.asarray(g.radii, jnp.float64)
+    terms: list[tuple[float, str]] = []
+    if g.pairs:
+        d = np.asarray(_pair_gaps(jnp.asarray(seg), r, tuple(g.pairs)))[0]
+        terms += [(float(d[p]), f"{lab[i]} × {lab[j]}") for p, (i, j) in enumerate(g.pairs)]
+    frames = [("", np.eye(3), np.zeros(3))]
+    if s.arms is not None:
+        bp = base_params(s, mech, jnp.float64)
+        Rb, tb = (np.asarray(v, np.float64) for v in base_frames(bp, jnp.asarray(full[None])))
+        frames = [(f" of arm {k}", Rb[k, 0], tb[k, 0]) for k in range(len(s.arms))]
+    for o, ob in enumerate(c.obstacles):
+        op = col.obstacle_params([ob], jnp.float64)
+        for arm, R, tr in frames:
+            w = seg @ R.T + tr  # (1, L, 2, 3) in the world
+            gaps = np.asarray(_link_gaps(jnp.asarray(w), r, op))[0]
+            terms += [(float(gaps[k]), f"{lab[k]}{arm} × collision.obstacles.{o} ({ob.shape})")
+                      for k in range(len(lab))]  # fmt: skip
+    design_txt = ", ".join(f"{k} = {v:g}" for k, v in zip(s.variables, xv, strict=True))
+    at = f"at {design_txt}; {joint_values(s, qv)}"
+    if not terms:
+        return [*lines, f"{at}: nothing is checked (no kept pair, no obstacle)"]
+    terms.sort(key=lambda v: v[0])
+    least = terms[0][0]
+    state = "collision" if least < g.margin else "free"
+    lines.append(f"{at}: clearance {least:+.4g} {u} ({state} by margin {g.margin:g} {u}); "
+                 f"least terms:")  # fmt: skip
+    lines += [f"  {v:+.4g} {u}  {what}" for v, what in terms[:top]]
+    return lines
 
 
 # ------------------------------------------------------------------- base frames
@@ -264,30 +435,42 @@ def base_frames(params: dict[str, Any], full: jax.Array) -> tuple[jax.Array, jax
 
 
 def cut_at_port(seg: jax.Array, port: jax.Array, z: jax.Array, radii: jax.Array) -> jax.Array:
-    """The capsule end points (..., L, 2, 3) with the part inside the patient removed:
-    links before the last link that starts before the port plane (through ``port``
-    (..., 3), normal the tool axis ``z`` (..., 3)) are kept; that link, the one through
-    the port, is cut 2·r (its radii ``radii`` (L,)) before the plane, since its capsule
-    touches the body wall at the port (the trocar's neighbourhood is not checked); the
-    links after it (inside) collapse onto the cut piece, so they add nothing to a minimum
-    over the links."""
+    """The capsule end points (..., L, 2, 3) with the part inside the patient taken out of
+    the obstacle check. With s(x) = (x − ``port``)·``z`` (``port`` (..., 3), ``z`` the tool
+    axis (..., 3), pointing into the body), let c be the last capsule, in path order, with
+    a part on the outer side of the port plane (an end with s < 0). Capsules before c are
+    kept whole, wherever they are (an elbow below the plane away from the port may touch
+    the patient). c, the capsule through the port, keeps its centre line from its outer
+    end to 2·r (its radius, ``radii`` (L,)) before its crossing of the plane (the whole of
+    it when it does not reach that far): its capsule touches the body wall at the port,
+    and the trocar's neighbourhood is not checked. The capsules after c lie wholly beyond
+    the plane (the instrument inside the patient) and collapse onto c's kept piece, so
+    they add nothing to a minimum over the capsules. When no capsule has a part on the
+    outer side, nothing is taken out. Either end of a capsule may be the outer one (a
+    URDF shape's capsule has no direction)."""
     a, b = seg[..., 0, :], seg[..., 1, :]
     sa = jnp.sum((a - port[..., None, :]) * z[..., None, :], -1)  # (..., L)
     sb = jnp.sum((b - port[..., None, :]) * z[..., None, :], -1)
     L = seg.shape[-3]
     idx = jnp.arange(L)
-    c = jnp.max(jnp.where(sa < 0, idx, 0), -1)  # the last link starting before the plane
-    length = jnp.linalg.norm(b - a, axis=-1)
-    t = jnp.where(sb > sa, -sa / jnp.where(sb > sa, sb - sa, 1.0), 1.0)  # the crossing
+    c = jnp.max(jnp.where(jnp.minimum(sa, sb) < 0, idx, -1), -1)  # -1: none outside
+    swap = (sb < sa)[..., None]
+    o, i = jnp.where(swap, b, a), jnp.where(swap, a, b)  # outer end, inner end
+    so, si = jnp.minimum(sa, sb), jnp.maximum(sa, sb)
+    length = jnp.linalg.norm(i - o, axis=-1)
+    up = si > so
+    t = jnp.where(up, -so / jnp.where(up, si - so, 1.0), jnp.inf)  # the crossing, from o
     t = jnp.clip(t - 2 * radii / jnp.maximum(length, 1e-300), 0.0, 1.0)
-    cut_b = a + t[..., None] * (b - a)
+    cut_b = o + t[..., None] * (i - o)
+    cc = jnp.maximum(c, 0)
 
-    def at_c(v):  # (..., L, 3) -> (..., 3) at link c
-        return jnp.take_along_axis(v, jnp.broadcast_to(c[..., None, None], (*c.shape, 1, 3)),
+    def at_c(v):  # (..., L, 3) -> (..., 3) at capsule c
+        return jnp.take_along_axis(v, jnp.broadcast_to(cc[..., None, None], (*cc.shape, 1, 3)),
                                    -2)[..., 0, :]  # fmt: skip
 
-    cut = jnp.stack([at_c(a), at_c(cut_b)], -2)  # (..., 2, 3)
-    return jnp.where((idx >= c[..., None])[..., None, None], cut[..., None, :, :], seg)
+    cut = jnp.stack([at_c(o), at_c(cut_b)], -2)  # (..., 2, 3)
+    out = (idx >= c[..., None]) & (c[..., None] >= 0)
+    return jnp.where(out[..., None, None], cut[..., None, :, :], seg)
 
 
 def obstacle_and_self(g: Geometry, obst: Any, seg: jax.Array, port: jax.Array | None,
