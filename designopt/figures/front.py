@@ -21,7 +21,7 @@
 from __future__ import annotations
 
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -41,16 +41,70 @@ _TO_SUP = str.maketrans("0123456789", "⁰¹²³⁴⁵⁶⁷⁸⁹")
 _POWER = re.compile(r"^([A-Za-zµ]+)(?:\^(\d+)|([⁰¹²³⁴⁵⁶⁷⁸⁹]+))?$")
 
 
-def draw(rec: FrontRecord, folder: Path) -> list[Path]:
-    """The figures of a front record into ``folder``."""
+RobotHook = Callable[[FrontRecord, Sequence[tuple[str, int]], Path], list[Path]]
+"""A study's drawing of chosen designs of a front: (record, [(name, design number)],
+folder) -> the figures written (the serial study's robots)."""
+
+
+def draw(rec: FrontRecord, folder: Path, robot: RobotHook | None = None) -> list[Path]:
+    """The figures of a front record into ``folder``; with ``robot`` (the study's hook)
+    also the designs of :func:`extremes_and_knee` drawn by it, and marked on ``front``."""
 
     units = rec.units()
-    paths = front(rec, folder, units)
+    picks = extremes_and_knee(rec) if robot is not None else []
+    paths = front(rec, folder, units, picks)
     paths += designs(rec, folder, units)
     paths += indices(rec, folder, units)
     if rec.history.size:
         paths += hypervolume(rec, folder, units)
+    if robot is not None:
+        paths += robot(rec, picks, folder)
     return paths
+
+
+def extremes_and_knee(rec: FrontRecord) -> list[tuple[str, int]]:
+    """[(name, design number)] of the front's two extremes and its knee, among the
+    designs of rank 0 that are feasible (every design where none is): the extremes are
+    the best designs in the first and in the second objective (ties broken by the
+    other); the knee is the design farthest from the line between them in the objective
+    space normalised to [0, 1] per objective over those designs (each minimised: a
+    ``max`` objective negated), on the side of the ideal point where any design lies
+    there (a convex front), else on either side (a concave one). Repeats dropped
+    (a front of one or two designs)."""
+    sign = np.array([-1.0 if s == "max" else 1.0 for s in rec.objectives.values()])
+    F = np.asarray(rec.F, np.float64) * sign  # minimised
+    idx = np.flatnonzero(_groups(rec)[0])
+    idx = idx if idx.size else np.arange(len(F))
+    G = F[idx]
+    span = np.ptp(G, 0)
+    Z = np.where(span > 0, (G - G.min(0)) / np.where(span > 0, span, 1.0), 0.0)
+    b = 1 if Z.shape[1] > 1 else 0
+    i0, i1 = np.lexsort((Z[:, b], Z[:, 0]))[0], np.lexsort((Z[:, 0], Z[:, b]))[0]
+    k = _knee(Z, Z[i0], Z[i1])
+    obj = list(rec.objectives)
+    out: dict[int, str] = {}
+    for name, i in ((f"best {obj[0]}", i0), ("knee", k), (f"best {obj[b]}", i1)):
+        out.setdefault(int(idx[i]), name)
+    return [(name, i) for i, name in out.items()]
+
+
+def _knee(Z: np.ndarray, a: np.ndarray, b: np.ndarray) -> int:
+    """The row of Z farthest from the line through a and b on the side of the origin
+    (the ideal point: a convex front's knee); where no row lies on that side (a concave
+    front, or the origin on the line), the farthest on any side."""
+    d = b - a
+    dd = float(d @ d)
+
+    def normal(v: np.ndarray) -> np.ndarray:  # the part of v normal to the line
+        return v - np.outer(v @ d / dd, d).reshape(v.shape) if dd > 0 else v
+
+    off = normal(Z - a)
+    dist = np.linalg.norm(off, axis=1)
+    w = normal(-a)
+    n = float(np.linalg.norm(w))
+    side = off @ (w / n) if n > 0 else np.zeros(len(Z))
+    tol = 1e-12 * max(float(dist.max(initial=0.0)), 1.0)
+    return int(np.argmax(side) if np.any(side > tol) else np.argmax(dist))
 
 
 # ------------------------------------------------------------------------ helpers
@@ -135,11 +189,25 @@ def _handles(rec: FrontRecord, masks: Sequence[np.ndarray]) -> list:
     return h
 
 
+def _ring(ax: plt.Axes, F: np.ndarray, picks: Sequence[tuple[str, int]]) -> list:
+    """The designs drawn with their robots ringed; their legend entry (none without)."""
+    if not picks:
+        return []
+    i = [k for _, k in picks]
+    ax.scatter(F[i, 0], F[i, 1], s=110, facecolors="none", edgecolors="k", lw=1.2, zorder=5,
+               gid="ringed:robots")  # fmt: skip
+    what = ", ".join(f"#{k}" for _, k in picks)
+    return [Line2D([], [], ls="none", marker="o", mfc="none", mec="k", ms=9,
+                   label=f"extremes and knee (front_robots): {what}")]  # fmt: skip
+
+
 # ------------------------------------------------------------------------ figures
 
 
-def front(rec: FrontRecord, folder: Path, units: Mapping[str, str]) -> list[Path]:
-    """``front`` (and ``front_3d`` for three objectives)."""
+def front(rec: FrontRecord, folder: Path, units: Mapping[str, str],
+          picks: Sequence[tuple[str, int]] = ()) -> list[Path]:  # fmt: skip
+    """``front`` (and ``front_3d`` for three objectives); ``picks`` [(name, design)]
+    ringed (the designs drawn with their robots)."""
     F, se, pairs = rec.F, rec.F_se, rec.ambiguous
     obj = list(rec.objectives.items())
     m = len(obj)
@@ -149,9 +217,10 @@ def front(rec: FrontRecord, folder: Path, units: Mapping[str, str]) -> list[Path
     if m == 2:
         fig, ax = style.subplots(figsize=(7.2, 4.4))
         _panel(ax, F, se, pairs, masks)
+        h = _handles(rec, masks) + _ring(ax, F[:, :2], picks)
         ax.set_xlabel(labels[0])
         ax.set_ylabel(labels[1])
-        ax.legend(handles=_handles(rec, masks), fontsize=7, loc="upper left",
+        ax.legend(handles=h, fontsize=7, loc="upper left",
                   bbox_to_anchor=(1.01, 1.0), borderaxespad=0)  # fmt: skip
         fig.suptitle(head, fontsize=9)
         return save(fig, folder, "front")
@@ -165,10 +234,11 @@ def front(rec: FrontRecord, folder: Path, units: Mapping[str, str]) -> list[Path
                 continue
             i, j = c, r + 1  # x: objective c, y: objective r + 1
             _panel(ax, F[:, [i, j]], se[:, [i, j]], pairs, masks)
+            ring = _ring(ax, F[:, [i, j]], picks)
             ax.set_xlabel(labels[i], fontsize=8)
             ax.set_ylabel(labels[j], fontsize=8)
             ax.tick_params(labelsize=7)
-    axes[0, k - 1].legend(handles=_handles(rec, masks), fontsize=7, loc="upper right",
+    axes[0, k - 1].legend(handles=_handles(rec, masks) + ring, fontsize=7, loc="upper right",
                           borderaxespad=0)  # fmt: skip
     fig.suptitle(f"{head}\n(pairwise projections)", fontsize=9)
     out = save(fig, folder, "front")

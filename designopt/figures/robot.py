@@ -272,6 +272,10 @@ def obstacle_mesh(ob: Any, center: np.ndarray, ext: float):
     raise ValueError(f"unknown obstacle shape {kind!r}")
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> float:
+    return float(a[0] * b[1] - a[1] * b[0])
+
+
 def hull_2d(P: np.ndarray) -> np.ndarray:
     """The convex hull (k, 2) of points (n, 2), counter-clockwise (Andrew's monotone
     chain): an obstacle's outline in a view."""
@@ -282,7 +286,7 @@ def hull_2d(P: np.ndarray) -> np.ndarray:
     def half(pts):
         out: list = []
         for p in pts:
-            while len(out) >= 2 and np.cross(out[-1] - out[-2], p - out[-2]) <= 0:
+            while len(out) >= 2 and _cross(out[-1] - out[-2], p - out[-2]) <= 0:
                 out.pop()
             out.append(p)
         return out
@@ -378,7 +382,9 @@ def cone_rays(cone: Cone, n: int = 12) -> list[np.ndarray]:
 
 
 def scene_points(scene: Scene) -> np.ndarray:
-    """Every point a scene draws (arms, meshes, region, cone, targets): its extent."""
+    """Every point a scene draws but its obstacles (arms, meshes, region, cone, targets,
+    marks, ports, colliding pairs): what the view holds (:func:`view_box`). Obstacles
+    are clipped to that view, so a far-away one does not shrink it."""
     pts = [a.points() for a in scene.arms]
     pts += [a.world().meshes[k][0] for a in scene.arms for k in range(len(a.meshes))]
     pts += region_wire(scene.region)
@@ -388,13 +394,128 @@ def scene_points(scene: Scene) -> np.ndarray:
         pts.append(np.asarray(scene.targets.xyz, np.float64))
     pts += [np.atleast_2d(p) for p, _ in scene.marks]
     pts += [np.atleast_2d(np.asarray(p, np.float64)) for p in scene.ports]
-    pts += [obstacle_mesh(o, np.zeros(3), 1.0)[0] for o in scene.obstacles
-            if o.shape != "halfspace"]  # fmt: skip
+    pts += [np.stack(ab) for ab in scene.collisions]
     return np.vstack(pts) if pts else np.zeros((1, 3))
 
 
 def _extent(scene: Scene) -> float:
     return float(np.ptp(scene_points(scene), 0).max()) or 1.0
+
+
+MARGIN = 0.1
+"""The view's margin around what it holds: this share of its extent on every side."""
+
+
+def view_box(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) of the view of ``points`` (k, 3): their bounding box with a margin of
+    :data:`MARGIN` × their extent, each side at least 0.6 × the extent (no flat box)."""
+    P = np.asarray(points, np.float64).reshape(-1, 3)
+    P = P[np.all(np.isfinite(P), 1)]
+    if not len(P):
+        return np.zeros(3), np.ones(3)
+    lo, hi = P.min(0), P.max(0)
+    ext = float((hi - lo).max()) or 1.0
+    mid, half = (lo + hi) / 2, np.maximum((hi - lo) / 2 + MARGIN * ext, 0.3 * ext)
+    return mid - half, mid + half
+
+
+def _corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    return np.array([[(lo, hi)[i][0], (lo, hi)[j][1], (lo, hi)[k][2]]
+                     for i in (0, 1) for j in (0, 1) for k in (0, 1)])  # fmt: skip
+
+
+def _plane_in_box(p: np.ndarray, n: np.ndarray, lo: np.ndarray, hi: np.ndarray):
+    """The polygon (vertices (k, 3), fan faces) where the plane through p normal to n
+    cuts the box [lo, hi]; None when it misses the box."""
+    C = _corners(lo, hi)
+    d = (C - p) @ n
+    pts = []
+    for a in range(8):
+        for b in range(a + 1, 8):
+            if np.sum(C[a] != C[b]) == 1 and d[a] * d[b] <= 0 and d[a] != d[b]:
+                pts.append(C[a] + d[a] / (d[a] - d[b]) * (C[b] - C[a]))
+    if len(pts) < 3:
+        return None
+    P = np.unique(np.round(np.asarray(pts), 12), axis=0)
+    if len(P) < 3:
+        return None
+    c = P.mean(0)
+    u, v = _basis(n)
+    P = P[np.argsort(np.arctan2((P - c) @ v, (P - c) @ u))]
+    F = np.array([[0, i, i + 1] for i in range(1, len(P) - 1)])
+    return P, F
+
+
+def _vec(v: Any) -> str:
+    return "(" + ", ".join(f"{float(a):.4g}" for a in np.asarray(v).ravel()) + ")"
+
+
+def describe_obstacle(ob: Any, unit: str = "") -> str:
+    """``ball at (x, y, z), r = 0.1 m``: an obstacle in words, for a note."""
+    u = f" {unit}" if unit else ""
+    if ob.shape == "ball":
+        return f"ball at {_vec(ob.center)}{u}, r = {float(ob.radius):.4g}{u}"
+    if ob.shape == "capsule":
+        return f"capsule {_vec(ob.a)}–{_vec(ob.b)}{u}, r = {float(ob.radius):.4g}{u}"
+    if ob.shape == "box":
+        return f"box at {_vec(ob.center)}{u}, size {_vec(ob.size)}{u}"
+    return f"half-space through {_vec(ob.point)}{u}, normal {_vec(ob.normal)}"
+
+
+def clip_obstacle(ob: Any, lo: np.ndarray, hi: np.ndarray):
+    """An obstacle within the view box [lo, hi] as (vertices, faces, how): a box cut to
+    the view exactly, a half-space as the polygon where its plane cuts the view, a ball
+    or capsule with its vertices moved into the view; ``how`` is "" (whole), "cut" or
+    "outside" (nothing to draw: vertices and faces None)."""
+    if ob.shape == "halfspace":
+        n = np.asarray(ob.normal, np.float64)
+        n = n / np.linalg.norm(n)
+        pf = _plane_in_box(np.asarray(ob.point, np.float64), n, lo, hi)
+        inside = float(np.max((_corners(lo, hi) - np.asarray(ob.point, np.float64)) @ n)) < 0
+        return (*pf, "") if pf is not None else (None, None, "inside" if inside else "outside")
+    V, F = obstacle_mesh(ob, (lo + hi) / 2, 1.0)
+    a, b = V.min(0), V.max(0)
+    if np.any(a > hi) or np.any(b < lo):
+        return None, None, "outside"
+    if ob.shape == "box":  # the box cut to the view: a box (corners in obstacle_mesh's order)
+        V = _corners(np.maximum(a, lo), np.minimum(b, hi))
+    cut = bool(np.any(a < lo) or np.any(b > hi))
+    return np.clip(V, lo, hi), F, "cut" if cut else ""
+
+
+def clipped_obstacles(obstacles: Sequence[Any], lo: np.ndarray, hi: np.ndarray, unit: str = ""
+                      ) -> tuple[list[tuple[int, Any, np.ndarray, np.ndarray]], list[str]]:  # fmt: skip
+    """The obstacles within the view [lo, hi]: [(number, obstacle, vertices, faces)] to
+    draw, and a note for each one clipped (``obstacle 2 (ball at …) outside the view``,
+    ``… cut at the view's edge``; a half-space whose plane misses the view: outside it,
+    or the whole view inside it)."""
+    keep, notes = [], []
+    for k, ob in enumerate(obstacles):
+        V, F, how = clip_obstacle(ob, lo, hi)
+        if V is not None:
+            keep.append((k, ob, V, F))
+        what = f"obstacle {k} ({describe_obstacle(ob, unit)})"
+        if how == "outside":
+            notes.append(f"{what} outside the view")
+        elif how == "cut":
+            notes.append(f"{what} cut at the view's edge")
+        elif how == "inside":
+            notes.append(f"{what}: the whole view lies inside it")
+    return keep, notes
+
+
+def clip_note(notes: Sequence[str]) -> str:
+    """The notes of :func:`clipped_obstacles` as one line ("" when none)."""
+    return ("view clipped to the robots, task and ports: " + "; ".join(dict.fromkeys(notes))
+            if notes else "")  # fmt: skip
+
+
+def clipped_note(scenes: Sequence[Scene], unit: str = "", limits: np.ndarray | None = None) -> str:
+    """What a drawing of ``scenes`` on the view of ``limits`` (default: the scenes'
+    own points, as :func:`figure` draws them) leaves out of its obstacles, one line."""
+    pts = np.vstack([scene_points(sc) for sc in scenes]) if limits is None else limits
+    lo, hi = view_box(pts)
+    return clip_note([n for sc in scenes for n in clipped_obstacles(sc.obstacles, lo, hi, unit)[1]])
 
 
 # ---------------------------------------------------------------- matplotlib
@@ -427,13 +548,16 @@ def legend_handles(scene: Scene) -> list:
 
 def draw_3d(ax: Any, scene: Scene, unit: str, legend: bool = True,
             limits: np.ndarray | None = None) -> Any:  # fmt: skip
-    """Draw ``scene`` on a 3-D axes: region, targets, arms (capsules, meshes, centre
-    lines, axes, frames), marks, collisions; equal scales, axes labelled in ``unit``.
-    ``limits``: points (k, 3) the axes must hold (default: the scene's own). Returns the
-    targets' colour mappable (None without reached targets)."""
+    """Draw ``scene`` on a 3-D axes: region, targets, obstacles and ports, arms
+    (capsules, meshes, centre lines, axes, frames), marks, collisions; equal scales, axes
+    labelled in ``unit``. ``limits``: points (k, 3) the axes must hold (default: the
+    scene's own, :func:`scene_points`); the view is their :func:`view_box`, and the
+    obstacles are clipped to it (:func:`clipped_note` says which). Returns the targets'
+    colour mappable (None without reached targets)."""
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-    ext = _extent(scene)
+    pts = scene_points(scene) if limits is None else np.asarray(limits, np.float64)
+    lo, hi = view_box(pts)
     ax.computed_zorder = False
     Vr, Fr = region_faces(scene.region)
     if len(Fr):
@@ -444,9 +568,7 @@ def draw_3d(ax: Any, scene: Scene, unit: str, legend: bool = True,
     if scene.cone is not None:
         for k, line in enumerate(cone_rays(scene.cone)):
             ax.plot(*line.T, color="#8c564b", lw=1.2 if k == 0 else 0.7, ls="--", zorder=1.5)
-    centre = scene_points(scene).mean(0)
-    for ob in scene.obstacles:
-        Vo, Fo = obstacle_mesh(ob, centre, ext)
+    for _, _, Vo, Fo in clipped_obstacles(scene.obstacles, lo, hi)[0]:
         ax.add_collection3d(Poly3DCollection(Vo[Fo], facecolor=OBSTACLE, alpha=0.18,
                                              edgecolor="none", zorder=1))  # fmt: skip
     for pt in scene.ports:
@@ -494,15 +616,10 @@ def draw_3d(ax: Any, scene: Scene, unit: str, legend: bool = True,
     for a, b in scene.collisions:
         s = np.stack([a, b])
         ax.plot(*s.T, color=COLLIDING, lw=1.5, marker="x", ms=8, zorder=6)
-    pts = scene_points(scene) if limits is None else np.asarray(limits, np.float64)
-    ext = float(np.ptp(pts, 0).max()) or ext
-    lo, hi = pts.min(0), pts.max(0)
-    pad = 0.06 * ext
-    mid, half = (lo + hi) / 2, np.maximum((hi - lo) / 2 + pad, 0.3 * ext)  # no flat box
-    ax.set_xlim(mid[0] - half[0], mid[0] + half[0])
-    ax.set_ylim(mid[1] - half[1], mid[1] + half[1])
-    ax.set_zlim(mid[2] - half[2], mid[2] + half[2])
-    ax.set_box_aspect(tuple(half / half.max()))
+    ax.set_xlim(lo[0], hi[0])  # the view: robots, task and ports; obstacles clipped to it
+    ax.set_ylim(lo[1], hi[1])
+    ax.set_zlim(lo[2], hi[2])
+    ax.set_box_aspect(tuple((hi - lo) / (hi - lo).max()))
     ax.set_xlabel(style.label("x", unit))
     ax.set_ylabel(style.label("y", unit))
     ax.set_zlabel(style.label("z", unit))
@@ -565,13 +682,14 @@ def draw_region_2d(ax: Any, region: Any, E: np.ndarray) -> None:
 
 
 def draw_obstacles_2d(ax: Any, scene: Scene, E: np.ndarray) -> None:
-    """The scene's obstacles (their outlines: the projections' convex hulls) and ports
-    in the plane of E."""
+    """The scene's obstacles (their outlines: the projections' convex hulls, clipped to
+    the scene's :func:`view_box`) and ports in the plane of E."""
     from matplotlib.collections import PolyCollection
     from matplotlib.patches import Polygon
 
     centre, ext = scene_points(scene).mean(0), _extent(scene)
-    for ob in scene.obstacles:
+    lo, hi = view_box(scene_points(scene))
+    for _, ob, V, _ in clipped_obstacles(scene.obstacles, lo, hi)[0]:
         if ob.shape == "halfspace":  # its side of the line where the plane cuts the view
             n = np.asarray(ob.normal, np.float64) / np.linalg.norm(ob.normal)
             n2 = n @ E
@@ -587,8 +705,7 @@ def draw_obstacles_2d(ax: Any, scene: Scene, E: np.ndarray) -> None:
                                              edgecolors="0.35", linewidths=0.8, zorder=1.2),
                               autolim=False)  # fmt: skip
             continue
-        V, _ = obstacle_mesh(ob, centre, 3 * ext)
-        H = hull_2d(V @ E)
+        H = hull_2d(V @ E)  # clipped to the view: a far-away obstacle does not widen it
         if len(H) >= 3:
             ax.add_patch(Polygon(H, closed=True, fc=OBSTACLE, alpha=0.3, ec="0.35", lw=0.8,
                                  zorder=1.2))  # fmt: skip
@@ -600,7 +717,8 @@ def draw_obstacles_2d(ax: Any, scene: Scene, E: np.ndarray) -> None:
 
 def figure(scenes: Sequence[Scene], unit: str, title: str = "", size: float = 5.0):
     """One 3-D panel per scene, side by side on common axis limits (so that arms compare
-    by size), the legend below them, ``title`` wrapped to the width; laid out by hand in
+    by size; obstacles clipped to the view, :func:`clipped_note` added to the title), the
+    legend below them, ``title`` wrapped to the width; laid out by hand in
     inches (constrained layout does not see a 3-D axes' labels). Returns the figure (save
     it with ``designopt.figures.save``)."""
     import textwrap
@@ -608,15 +726,14 @@ def figure(scenes: Sequence[Scene], unit: str, title: str = "", size: float = 5.
     from designopt.figures.canvas import plt
 
     W = size * len(scenes) + 0.5
-    lines = (
-        [ln for par in title.split("\n") for ln in textwrap.wrap(par, int(W * 12.5))]
-        if title
-        else []
-    )
+    note = clipped_note(scenes, unit)
+    title = "\n".join(x for x in (title, note) if x)
+    lines = [ln for par in title.split("\n") for ln in textwrap.wrap(par, int(W * 12.5))]
     handles = list({h.get_label(): h for sc in scenes for h in legend_handles(sc)}.values())
     ncol = max(1, min(len(handles), int(W // 2.6)))
     rows = -(-len(handles) // ncol)
-    top = 0.15 + 0.19 * len(lines) + 0.15  # the title, then the panels' own titles
+    rows_t = max((sc.title.count("\n") + 1 for sc in scenes if sc.title), default=1)
+    top = 0.15 + 0.19 * len(lines) + 0.15 * rows_t  # the title, then the panels' own titles
     bottom = 0.55 + (0.22 * rows + 0.15 if handles else 0.0)  # x, y labels hang below
     H = size + top + bottom
     fig = plt.figure(figsize=(W, H))

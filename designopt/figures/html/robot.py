@@ -25,15 +25,20 @@ from designopt.figures.html.plots import _layout
 from designopt.figures.robot import (
     COLLIDING,
     FRAME_COLOURS,
+    OBSTACLE,
     Arm,
     Scene,
     axis_arrows,
     capsules,
+    clip_note,
+    clipped_obstacles,
     cone_rays,
     radii,
     region_faces,
     region_wire,
+    scene_points,
     triads,
+    view_box,
 )
 
 TRIANGLES = 20_000
@@ -67,8 +72,10 @@ class View:
 @dataclass
 class FrontView:
     """A front beside its robots: objective values ``x``, ``y`` (n,) with their axis
-    labels, one robot (list of arms) per design at one common pose, each design's hover
-    text, reference arms (the original robot of a URDF chain)."""
+    labels, one robot (list of arms, each at its base in the world) per design at one
+    pose per design (a representative tuple of targets, or the home pose), each design's
+    hover text, reference arms (the original robot of a URDF chain), and what stays:
+    the task region, obstacles and ports."""
 
     title: str
     unit: str
@@ -81,6 +88,8 @@ class FrontView:
     reference: list[Arm] = field(default_factory=list)
     region: Any = None
     note: str = ""
+    obstacles: list[Any] = field(default_factory=list)
+    ports: list[np.ndarray] = field(default_factory=list)
 
 
 def _segments(segs: Sequence[np.ndarray]) -> np.ndarray:
@@ -109,21 +118,27 @@ def arm_geometry(arm: Arm, r: float) -> list[dict[str, Any]]:
     return out
 
 
+def _look(arm: Arm) -> dict[str, Any]:
+    """The capsules' colour and name of an arm (red and "(colliding)" when it collides)."""
+    return {"color": COLLIDING if arm.colliding else arm.color,
+            "name": esc(arm.label + (" (colliding)" if arm.colliding else "")) or "arm"}  # fmt: skip
+
+
 def arm_traces(arm: Arm, r: float, hover: str, legend: bool = True,
                opacity: float = 0.55) -> list[dict[str, Any]]:  # fmt: skip
     """Plotly traces of one arm: capsules (mesh3d), the centre line with its joints
     (hover: ``hover``), joint axes, the frames' x, y, z axes, the meshes (mesh3d)."""
     geo = arm_geometry(arm, r)
     _, F = capsules(arm, r, keep_all=True)
-    col = COLLIDING if arm.colliding else arm.color
-    name = esc(arm.label + (" (colliding)" if arm.colliding else "")) or "arm"
-    grp = name
+    look = _look(arm)
+    col, name = look["color"], look["name"]
+    grp = esc(arm.label) or "arm"
     trs: list[dict[str, Any]] = [
         {"type": "mesh3d", **geo[0], "i": F[:, 0], "j": F[:, 1], "k": F[:, 2], "color": col,
          "opacity": opacity, "flatshading": True, "name": name, "legendgroup": grp,
          "showlegend": legend, "hoverinfo": "skip",
          "lighting": {"ambient": 0.55, "diffuse": 0.8, "specular": 0.2}},
-        {"type": "scatter3d", "mode": "lines+markers", **geo[1], "name": name + ": joints",
+        {"type": "scatter3d", "mode": "lines+markers", **geo[1], "name": grp + ": joints",
          "legendgroup": grp, "showlegend": False, "hovertemplate": hover,
          "line": {"color": "#222", "width": 4}, "marker": {"size": 3, "color": "#222"}},
         {"type": "scatter3d", "mode": "lines", **geo[2], "name": "joint axes",
@@ -140,13 +155,14 @@ def arm_traces(arm: Arm, r: float, hover: str, legend: bool = True,
         _, Fm = merge(list(arm.world().meshes))
         trs.append({"type": "mesh3d", **geo[-1], "i": Fm[:, 0], "j": Fm[:, 1], "k": Fm[:, 2],
                     "color": "#a8a8a8", "opacity": 0.6, "flatshading": True,
-                    "name": name + ": meshes", "legendgroup": grp, "showlegend": False,
+                    "name": grp + ": meshes", "legendgroup": grp, "showlegend": False,
                     "hoverinfo": "skip"})  # fmt: skip
     return trs
 
 
-def _static(scene: Scene, unit: str) -> list[dict[str, Any]]:
-    """Region (faces and wireframe), tool-axis cone, targets, reference arms."""
+def _static(scene: Scene, unit: str, box: tuple[np.ndarray, np.ndarray]) -> list[dict[str, Any]]:
+    """Region (faces and wireframe), obstacles (clipped to the view ``box`` (lo, hi)),
+    ports, tool-axis cone, targets, reference arms."""
     out: list[dict[str, Any]] = []
     V, F = region_faces(scene.region)
     if len(F):
@@ -158,22 +174,15 @@ def _static(scene: Scene, unit: str) -> list[dict[str, Any]]:
         out.append({"type": "scatter3d", "mode": "lines", **_xyz(_segments(wire)),
                     "name": "task region", "hoverinfo": "skip",
                     "line": {"color": "#3182bd", "width": 2}})  # fmt: skip
-    if scene.obstacles or scene.ports:
-        from designopt.figures.robot import obstacle_mesh, scene_points
-
-        pts = scene_points(scene)
-        centre, ext = pts.mean(0), float(np.ptp(pts, 0).max()) or 1.0
-        for k, ob in enumerate(scene.obstacles):
-            Vo, Fo = obstacle_mesh(ob, centre, ext)
-            out.append({"type": "mesh3d", **_xyz(Vo), "i": Fo[:, 0], "j": Fo[:, 1],
-                        "k": Fo[:, 2], "color": "#7f7f7f", "opacity": 0.2,
-                        "name": f"obstacle {k}: {ob.shape}", "hoverinfo": "name",
-                        "showlegend": True})  # fmt: skip
-        if scene.ports:
-            out.append({"type": "scatter3d", "mode": "markers",
-                        **_xyz(np.asarray(scene.ports, np.float64)), "name": "port",
-                        "marker": {"size": 6, "color": "white",
-                                   "line": {"color": "black", "width": 3}}})  # fmt: skip
+    for k, ob, Vo, Fo in clipped_obstacles(scene.obstacles, *box)[0]:  # clipped to the view
+        out.append({"type": "mesh3d", **_xyz(Vo), "i": Fo[:, 0], "j": Fo[:, 1], "k": Fo[:, 2],
+                    "color": OBSTACLE, "opacity": 0.2, "name": f"obstacle {k}: {ob.shape}",
+                    "hoverinfo": "name", "showlegend": True})  # fmt: skip
+    if scene.ports:
+        out.append({"type": "scatter3d", "mode": "markers",
+                    **_xyz(np.asarray(scene.ports, np.float64)), "name": "port",
+                    "marker": {"size": 6, "color": "white",
+                               "line": {"color": "black", "width": 3}}})  # fmt: skip
     if scene.cone is not None:
         out.append({"type": "scatter3d", "mode": "lines", **_xyz(_segments(cone_rays(scene.cone))),
                     "name": f"tool z axes within {scene.cone.half_angle:g}°", "hoverinfo": "skip",
@@ -203,25 +212,27 @@ def _static(scene: Scene, unit: str) -> list[dict[str, Any]]:
     return out
 
 
-def _scene_layout(unit: str, traces: Sequence[dict[str, Any]], **kw: Any) -> dict[str, Any]:
-    """A 3-D scene on fixed ranges that hold every point of ``traces`` (and of the
-    frames and designs drawn there later, passed in as traces too), one scale on all
-    three axes, the camera a little back so that no corner is cut."""
-    P = np.vstack([np.c_[np.asarray(t["x"], np.float64), np.asarray(t["y"], np.float64),
-                         np.asarray(t["z"], np.float64)] for t in traces if "x" in t])  # fmt: skip
-    P = P[np.all(np.isfinite(P), 1)]
-    lo, hi = (P.min(0), P.max(0)) if len(P) else (np.zeros(3), np.ones(3))
-    ext = float((hi - lo).max()) or 1.0
-    pad = 0.05 * ext
-    lo, hi = lo - pad, hi + pad
-    span = np.maximum(hi - lo, 0.15 * ext)
-    mid = (lo + hi) / 2
+def _box(scene: Scene, arms: Sequence[Arm]) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray]:
+    """The view ((lo, hi), :func:`designopt.figures.robot.view_box`) of a scene and of
+    the arms drawn in it later (frames, designs), and the points it holds."""
+    P = np.vstack([scene_points(scene), *(scene_points(Scene(arms=[a])) for a in arms)])
+    return view_box(P), P
+
+
+def _scene_layout(unit: str, box: tuple[np.ndarray, np.ndarray], points: np.ndarray,
+                  **kw: Any) -> dict[str, Any]:  # fmt: skip
+    """A 3-D scene on the fixed ranges of the view ``box`` (lo, hi), one scale on all
+    three axes, the camera a little back so that no corner is cut; a planar scene
+    (``points`` in one horizontal plane) seen from above."""
+    lo, hi = box
+    span = hi - lo
     ax = {"backgroundcolor": "#fafafa", "gridcolor": "#dcdcdc", "showbackground": True}
     out = {a: ax | {"title": {"text": esc(style.label(a[0], unit))},
-                    "range": [float(mid[k] - span[k] / 2), float(mid[k] + span[k] / 2)]}
+                    "range": [float(lo[k]), float(hi[k])]}
            for k, a in enumerate(("xaxis", "yaxis", "zaxis"))}  # fmt: skip
     r = span / span.max()
-    flat = (hi - lo)[2] - 2 * pad < 0.2 * ext  # a planar scene: seen from above
+    P = points[np.all(np.isfinite(points), 1)]
+    flat = len(P) > 0 and np.ptp(P[:, 2]) < 0.2 * (float(np.ptp(P, 0).max()) or 1.0)
     eye = {"x": 0.3, "y": -1.0, "z": 1.9} if flat else {"x": 1.3, "y": 1.3, "z": 0.9}
     return out | {"aspectmode": "manual",
                   "aspectratio": {"x": float(r[0]), "y": float(r[1]), "z": float(r[2])},
@@ -237,7 +248,8 @@ def _mark_trace(p: np.ndarray | None) -> dict[str, Any]:
 
 def view_plot(view: View, ids: _Ids) -> Plot:
     """The 3-D robot in its task with a slider through ``view.poses``."""
-    static = _static(view.scene, view.unit)
+    box, points = _box(view.scene, [a for p in view.poses for a in p.arms])
+    static = _static(view.scene, view.unit, box)
     first = view.poses[0]
     rs = radii([a for p in view.poses for a in p.arms] + list(view.scene.arms))
     r = rs[0]
@@ -255,13 +267,13 @@ def view_plot(view: View, ids: _Ids) -> Plot:
         for k, arm in enumerate(p.arms):
             geo = arm_geometry(arm, arm.radius or r)
             geo[1] = geo[1] | {"hovertemplate": p.hover[k]}
+            geo[0] = geo[0] | _look(arm)  # a colliding arm red in its frame only
             upd += geo
         if marked:
             m = _mark_trace(p.mark)
             upd.append({k: m[k] for k in ("x", "y", "z")})
         frames.append({"name": p.label, "data": upd, "traces": idx})
-    every = static + dyn + [t for f in frames for t in f["data"]]
-    lay = _layout(esc(view.title), scene=_scene_layout(view.unit, every), height=640)
+    lay = _layout(esc(view.title), scene=_scene_layout(view.unit, box, points), height=640)
     lay["legend"] |= {"x": 0.0, "y": 1.0, "xanchor": "left", "yanchor": "top"}
     lay["uirevision"] = "robot"
     if len(view.poses) > 1:
@@ -289,8 +301,9 @@ def front_plots(fv: FrontView, ids: _Ids) -> list[Plot]:
     lay = _layout(esc(f"{fv.title}: hover or click a design to draw its robot beside"),
                   esc(fv.xlabel), esc(fv.ylabel), showlegend=False, height=520)  # fmt: skip
     fplot = Plot(fid, {"data": [front], "layout": lay})
-    scene = Scene(arms=list(fv.reference), region=fv.region)
-    static = _static(scene, fv.unit)
+    scene = front_scene(fv)
+    box, points = _box(scene, [a for rb in fv.robots for a in rb])
+    static = _static(scene, fv.unit, box)
     rs = radii([a for rb in fv.robots for a in rb] + list(fv.reference))
     r = rs[0]
     dyn: list[dict[str, Any]] = []
@@ -303,17 +316,15 @@ def front_plots(fv: FrontView, ids: _Ids) -> list[Plot]:
         upd: dict[str, list[Any]] = {"x": [g["x"] for g in geo], "y": [g["y"] for g in geo],
                                      "z": [g["z"] for g in geo]}  # fmt: skip
         designs.append(
-            {"data": upd, "layout": {"annotations[0].text": esc(f"design {i}: {fv.hover[i]}")}}
+            {"data": upd, "layout": {"annotations[0].text": _label(i, fv.hover[i])}}
         )
-    every = static + dyn + [{"x": x, "y": y, "z": z} for d in designs
-                            for x, y, z in zip(d["data"]["x"], d["data"]["y"], d["data"]["z"], strict=True)]  # fmt: skip
     lay = _layout(esc("the robot of the design hovered or clicked on the front (common axes: "
                       "the designs compare by size)"),
-                  scene=_scene_layout(fv.unit, every), height=520)  # fmt: skip
+                  scene=_scene_layout(fv.unit, box, points), height=520)  # fmt: skip
     lay["legend"] |= {"orientation": "h", "x": 0.0, "y": 0.0, "xanchor": "left",
                       "yanchor": "bottom"}  # fmt: skip  # the design's label goes on top
     lay["uirevision"] = "robot"
-    lay["annotations"] = [{"text": esc(f"design 0: {fv.hover[0]}"), "xref": "paper",
+    lay["annotations"] = [{"text": _label(0, fv.hover[0]), "xref": "paper",
                            "yref": "paper", "x": 0.0, "y": 1.0, "xanchor": "left",
                            "yanchor": "top", "showarrow": False, "font": {"size": 11},
                            "align": "left", "bgcolor": "rgba(255,255,255,0.8)"}]  # fmt: skip
@@ -323,14 +334,40 @@ def front_plots(fv: FrontView, ids: _Ids) -> list[Plot]:
     return [fplot, rplot]
 
 
+def front_scene(fv: FrontView) -> Scene:
+    """What stays beside a front's robots: the reference arms, region, obstacles, ports."""
+    return Scene(arms=list(fv.reference), region=fv.region, obstacles=list(fv.obstacles),
+                 ports=list(fv.ports))  # fmt: skip
+
+
+def clipped(view: View | None = None, front: FrontView | None = None) -> str:
+    """What the views leave out of their obstacles (``figures.robot.clip_note``)."""
+    parts = []
+    if view is not None:
+        parts.append((view.scene, [a for p in view.poses for a in p.arms], view.unit))
+    if front is not None:
+        parts.append((front_scene(front), [a for rb in front.robots for a in rb], front.unit))
+    return clip_note([n for sc, arms, u in parts
+                      for n in clipped_obstacles(sc.obstacles, *_box(sc, arms)[0], u)[1]])  # fmt: skip
+
+
+def _label(i: int, hover: str) -> str:
+    """The robot's label of design i: its hover text, one part (``; ``) a line."""
+    return "<br>".join(esc(part) for part in f"design {i}: {hover}".split("; "))
+
+
 def robot_section(view: View | None = None, front: FrontView | None = None,
                   ids: _Ids | None = None) -> PageSection:  # fmt: skip
-    """The page's "Robot" section: the view in its task and/or the front's robots."""
+    """The page's "Robot" section: the view in its task and/or the front's robots; a
+    note names the obstacles clipped to the view (far away, or cut at its edge)."""
     ids = ids or _Ids()
     sec = PageSection("robot", "Robot")
     for v in (view, front):
         if v is not None and v.note:
             sec.items.append(f"<p class='note'>{esc(v.note)}</p>")
+    note = clipped(view, front)
+    if note:
+        sec.items.append(f"<p class='note'>{esc(note)}</p>")
     if view is not None:
         sec.items.append(view_plot(view, ids))
     if front is not None:

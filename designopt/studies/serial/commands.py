@@ -268,33 +268,90 @@ def _in_limits(q: np.ndarray, s: Any, mech: Any, text: str) -> None:
 
 
 def _outputs(args: argparse.Namespace, cfg: Any) -> tuple[Path, Path | None]:
-    """(the figure's PNG, the HTML page or None), checked before anything is drawn."""
-    png = Path(args.out) if args.out else \
-        Path(cfg.output_path).with_name(f"{Path(args.config).stem}_view.png")  # fmt: skip
-    if png.suffix.lower() != ".png":
-        raise ConfigError(f"--out {args.out}: give a .png file name (the PDF is written beside "
-                          "it)")  # fmt: skip
+    """(the figure's PNG, the HTML page or None), checked before anything is drawn: the
+    PNG by default ``<config stem>_view.png`` beside the config's output archive."""
+    stem = f"{Path(args.config).stem}_view"
+    png = Path(args.out) if args.out else Path(cfg.output_path()).with_name(f"{stem}.png")
     html = Path(args.html) if args.html else None
-    if html is not None and html.suffix.lower() not in (".html", ".htm"):
-        raise ConfigError(f"--html {args.html}: give an .html file name")
+    for flag, path, suffixes in (("--out", png, (".png",)), ("--html", html, (".html", ".htm"))):
+        if path is None:
+            continue
+        if path.is_dir():
+            raise ConfigError(f"{flag} {path}: is a folder; give a file name such as "
+                              f"{path / (stem + suffixes[0])}")  # fmt: skip
+        if path.suffix.lower() not in suffixes:
+            raise ConfigError(f"{flag} {path}: give a{'n' * (flag == '--html')} "
+                              f"{suffixes[0]} file name"
+                              + (" (the PDF is written beside it)" if flag == "--out" else ""))  # fmt: skip
     return png, html
+
+
+def _view_title(s: Any, design: dict[str, float], q: np.ndarray, at_home: bool) -> str:
+    """The view's title: the chain, the design, the pose, the changed URDF numbers,
+    the meshes, the arms' bases."""
+    import textwrap
+
+    from designopt.studies.serial import drawing
+    from designopt.studies.serial.settings import UrdfChain, length_unit
+
+    u = length_unit(s)
+    units = {k: ("deg" if k in s.angle_names() else u) for k in design}
+    dtext = ", ".join(f"{k} = {v:.6g} {units[k]}" for k, v in design.items())
+    urdf_chain = isinstance(s.chain, UrdfChain)
+    what = (f"{Path(s.chain.urdf).name} ({s.chain.imported.base} -> {s.chain.imported.tip})" if urdf_chain
+            else f"DH chain ({s.chain.convention}, {len(s.chain.joints)} joints)")  # fmt: skip
+    pose = drawing.joint_values(s, q) + (" (home pose: each joint at 0 where its limits allow, "
+                                         "else mid-range)" if at_home else "")  # fmt: skip
+    lines = [f"{what}: design {dtext}", f"at {pose}"]
+    if s.arms is not None:
+        lines.append(f"{len(s.arms)} arms, each at its base in the world (study.arms), every "
+                     "arm at this pose")  # fmt: skip
+    if urdf_chain:
+        lines.append("set numbers: " + drawing.changes_text(s, design).replace("\n", "; "))
+    note = drawing.meshes_note(s, design, q)
+    if note:
+        lines.append(note)
+    return "\n".join(ln for line in lines for ln in textwrap.wrap(line, 110))
+
+
+def _changed(s: Any, design: dict[str, float]) -> bool:
+    """Whether the design changes a URDF chain's own numbers (the original is drawn)."""
+    from designopt.studies.serial import drawing
+    from designopt.studies.serial.settings import UrdfChain
+
+    return isinstance(s.chain, UrdfChain) and any(
+        abs(a - b) > 1e-12 * max(1.0, abs(b)) for _, a, b, _ in drawing.changes(s, design))
+
+
+def _task_around(s: Any) -> dict[str, Any]:
+    """What the view draws around the robot: the task region, the tool-axis cone, the
+    obstacles and the ports, as ``figures.robot.Scene`` keywords."""
+    from designopt.figures import robot
+    from designopt.studies.serial import drawing
+
+    region = s.task.region if s.task is not None else None
+    cone = None
+    if region is not None:
+        rp = robot.scene_points(robot.Scene(arms=[], region=region))
+        cone = drawing.cone(s, rp, 0.4 * float(np.ptp(rp, 0).max()) if len(rp) > 1 else 0.1)
+    return {"region": region, "cone": cone, **drawing.obstacles_and_ports(s)}
 
 
 def cmd_view(args: argparse.Namespace, ctx: Any) -> int:
     """Draw the chain as configured, without optimising: a figure (PNG + PDF) of the robot
-    at ``--design`` (else the middle of the box) and ``--q`` (else the home pose), the
-    URDF's original robot beside it where the design changes the file's numbers, the task
-    region and tool-axis cone where the config has a task; ``--html``: a 3-D page too."""
+    at ``--design`` (else the middle of the box) and ``--q`` (else the home pose), every
+    arm at its base in the world where the study has several, the URDF's original robot
+    beside it where the design changes the file's numbers, the task region, tool-axis
+    cone, obstacles and ports where the config has them; ``--html``: a 3-D page too."""
     loaded = ctx.load(args)
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    from designopt.figures import html as page
     from designopt.figures import robot, save
     from designopt.io import writer
     from designopt.studies.serial import drawing
     from designopt.studies.serial.mechanism import build
-    from designopt.studies.serial.settings import UrdfChain, length_unit
+    from designopt.studies.serial.settings import length_unit
 
     cfg, _ = loaded
     where = args.config
@@ -310,60 +367,50 @@ def cmd_view(args: argparse.Namespace, ctx: Any) -> int:
     for p in (png, html):
         if p is not None:
             writer.check(p, overwrite=True)
-    u = length_unit(s)
     x = np.asarray([design[k] for k in s.variables], np.float64)
-    arm = drawing.arms(s, mech, [x], q, labels=["this design"], colors=["#ff7f0e"])[0][0]
-    region = s.task.region if s.task is not None else None
-    cone = None
-    if region is not None:
-        from designopt.figures.robot import scene_points
-
-        rp = scene_points(robot.Scene(arms=[], region=region))
-        cone = drawing.cone(s, rp, 0.4 * float(np.ptp(rp, 0).max()) if len(rp) > 1 else 0.1)
-    scenes = [robot.Scene(arms=[arm], region=region, cone=cone, title="this design")]
-    changed = ""
-    urdf_chain = isinstance(s.chain, UrdfChain)
-    if urdf_chain:
-        changed = drawing.changes_text(s, design)
-        if any(abs(a - b) > 1e-12 * max(1.0, abs(b)) for _, a, b, _ in drawing.changes(s, design)):
-            orig = drawing.original_arm(s, mech, q)
-            scenes.insert(0, robot.Scene(arms=[orig], region=region, cone=cone,
-                                         title="original: the URDF's own numbers"))  # fmt: skip
-    units = {k: ("deg" if k in s.angle_names() else u) for k in design}
-    dtext = ", ".join(f"{k} = {v:.6g} {units[k]}" for k, v in design.items())
-    what = (f"{Path(s.chain.urdf).name} ({s.chain.imported.base} -> {s.chain.imported.tip})" if urdf_chain
-            else f"DH chain ({s.chain.convention}, {len(s.chain.joints)} joints)")  # fmt: skip
-    pose = drawing.joint_values(s, q) + (" (home pose: each joint at 0 where its limits allow, "
-                                         "else mid-range)" if at_home else "")  # fmt: skip
-    import textwrap
-
-    lines = [f"{what}: design {dtext}", f"at {pose}"]
-    if changed:
-        lines.append("set numbers: " + changed.replace("\n", "; "))
-    note = drawing.meshes_note(s, design, q)
-    if note:
-        lines.append(note)
-    title = "\n".join(ln for line in lines for ln in textwrap.wrap(line, 110))
-    fig = robot.figure(scenes, u, title)
-    written = writer.publish_figures(lambda d: save(fig, d, png.stem), png.parent, swap=False)
+    around = _task_around(s)
+    mine = drawing.study_arms(s, mech, x, q, label="this design", color="#ff7f0e")
+    scenes = [robot.Scene(arms=mine, title="this design", **around)]
+    if _changed(s, design):
+        scenes.insert(0, robot.Scene(arms=drawing.original_arms(s, mech, x, q), **around,
+                                     title="original: the URDF's own numbers"))  # fmt: skip
+    title = _view_title(s, design, q, at_home)
+    fig = robot.figure(scenes, length_unit(s), title)
+    written = [png.parent / p.name for p in  # printed as given (a bare name: its folder is ".")
+               writer.publish_figures(lambda d: save(fig, d, png.stem), png.absolute().parent,
+                                      swap=False)]  # fmt: skip
     if html is not None:
-        from designopt.studies.serial.drawing import hover
-        from designopt.studies.serial.report import _budget
+        from designopt.figures import html as page
 
-        ref = [drawing.original_arm(s, mech, q, budget=_budget(2))] if len(scenes) > 1 else []
-        arm_h = drawing.arms(s, mech, [x], q, labels=["this design"], colors=["#ff7f0e"],
-                             budget=_budget(1 + len(ref)))[0][0]  # fmt: skip
-        view = page.View(title=title.replace("\n", "; ") + "; drag to rotate", unit=u,
-                         scene=robot.Scene(arms=ref, region=region, cone=cone),
-                         poses=[page.Pose("this pose", [arm_h], [hover(s, "this design", q)])],
-                         note=(("blue: the original robot (the URDF's numbers); ") if ref else "")
-                         + "hover the joints for their values")  # fmt: skip
+        view = view_of(s, mech, x, q, title, len(scenes) > 1, around)
         doc = page.document([page.robot_section(view)], f"designopt view: {Path(where).name}")
         writer.write_file(html, doc.encode("utf-8"), "HTML view")
         written.append(html)
     for p in written:
         print(p)
     return 0
+
+
+def view_of(s: Any, mech: Any, x: np.ndarray, q: np.ndarray, title: str, original: bool,
+            around: dict[str, Any]) -> Any:  # fmt: skip
+    """The view's 3-D robot (``designopt.figures.html.View``): every arm of this design
+    at ``q``, at its base, the original robot as a reference, with ``around`` (region,
+    cone, obstacles, ports)."""
+    from designopt.figures import html as page
+    from designopt.figures import robot
+    from designopt.studies.serial import drawing
+    from designopt.studies.serial.report import _budget
+    from designopt.studies.serial.settings import length_unit
+
+    A = 1 if s.arms is None else len(s.arms)
+    ref = drawing.original_arms(s, mech, x, q, budget=_budget(2 * A)) if original else []
+    mine = drawing.study_arms(s, mech, x, q, label="this design", color="#ff7f0e",
+                              budget=_budget(A + len(ref)))  # fmt: skip
+    return page.View(title=title.replace("\n", "; ") + "; drag to rotate", unit=length_unit(s),
+                     scene=robot.Scene(arms=ref, **around),
+                     poses=[page.Pose("this pose", mine, [drawing.hover(s, a.label, q) for a in mine])],
+                     note=("faint: the original robot (the URDF's numbers); " if ref else "")
+                     + "hover the joints for their values")  # fmt: skip
 
 
 def _commands() -> tuple[Any, ...]:

@@ -126,14 +126,12 @@ def _closest(sa: np.ndarray, sb: np.ndarray, n: int = 24) -> tuple[np.ndarray, n
     return pa[i], pb[j], float(d[i, j])
 
 
-def arm_tuples(s: SerialSettings, mech: Mechanism, x: Any, sol: Mapping[str, np.ndarray],
-               keys: Mapping[str, Any], budget: int | None = FIGURE_TRIANGLES,
-               ) -> list[tuple[str, list[Arm], list[tuple[np.ndarray, np.ndarray]], list]]:  # fmt: skip
-    """Tuples of targets of a multi-arm run (one per arm, drawn as ``arms_free`` draws
-    them: arm k's tuple j is target π_k(j)) where every arm reaches its own: the tightest
-    (smallest gap between two arms: colliding if any collides), the median and the
-    loosest. Each: (label, the arms at their solutions with their bases and colours,
-    colliding pairs (their closest points), the arms' joints)."""
+def _tuples(s: SerialSettings, mech: Mechanism, sol: Mapping[str, np.ndarray],
+            keys: Mapping[str, Any]) -> tuple[list[np.ndarray], np.ndarray, np.ndarray, list, Any]:  # fmt: skip
+    """The tuples of targets of a multi-arm solution as ``arms_free`` draws them (arm
+    k's tuple j is target π_k(j)): (π_k per arm, the tuples where every arm reaches its
+    own target (N,) bool, the least gap between two arms per tuple, each arm's capsules
+    per tuple (N, L, 2, 3) in the world, the collision geometry)."""
     import jax.numpy as jnp
 
     from designopt.kinematics.collision import arms_clearance
@@ -146,33 +144,47 @@ def arm_tuples(s: SerialSettings, mech: Mechanism, x: Any, sol: Mapping[str, np.
     perm = [np.arange(N)] + [np.asarray(jax.random.permutation(jax.random.fold_in(key, k), N))
                              for k in range(1, A)]  # fmt: skip
     both = np.all(np.stack([ok[k][perm[k]] for k in range(A)]), 0)
-    if not both.any():
-        return []
     seg = [np.asarray(sol["segments"])[k][perm[k]] for k in range(A)]  # (N, L, 2, 3) world
     g = bodies.geometry(s, mech)
-    r = jnp.asarray(g.radii)  # type: ignore[union-attr]
     gap = np.full(N, np.inf)
-    for a in range(A):
-        for b in range(a + 1, A):
-            gap = np.minimum(gap, np.asarray(arms_clearance(seg[a], r, seg[b], r)))
+    if both.any() and g is not None:
+        r = jnp.asarray(g.radii)
+        for a in range(A):
+            for b in range(a + 1, A):
+                gap = np.minimum(gap, np.asarray(arms_clearance(seg[a], r, seg[b], r)))
+    return perm, both, gap, seg, g
+
+
+def _ordered(both: np.ndarray, gap: np.ndarray) -> np.ndarray:
+    """The tuples every arm reaches, by their gap (the tightest first)."""
     idx = np.flatnonzero(both)
-    order = idx[np.argsort(gap[idx], kind="stable")]
+    return idx[np.argsort(gap[idx], kind="stable")]
+
+
+def arm_tuples(s: SerialSettings, mech: Mechanism, x: Any, sol: Mapping[str, np.ndarray],
+               keys: Mapping[str, Any], budget: int | None = FIGURE_TRIANGLES,
+               ) -> list[tuple[str, list[Arm], list[tuple[np.ndarray, np.ndarray]], list]]:  # fmt: skip
+    """Tuples of targets of a multi-arm run (one per arm, drawn as ``arms_free`` draws
+    them: arm k's tuple j is target π_k(j)) where every arm reaches its own: the tightest
+    (smallest gap between two arms: colliding if any collides), the median and the
+    loosest. Each: (label, the arms at their solutions with their bases and colours,
+    colliding pairs (their closest points), the arms' joints)."""
+    import jax.numpy as jnp
+
+    from designopt.kinematics.collision import arms_clearance
+
+    A = len(s.arms)  # type: ignore[arg-type]
+    perm, both, gap, seg, g = _tuples(s, mech, sol, keys)
+    if not both.any():
+        return []
+    order = _ordered(both, gap)
     picks = dict.fromkeys([int(order[0]), int(order[(len(order) - 1) // 2]), int(order[-1])])
-    X = full(mech, x)
-    p = bodies.base_params(s, mech, jnp.float64)
-    Rb, tb = (np.asarray(v, np.float64) for v in bodies.base_frames(p, jnp.asarray(X)))
+    r = jnp.asarray(g.radii)  # type: ignore[union-attr]
     out = []
     for j, name in zip(picks, ("tightest", "median", "loosest"), strict=False):
-        arms_j, pairs, qs = [], [], []
-        for k in range(A):
-            T = np.eye(4)
-            T[:3, :3], T[:3, 3] = Rb[k, 0], tb[k, 0]
-            q = np.asarray(sol["q"])[k][perm[k][j]]
-            qs.append(q)
-            a = arms(s, mech, [x], q[None], labels=[f"arm {k}"], colors=[ARM_COLOURS[k % 8]],
-                     budget=budget)[0][0]  # fmt: skip
-            arms_j.append(_with_base(a, T))
-        coll = set()
+        qs = [np.asarray(sol["q"])[k][perm[k][j]] for k in range(A)]
+        arms_j = study_arms(s, mech, x, np.stack(qs), budget=budget)
+        pairs, coll = [], set()
         for a in range(A):
             for b in range(a + 1, A):
                 d = float(np.asarray(arms_clearance(seg[a][j], r, seg[b][j], r)))
@@ -183,6 +195,92 @@ def arm_tuples(s: SerialSettings, mech: Mechanism, x: Any, sol: Mapping[str, np.
         arms_j = [_with_base(a, a.base, colliding=k in coll) for k, a in enumerate(arms_j)]
         what = f"arms {sorted(coll)} collide" if coll else f"gap {gap[j]:.3g}"
         out.append((f"{name} tuple {j}: {what}", arms_j, pairs, qs))
+    return out
+
+
+def representative(s: SerialSettings, mech: Mechanism, sol: Mapping[str, np.ndarray] | None,
+                   keys: Mapping[str, Any] | None = None,
+                   ) -> tuple[str, np.ndarray, list[np.ndarray]]:  # fmt: skip
+    """One representative tuple of targets of a design's solution ``sol`` (one target
+    per arm): (its label, the arms' joints (A, n), the targets). One arm: the reached
+    target of median 1/k (:func:`representatives`). Several arms: among the tuples every
+    arm reaches (as ``arms_free`` draws them, :func:`arm_tuples`), the one of median gap
+    between the arms. The home pose (no target) where nothing is reached or there is no
+    task (``sol`` None)."""
+    A = 1 if s.arms is None else len(s.arms)
+    q0 = np.broadcast_to(home(mech), (A, mech.n))
+    if sol is None:
+        return "the home pose", q0, []
+    p = np.asarray(sol["target_p"], np.float64)
+    if s.arms is None:
+        reps = representatives(sol)
+        if not reps:
+            return "no target reached: the home pose", q0, []
+        i = reps[1][1]
+        return (f"the target of median 1/k (target {i}, 1/k = {float(sol['inv_k'][i]):.3g})",
+                np.asarray(sol["q"])[i][None], [p[i]])  # fmt: skip
+    perm, both, gap, _, _ = _tuples(s, mech, sol, keys)
+    if not both.any():
+        return "no tuple every arm reaches: the home pose", q0, []
+    order = _ordered(both, gap)
+    j = int(order[(len(order) - 1) // 2])
+    idx = [int(perm[k][j]) for k in range(A)]
+    Q = np.stack([np.asarray(sol["q"])[k][i] for k, i in enumerate(idx)])
+    return (f"the tuple of median gap between the arms (tuple {j}: targets {idx}, gap "
+            f"{gap[j]:.3g})", Q, [p[i] for i in idx])  # fmt: skip
+
+
+def design_pose(s: SerialSettings, mech: Mechanism, x: Any,
+                keys: Mapping[str, Any]) -> tuple[str, np.ndarray, list[np.ndarray]]:  # fmt: skip
+    """Where one design is drawn on its own (a front's designs): under a task, at one
+    representative tuple of targets of its IK solution on the run's targets
+    (``taskindex.solution``, :func:`representative`); else at the home pose. (label,
+    joints (A, n), targets)."""
+    from designopt.studies.serial import taskindex
+
+    sol = taskindex.solution(s, x, keys) if s.indices.measure == "task" else None
+    return representative(s, mech, sol, keys)
+
+
+def base_poses(s: SerialSettings, mech: Mechanism, x: Any) -> list[np.ndarray | None]:
+    """Each arm's base pose in the world (4 × 4) for design ``x`` (variables; config
+    units), from ``study.arms`` (``bodies.base_frames``); [None] (the world) without."""
+    if s.arms is None:
+        return [None]
+    import jax.numpy as jnp
+
+    from designopt.studies.serial import bodies
+
+    dt = mc.out_dtype()
+    p = bodies.base_params(s, mech, dt)
+    X = jnp.asarray(full(mech, x), dt)
+    Rb, tb = (np.asarray(v, np.float64) for v in bodies.base_frames(p, X))
+    out: list[np.ndarray | None] = []
+    for k in range(len(s.arms)):
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = Rb[k, 0], tb[k, 0]
+        out.append(T)
+    return out
+
+
+def study_arms(s: SerialSettings, mech: Mechanism, x: Any, Q: np.ndarray, *, label: str = "",
+               color: str = "#1f77b4", budget: int | None = FIGURE_TRIANGLES, model: Any = None,
+               design: Any = "x") -> list[Arm]:  # fmt: skip
+    """Every arm of the study for one design ``x`` (variables; config units), each at
+    its base in the world (:func:`base_poses`): arm k at joints Q[k] (Q (A, n); (n,):
+    every arm at the same joints). One arm (``label``, ``color``) without ``study.arms``;
+    else ``<label>: arm k`` (``arm k``) in :data:`ARM_COLOURS`. ``model``, ``design``:
+    as :func:`arms` (None: the original robot of a URDF chain)."""
+    T = base_poses(s, mech, x)
+    Q = np.asarray(Q, np.float64)
+    Q = np.broadcast_to(Q, (len(T), mech.n)) if Q.ndim == 1 else Q
+    out = []
+    for k, Tk in enumerate(T):
+        lab = label if Tk is None else (f"{label}: arm {k}" if label else f"arm {k}")
+        col = color if Tk is None else ARM_COLOURS[k % len(ARM_COLOURS)]
+        a = arms(s, mech, [x], Q[k][None], labels=[lab], colors=[col], budget=budget,
+                 model=model, design=design)[0][0]  # fmt: skip
+        out.append(a if Tk is None else _with_base(a, Tk))
     return out
 
 
@@ -271,6 +369,15 @@ def original_arm(s: SerialSettings, mech: Mechanism, q: np.ndarray, label: str =
         model=original_model(s, mech),
         design=None,
     )[0][0]
+
+
+def original_arms(s: SerialSettings, mech: Mechanism, x: Any, q: np.ndarray,
+                  label: str = "original (the URDF's numbers)", color: str = "#4c72b0",
+                  budget: int | None = FIGURE_TRIANGLES) -> list[Arm]:  # fmt: skip
+    """The URDF's own robot at joints q, every arm at its base for design ``x`` (the
+    bases are design numbers, not the file's)."""
+    return study_arms(s, mech, x, q, label=label, color=color, budget=budget,
+                      model=original_model(s, mech), design=None)  # fmt: skip
 
 
 def changes(s: SerialSettings, design: Mapping[str, float]) -> list[tuple[str, float, float, str]]:

@@ -14,6 +14,7 @@ unreached targets as grey crosses; the report's cloud (:func:`cloud`) shows the 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -166,41 +167,62 @@ def draw_run(rec: RunRecord, folder: Path, resolution: int = MAP_RESOLUTION) -> 
 
 def _workspace(p: np.ndarray, c: np.ndarray, s: SerialSettings, folder: Path,
                rec: RunRecord | None = None) -> list[Path]:  # fmt: skip
-    """The final design's tip positions p (C, 3) coloured by 1/k c (C,), with the final
-    design drawn at its home pose (``drawing.home``) and, under a task, the region."""
-    planar = np.ptp(p[:, 2]) <= 1e-9 * max(np.ptp(p[:, :2]), 1e-300)
+    """The final design's tip positions p (C, 3) (in an arm's base frame) coloured by
+    1/k c (C,), with the final design drawn at its home pose (``drawing.home``), every
+    arm at its base in the world with its own tip positions where the study has several,
+    the task region, obstacles and ports."""
     fig = style.figure(figsize=(5.8, 5.4))
     L = STUDY_UNITS(s).get("__length__", "L")
     arm, home_txt = [], ""
+    region = s.task.region if s.task is not None else None
     if rec is not None:
         mech = build(s)
         q = drawing.home(mech)
         x = np.asarray(list(rec.x.values()), np.float64)
-        arm = drawing.arms(s, mech, [x], q, labels=["final design at its home pose"])[0]
+        arm = drawing.study_arms(s, mech, x, q, label="final design at its home pose")
+        p, c = _in_world(p, c, [a.base for a in arm])
         home_txt = ("\nthe arm at its home pose (each joint at 0 where its limits\nallow, "
                     "else mid-range)")  # fmt: skip
-    region = s.task.region if s.task is not None else None
+        if s.arms is not None:
+            home_txt = (f"\n(each of the {len(arm)} arms at its base) and the arms at their "
+                        "home pose\n(each joint at 0 where its limits allow, else mid-range)")  # fmt: skip
+    planar = np.ptp(p[:, 2]) <= 1e-9 * max(np.ptp(p[:, :2]), 1e-300)
+    scene = robot.Scene(arms=arm, region=region, **drawing.obstacles_and_ports(s),
+                        targets=robot.Targets(p, c, np.ones(len(p), bool), size=1.5, alpha=1.0))  # fmt: skip
     if planar:
         ax = fig.add_subplot(1, 1, 1)
         sc = ax.scatter(p[:, 0], p[:, 1], s=2, c=c, cmap="viridis", rasterized=True)
         robot.draw_2d(ax, arm, np.eye(3)[:, :2])
+        robot.draw_obstacles_2d(ax, scene, np.eye(3)[:, :2])
         if region is not None:
             robot.draw_region_2d(ax, region, np.eye(3)[:, :2])
         ax.set_aspect("equal", adjustable="datalim")
     else:
         ax = fig.add_subplot(1, 1, 1, projection="3d")
-        scene = robot.Scene(arms=arm, region=region,
-                            targets=robot.Targets(p, c, np.ones(len(p), bool), size=1.5, alpha=1.0))  # fmt: skip
         sc = robot.draw_3d(ax, scene, L, legend=False)
     ax.set_xlabel(style.label("x", L))
     ax.set_ylabel(style.label("y", L))
     fig.colorbar(sc, ax=ax, label=style.label("1/k", style.DIMENSIONLESS), shrink=0.7, pad=0.1)
-    ax.set_title(f"final design: tip positions of {len(p)} uniform joint samples" + home_txt
-                 + ("\n(L: the chain's length unit)" if L == "L" else ""), fontsize=9, y=1.0)  # fmt: skip
-    handles = robot.legend_handles(robot.Scene(arms=arm))
+    import textwrap
+
+    clip = textwrap.wrap(robot.clipped_note([scene], L), 60)
+    ax.set_title(f"final design: tip positions of {len(c) // max(len(arm), 1)} uniform joint "
+                 "samples" + home_txt + ("\n(L: the chain's length unit)" if L == "L" else "")
+                 + "".join(f"\n{ln}" for ln in clip), fontsize=9, y=1.0)  # fmt: skip
+    handles = robot.legend_handles(robot.Scene(arms=arm, obstacles=scene.obstacles,
+                                               ports=scene.ports))  # fmt: skip
     if handles:
         fig.legend(handles=handles, loc="outside lower center", ncol=3, fontsize=7.5)
     return save(fig, folder, "workspace")
+
+
+def _in_world(p: np.ndarray, c: np.ndarray, bases: list) -> tuple[np.ndarray, np.ndarray]:
+    """Tip positions p (C, 3) in an arm's base frame and their values c, placed by each
+    base pose (4 × 4; None: the world) and stacked."""
+    if all(T is None for T in bases):
+        return p, c
+    P = [p if T is None else p @ np.asarray(T)[:3, :3].T + np.asarray(T)[:3, 3] for T in bases]
+    return np.vstack(P), np.tile(c, len(bases))
 
 
 def draw_robot(rec: RunRecord, folder: Path) -> list[Path]:
@@ -215,13 +237,13 @@ def draw_robot(rec: RunRecord, folder: Path) -> list[Path]:
     design = dict(rec.x)
     x = np.asarray(list(design.values()), np.float64)
     region = s.task.region if s.task is not None else None
-    orig = drawing.original_arm(s, mech, q)
-    final = drawing.arms(s, mech, [x], q, labels=["final design"], colors=["#ff7f0e"])[0][0]
+    orig = drawing.original_arms(s, mech, x, q)  # every arm at its base in the world
+    final = drawing.study_arms(s, mech, x, q, label="final design", color="#ff7f0e")
     note = drawing.meshes_note(s, design, q)
     around = drawing.obstacles_and_ports(s)  # the patient and the port, where configured
-    scenes = [robot.Scene(arms=[orig], region=region, title="original: the URDF's own numbers",
+    scenes = [robot.Scene(arms=orig, region=region, title="original: the URDF's own numbers",
                           **around),
-              robot.Scene(arms=[final], region=region, title="final design", **around)]  # fmt: skip
+              robot.Scene(arms=final, region=region, title="final design", **around)]  # fmt: skip
     title = (f"{Path(s.chain.urdf).name} at the home pose ({drawing.joint_values(s, q)}; each joint at 0 "
              "where its limits allow, else mid-range)")  # fmt: skip
     import textwrap
@@ -231,6 +253,60 @@ def draw_robot(rec: RunRecord, folder: Path) -> list[Path]:
                       + ([note] if note else []))  # fmt: skip
     fig = robot.figure(scenes, length_unit(s), title)
     return save(fig, folder, "robot")
+
+
+def draw_front_robots(rec: Any, picks: Sequence[tuple[str, int]], folder: Path) -> list[Path]:
+    """``front_robots``: the front's chosen designs (``figures.front.extremes_and_knee``:
+    the two extremes and the knee) side by side on common axes, each with every arm at
+    its base in the world, at one representative tuple of targets of its own IK
+    solution (``drawing.design_pose``; the home pose without a task), with the task
+    region, obstacles and ports; the targets starred."""
+    s: SerialSettings = rec.config.study
+    if not picks:
+        return []
+    mech = build(s)
+    objs, cols, _ = front_columns(rec)
+    around = {"region": s.task.region if s.task is not None else None,
+              **drawing.obstacles_and_ports(s)}  # fmt: skip
+    scenes, lines = [], []
+    for (name, i), col in zip(picks, ("#2ca02c", "#ff7f0e", "#9467bd"), strict=False):
+        label, Q, tg = drawing.design_pose(s, mech, rec.X[i], rec.keys())
+        arms = drawing.study_arms(s, mech, rec.X[i], Q, color=col,  # several: "arm k"
+                                  label=f"design {i}" if s.arms is None else "")  # fmt: skip
+        val = ", ".join(f"{k} = {c[i]:.4g}" for (k, _), c in zip(objs, cols, strict=True))
+        scenes.append(robot.Scene(arms=arms, title=f"{name}: design {i}\n{val}",
+                                  marks=[(p, "#d62728") for p in tg], **around))  # fmt: skip
+        d = dict(zip(s.variables, rec.X[i], strict=True))
+        lines.append(f"{name} (design {i}): {_design(s, d)}; drawn at {label}")
+    where = ("one representative tuple of targets of its own IK solution (stars): " +
+             ("the tuple (one target per arm, as arms_free draws them) of median gap between "
+              "the arms" if s.arms is not None else "the reached target of median 1/k")
+             if s.indices.measure == "task" else "the home pose")  # fmt: skip
+    head = (f"The front's extremes and knee ({len(rec.X)} designs of {rec.study}; the knee: "
+            "farthest from the line between the extremes, objectives normalised over the "
+            f"front), each at {where}")  # fmt: skip
+    fig = robot.figure(scenes, length_unit(s), "\n".join([head, *lines]))
+    return save(fig, folder, "front_robots")
+
+
+def front_columns(rec: Any) -> tuple[list[tuple[str, str]], list[np.ndarray], list[str]]:
+    """A front's objectives: (name, sense), their values in the indices' own terms (a
+    ``max`` objective not negated: ``front/<name>`` where archived, else ``front/f``,
+    which holds them so too; docs/pareto.md), their axis labels."""
+    n = len(rec.X)
+    objs = list(rec.objectives.items())
+    cols = []
+    for k, (name, _) in enumerate(objs):
+        v = rec.values.get(name)
+        cols.append(np.asarray(rec.F[:, k] if v is None or np.shape(v) != (n,) else v, np.float64))
+    units = rec.units() if hasattr(rec, "units") else {}
+    return objs, cols, [f"{name} ({sense}) [{units.get(name, '-')}]" for name, sense in objs]
+
+
+def _design(s: SerialSettings, x: dict[str, float]) -> str:
+    u = length_unit(s)
+    ang = s.angle_names()
+    return ", ".join(f"{k} = {v:.4g} {'deg' if k in ang else u}" for k, v in x.items())
 
 
 def _uniform_q(mech: Mechanism, rec: RunRecord, n: int) -> np.ndarray:
@@ -414,7 +490,10 @@ def draw_task(rec: RunRecord, folder: Path) -> list[Path]:
         fig.legend(handles=handles, loc="outside lower center", ncol=2 if flat else 4,
                    fontsize=8, framealpha=0.9)  # fmt: skip
     # a design far from what was asked (rec.warnings): the caption says so, in red
-    fig.suptitle(_task_caption(rec, sol_all, sol, L), fontsize=9,
+    import textwrap
+
+    clip = textwrap.wrap(robot.clipped_note([scene], L), 90)  # far-away obstacles left out
+    fig.suptitle("\n".join([_task_caption(rec, sol_all, sol, L), *clip]), fontsize=9,
                  color="crimson" if rec.warnings else "black")  # fmt: skip
     return save(fig, folder, "task")
 
@@ -423,18 +502,25 @@ def cloud(rec: RunRecord, n: int = 8000) -> dict[str, Any]:
     """The final design's workspace for the interactive report: tip positions of ``n``
     uniform joint samples (the run's ``figures`` stream), coloured by 1/k. Under
     ``measure: task``, the task's targets instead, coloured by 1/k at the final design's
-    IK solution (NaN where unreached), with ``flag`` marking the unreached ones."""
+    IK solution (NaN where unreached), with ``flag`` marking the unreached ones; with
+    several arms, the arms' mean 1/k where every arm reaches the target
+    (``drawing.combined``), the others flagged."""
     s: SerialSettings = rec.config.study
     length = STUDY_UNITS(s).get("__length__", "L")
     if s.indices.measure == "task":
         sol = task_solution(rec)
+        many = s.arms is not None  # per arm (A, N): the targets every arm reaches
+        sol = drawing.combined(sol) if many else sol
         ok = sol["success"]
+        what = "the arms' mean 1/k" if many else "1/k"
         return {"xyz": np.asarray(sol["target_p"], np.float64),
                 "value": np.where(ok, sol["inv_k"], np.nan).astype(np.float64),
-                "label": f"1/k ({s.indices.norm}-norm) at the IK solution", "unit": "-",
-                "xyz_unit": length, "flag": ~ok, "flag_label": "unreached",
-                "title": "the task's targets, coloured by 1/k at the final design's IK "
-                         "solution"}  # fmt: skip
+                "label": f"{what} ({s.indices.norm}-norm) at the IK solution", "unit": "-",
+                "xyz_unit": length, "flag": ~ok,
+                "flag_label": "not reached by every arm" if many else "unreached",
+                "title": f"the task's targets, coloured by {what} at the final design's IK "
+                         "solution" + (f"s of its {len(s.arms)} arms (where every arm reaches "
+                                       "the target)" if many else "")}  # fmt: skip
     mech = build(s)
     q = _uniform_q(mech, rec, n)
     X = _full(mech, np.asarray(list(rec.x.values()), np.float64))

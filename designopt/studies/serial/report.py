@@ -14,12 +14,14 @@ from designopt.figures.robot import Scene
 from designopt.studies.serial import figures, taskindex
 from designopt.studies.serial.drawing import (
     arms,
+    design_pose,
     home,
     hover,
-    joint_values,
     meshes_note,
-    original_arm,
+    obstacles_and_ports,
+    original_arms,
     slider_targets,
+    study_arms,
     task_scene,
 )
 from designopt.studies.serial.mechanism import Mechanism, build
@@ -59,20 +61,20 @@ def run_view(rec: Any):
     x = np.asarray(list(rec.x.values()), np.float64)
     u = length_unit(s)
     q0 = home(mech)
-    scene = Scene(arms=[], region=s.task.region if s.task is not None else None)
+    scene = Scene(arms=[], region=s.task.region if s.task is not None else None,
+                  **obstacles_and_ports(s))  # fmt: skip
     if s.arms is not None:  # every arm at tuples of targets: the tightest, median, loosest
+        from designopt.figures.html.robot import Pose
         from designopt.studies.serial.drawing import arm_tuples, arms_scene
 
         sol_all = taskindex.solution(s, rec.x, rec.keys())
-        ts = arms_scene(s, mech, x, sol_all, rec.keys(), budget=None)
-        scene.targets, scene.obstacles, scene.ports = ts.targets, ts.obstacles, ts.ports
+        scene.targets = arms_scene(s, mech, x, sol_all, rec.keys(), budget=None).targets
         tup = arm_tuples(s, mech, x, sol_all, rec.keys(), budget=None)
-        from designopt.figures.html.robot import Pose
-
         poses = [Pose(lab, row, [hover(s, a.label, q, None) for a, q in zip(row, qs, strict=True)])
                  for lab, row, _, qs in tup]  # fmt: skip
         if not poses:
-            poses = _poses(s, mech, x, q0[None], ["home pose"], [None], [None])
+            row = study_arms(s, mech, x, q0, budget=None)
+            poses = [Pose("home pose", row, [hover(s, a.label, q0) for a in row])]
         what = "tuples of targets (one per arm): the tightest, the median and the loosest gap"
     elif s.indices.measure == "task":
         sol = taskindex.solution(s, rec.x, rec.keys())
@@ -113,8 +115,10 @@ def _design_text(s: SerialSettings, x: Mapping[str, float]) -> str:
 
 def front_view(rec: Any):
     """The report's front view (``designopt.figures.html.FrontView``): the front's
-    first two objectives, each design's robot at the home pose, the original robot of a
-    URDF chain for reference."""
+    first two objectives and each design's robot, every arm at its base in the world,
+    at a representative tuple of targets of its own solution (``drawing.design_pose``; the
+    home pose without a task), with the task region, obstacles and ports; the original
+    robot of a URDF chain (at the home pose, the first design's bases) for reference."""
     from designopt.figures.html.robot import FrontView
 
     s: SerialSettings = rec.config.study
@@ -122,35 +126,29 @@ def front_view(rec: Any):
     q0 = home(mech)
     X = rec.X
     n = len(X)
-    objs = list(rec.objectives.items())[:2]
-    vals = rec.values
-    cols = []
-    for k, (name, sense) in enumerate(objs):
-        v = vals.get(name)
-        if v is None or np.shape(v) != (n,):
-            v = -rec.F[:, k] if sense == "max" else rec.F[:, k]
-        cols.append(np.asarray(v, np.float64))
-    units = rec.units() if hasattr(rec, "units") else {}
-    labels = [f"{name} ({sense}) [{units.get(name, '-')}]" for name, sense in objs]
-    budget = _budget(n + 1)
-    robots = [[a] for a in (r[0] for r in arms(s, mech, X, q0, labels=["design"],
-                                                colors=["#ff7f0e"], budget=budget))]  # fmt: skip
-    ref = []
-    if isinstance(s.chain, UrdfChain):
-        ref = [original_arm(s, mech, q0, budget=budget)]
+    objs, cols, labels = (v[:2] for v in figures.front_columns(rec))
+    A = 1 if s.arms is None else len(s.arms)
+    budget = _budget(A * (n + 1))
+    poses = [design_pose(s, mech, X[i], rec.keys()) for i in range(n)]
+    robots = [study_arms(s, mech, X[i], Q, label="design", color="#ff7f0e", budget=budget)
+              for i, (_, Q, _) in enumerate(poses)]  # fmt: skip
+    ref = original_arms(s, mech, X[0], q0, budget=budget) if isinstance(s.chain, UrdfChain) else []
     hov = []
     for i in range(n):
         d = dict(zip(s.variables, X[i], strict=True))
         objtxt = ", ".join(f"{name} = {c[i]:.4g}" for (name, _), c in zip(objs, cols, strict=True))
-        hov.append(f"{_design_text(s, d)}; {objtxt}")
-    note = (f"each design at the home pose ({joint_values(s, q0)}: each joint at 0 where its "
-            "limits allow, else mid-range)" + ("; blue: the original robot (the URDF's numbers)"
-                                               if ref else ""))  # fmt: skip
+        hov.append(f"{_design_text(s, d)}; {objtxt}; drawn at {poses[i][0]}")
+    where = ("at one representative tuple of targets of its own IK solution (one arm: the "
+             "reached target of median 1/k; several: the tuple of median gap between the arms, "
+             "one target per arm as arms_free draws them)" if s.indices.measure == "task" else
+             "at the home pose (each joint at 0 where its limits allow, else mid-range)")  # fmt: skip
+    note = (f"each design {where}" + ("; faint: the original robot (the URDF's numbers) at "
+                                      "the home pose" if ref else ""))  # fmt: skip
     mn = meshes_note(s, dict(zip(s.variables, X[0], strict=True)), q0, budget)
     return FrontView(title=f"Pareto front ({n} designs)", unit=length_unit(s), x=cols[0],
                      y=cols[1], xlabel=labels[0], ylabel=labels[1], robots=robots, hover=hov,
                      reference=ref, region=s.task.region if s.task is not None else None,
-                     note=note + (f"; {mn}" if mn else ""))  # fmt: skip
+                     note=note + (f"; {mn}" if mn else ""), **obstacles_and_ports(s))  # fmt: skip
 
 
 def report(rec: Any) -> dict[str, Any] | None:
