@@ -337,7 +337,7 @@ def evaluate_one(cfg: Any, design: Mapping[str, float], where: str = "config"
     job = Job.build(cfg, where, n_designs=1)
     X = matrix(job.problem, design, where)
     res = {k: float(v[0]) for k, v in score(job.problem, X, batch=1).items()}
-    return res, list(job.study.warnings(cfg.study, res))
+    return res, list(job.study.warnings(cfg.study, res | {"x": np.asarray(X[0])}))
 
 
 def scan(cfg: Any, text: str | None = None, where: str = "config", out: Path | None = None,

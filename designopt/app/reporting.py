@@ -69,8 +69,10 @@ def drawer(rec: Record, path: Path) -> tuple[Callable[[Any, Path], list[Path]], 
             raise ConfigError(f"{path}: study {rec.study!r} is not registered in this process; "
                               f"known: {sorted(STUDIES)}")  # fmt: skip
         return st.figures, figs, True
-    if isinstance(rec, FrontRecord):
-        return front.draw, figs, True
+    if isinstance(rec, FrontRecord):  # with the study's drawings of its chosen designs
+        st = STUDIES.get(rec.study)
+        hook = None if st is None else st.front_figures
+        return (lambda r, d: front.draw(r, d, robot=hook)), figs, True
     if isinstance(rec, SweepRecord):
         return sweep.draw, figs, True
     if isinstance(rec, ScanRecord):

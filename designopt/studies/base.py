@@ -9,7 +9,7 @@ these fields; the typed settings model flows down unchanged.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -238,6 +238,11 @@ class Study:
     ``designopt.figures.html.View``} for a run (the final design, a slider through
     representative poses) or {"front": ``designopt.figures.html.FrontView``} for a Pareto
     front (the robot of the design hovered or clicked); None: the study draws none."""
+    front_figures: Callable[[Any, Sequence[tuple[str, int]], Path], list[Path]] | None = None
+    """``front_figures(front record, picks, folder)``: the study's drawings of a front's
+    chosen designs (``picks``: [(name, design number)], the extremes and the knee,
+    ``designopt.figures.front.extremes_and_knee``) beside the generic front figures;
+    None: the generic ones only."""
     targets: Callable[[Any, Any, Mapping[str, jax.Array], Any], dict[str, Any] | None] | None = None
     """``targets(settings, x, keys, dtype)``: the final design ``x`` (variables in order)
     at every target of a task run, for the archive's ``targets`` group (per arm and

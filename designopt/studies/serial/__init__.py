@@ -37,6 +37,12 @@ def _robot(record: Any) -> dict[str, Any] | None:
     return report.report(record)
 
 
+def _front_figures(record: Any, picks: Any, folder: Path) -> list[Path]:
+    from designopt.studies.serial import figures
+
+    return figures.draw_front_robots(record, picks, folder)
+
+
 def _targets(s: SerialSettings, x: Any, keys: Any, dtype: Any) -> dict[str, Any] | None:
     """The final design at every target of a task run (``Study.targets``): per arm (A = 1
     without ``arms``) and target ``success`` (A, N) 0/1, ``q`` (A, N, n) in the kernel's
@@ -144,6 +150,7 @@ STUDY = Study(
     cloud=_cloud,
     robot=_robot,
     targets=_targets,
+    front_figures=_front_figures,
     check=reach.check,
     warnings=reach.warnings,
     tiny={

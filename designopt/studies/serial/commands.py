@@ -146,6 +146,10 @@ def cmd_chain(args: argparse.Namespace, ctx: Any) -> int:
         lines.append(f"check against yourdfpy's FK at {N_CHECK} random joint values in the "
                      f"limits: max |ΔT| = {err:.2e} ({'OK' if ok else 'MISMATCH'})")  # fmt: skip
         status = 0 if ok else 1
+    if s.collision is not None:  # the capsules, the pairs checked and what sets the clearance
+        from designopt.studies.serial import bodies
+
+        lines += bodies.pair_lines(s, mech, design, q)
     print("\n".join(lines))
     return status
 
@@ -386,6 +390,10 @@ def cmd_view(args: argparse.Namespace, ctx: Any) -> int:
         doc = page.document([page.robot_section(view)], f"designopt view: {Path(where).name}")
         writer.write_file(html, doc.encode("utf-8"), "HTML view")
         written.append(html)
+    if s.collision is not None:  # what the collision check holds, and what sets it here
+        from designopt.studies.serial import bodies
+
+        print("\n".join(bodies.pair_lines(s, mech, design, q)))
     for p in written:
         print(p)
     return 0
