@@ -216,7 +216,8 @@ def problem(s: SerialSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Pro
     if task:  # once per run, shared by the swarm (common random numbers)
         from designopt.studies.serial import bodies
 
-        params |= taskindex.targets(s, keys["samples"], dtype) | bodies.base_params(s, mech, dtype)
+        params |= (taskindex.targets(s, keys["samples"], dtype) | bodies.base_params(s, mech, dtype)
+                   | taskindex.scene_params(s, dtype))  # fmt: skip
     norm_bounds = None
     b = np.asarray([[0.0, 1.0]] * len(weights))  # params["bounds"]: unit rows unless normalised
     if s.objective.get("normalize", False):

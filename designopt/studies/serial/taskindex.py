@@ -54,6 +54,25 @@ def estimates_of(s: SerialSettings, mech: Mechanism, per: dict[str, jax.Array],
     return estimates(per, key, g.radii, g.margin)
 
 
+def scene_params(s: SerialSettings, dtype: Any) -> dict[str, Any]:
+    """The scene's numbers as ``params`` entries, so that one compiled program serves any
+    values of them (only their counts shape it): ``scene_obstacles`` (the collision
+    obstacles grouped by shape, ``collision.obstacle_params``; empty groups without
+    ``collision``), ``scene_insertion`` (A or 1, 2) each arm's insertion range [d0, d1]
+    (d1 = ∞ without one) and, for one arm with a port, ``scene_port`` (1, 3). (The arms'
+    bases and ports are ``bodies.base_params``'s, the targets :func:`targets`'.) Made on
+    the host."""
+    from designopt.kinematics.collision import obstacle_params
+
+    obst = [] if s.collision is None else s.collision.obstacles
+    out = {"scene_obstacles": obstacle_params(obst, dtype),
+           "scene_insertion": jnp.asarray(np.asarray(s.insertions(), np.float64), dtype)}  # fmt: skip
+    port = s.ports()[0]
+    if s.arms is None and port is not None:
+        out["scene_port"] = jnp.asarray(np.asarray([port], np.float64), dtype)
+    return out
+
+
 def counts_of(s: SerialSettings, mech: Mechanism, per: dict[str, jax.Array],
               params: dict[str, Any]) -> dict[str, tuple[jax.Array, int]]:  # fmt: skip
     """:func:`counts` with the arms' target tuples of :func:`estimates_of`."""
@@ -113,7 +132,6 @@ def per_target(mech: Mechanism, s: SerialSettings, params: dict[str, Any], full:
     last target and cut off again. ``opts``: the solver's options (default
     :func:`options`). Under ``collision`` the IK keeps trying seeds until a converged
     solution is collision-free (``bodies``)."""
-    from designopt.kinematics.collision import obstacle_params
     from designopt.kinematics.task import port_frames
     from designopt.studies.serial import bodies
 
@@ -130,17 +148,19 @@ def per_target(mech: Mechanism, s: SerialSettings, params: dict[str, Any], full:
     geo = bodies.geometry(s, mech)
     arms = s.arms is not None
     A = len(s.arms) if arms else 1
-    obst = None if geo is None else obstacle_params(s.collision.obstacles, dtype)  # type: ignore[union-attr]
-    ports = s.ports()
-    has_port = ports[0] is not None
-    ins = np.asarray(s.insertions(), np.float64)  # (A or 1, 2): each arm's [d0, d1]
-    d0, d1 = jnp.asarray(ins[:, :1], dtype), jnp.asarray(ins[:, 1:], dtype)
+    # the scene's numbers are inputs (:func:`scene_params`): editing them compiles nothing
+    sc_p = params if "scene_insertion" in params else scene_params(s, dtype)
+    obst = None if geo is None else jax.tree_util.tree_map(lambda a: a.astype(dtype),
+                                                             sc_p["scene_obstacles"])  # fmt: skip
+    has_port = s.ports()[0] is not None
+    ins = sc_p["scene_insertion"].astype(dtype)  # (A or 1, 2): each arm's [d0, d1]
+    d0, d1 = ins[:, :1], ins[:, 1:]
     if arms:
         Rb, tb = bodies.base_frames(params, full)  # (A, M, 3, 3), (A, M, 3)
         port = params["arm_port"].astype(dtype) if has_port else None  # (A, 3)
         X = jnp.tile(full, (A, 1))  # (A·M, P), arm-major
     else:
-        port = jnp.asarray([ports[0]], dtype) if has_port else None
+        port = sc_p["scene_port"].astype(dtype) if has_port else None  # (1, 3)
         X = full
 
     def padded(a):
@@ -350,6 +370,41 @@ def estimates(per: dict[str, jax.Array], key: jax.Array | None = None,
     return out
 
 
+def structure_key(s: SerialSettings) -> str:
+    """What shapes :func:`per_target`'s program, as text: the settings without the
+    scene's numbers, which travel in ``params`` (:func:`scene_params`, the targets,
+    ``bodies.base_params``): the region's kind (a points file: its count), whether there
+    are ports and insertion ranges, the obstacles' count per shape, the arms' base
+    entries that name a variable (a number's value left out); the objective and the
+    constraints, which the program does not read, left out too. Two settings with one
+    key run in one compiled program."""
+    import json
+
+    from designopt.kinematics.task import Points
+
+    d = s.model_dump(mode="json")
+    d.pop("objective", None)
+    d.pop("constraints", None)
+    d.pop("pareto", None)
+    task = d.get("task")
+    if task is not None:
+        reg = s.task.region  # type: ignore[union-attr]
+        task["region"] = (f"points:{len(reg.xyz())}" if isinstance(reg, Points)
+                          else str(task["region"].get("shape")))  # fmt: skip
+        task["port"] = task.get("port") is not None
+        task["insertion"] = task.get("insertion") is not None
+    col = d.get("collision")
+    if col is not None:
+        shapes = [str(o.get("shape")) for o in col.get("obstacles", [])]
+        col["obstacles"] = {k: shapes.count(k) for k in sorted(set(shapes))}
+    for a in d.get("arms") or []:
+        a["port"] = a.get("port") is not None
+        a["insertion"] = a.get("insertion") is not None
+        for f in ("xyz", "rpy"):
+            a["base"][f] = [v if isinstance(v, str) else "#" for v in a["base"][f]]
+    return json.dumps(d, sort_keys=True)
+
+
 _SOLVERS: dict[tuple[str, str], tuple[Mechanism, Any]] = {}
 """The compiled per-target programs of :func:`solution`, by settings and dtype (the last
 few kept)."""
@@ -370,7 +425,7 @@ def solution(s: SerialSettings, x: Any, keys: Any,
     if jnp.dtype(dtype) == jnp.float64 and not jax.config.jax_enable_x64:
         raise ValueError("the task's inverse kinematics needs float64: call "
                          "jax.config.update('jax_enable_x64', True) first")  # fmt: skip
-    ck = (s.model_dump_json(), jnp.dtype(dtype).name)
+    ck = (structure_key(s), jnp.dtype(dtype).name)
     if ck not in _SOLVERS:  # figures and the report's cloud share one compiled program
         mech = build(s)
         while len(_SOLVERS) >= 4:
@@ -397,7 +452,7 @@ def solution(s: SerialSettings, x: Any, keys: Any,
          "sample_key": keys["samples"]} | targets(s, keys["samples"], dtype)  # fmt: skip
     from designopt.studies.serial import bodies
 
-    p |= bodies.base_params(s, mech, dtype)
+    p |= bodies.base_params(s, mech, dtype) | scene_params(s, dtype)
     xv = np.asarray([x[k] for k in s.variables] if hasattr(x, "keys") else x, np.float64)
     full = np.concatenate([xv.astype(dt), np.asarray(mech.fixed, dt)]) * np.asarray(mech.scale, dt)
     out = {k: np.asarray(v) for k, v in run(p, jnp.asarray(full[None])).items()}
