@@ -336,7 +336,7 @@ def test_mesh_paths_resolve_like_the_importer(tmp_path, monkeypatch):
 def test_a_mesh_that_cannot_be_found_or_read_names_the_link_and_the_file(arm, tmp_path):
     text, path, imp = arm
     bad = text.replace("../meshes/part.stl", "../meshes/gone.stl")
-    with pytest.raises(ValueError, match=r'<link name="l4">.*gone\.stl.*no such file'):
+    with pytest.raises(ValueError, match=r"link 'l4'.*gone\.stl.*no such file"):
         UC.capsules(bad, str(path), imp)
     (path.parent / "junk.stl").write_text("not a mesh at all")
     bad = text.replace("../meshes/part.stl", "junk.stl")

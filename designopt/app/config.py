@@ -204,7 +204,7 @@ def set_key(raw: dict[str, Any], key: str, value: Any, where: str = "config") ->
     """Set the dotted ``key`` of a parsed config to ``value`` before validation, making the
     sections on its way: the one way a config is overridden (the API's ``overrides``, the
     command line's flags, each member of a sweep), so an override is checked exactly like
-    the file's own keys."""
+    the file's own keys. A ``None`` value unsets the key (its default applies)."""
     if not isinstance(key, str) or not key:
         raise ConfigError(f"{where}: override key {key!r}: give a dotted key, e.g. 'seed'")
     node: Any = raw
@@ -228,6 +228,8 @@ def set_key(raw: dict[str, Any], key: str, value: Any, where: str = "config") ->
             raise ConfigError(f"{where}: override '{key}': '{last}': the list has {len(node)} "
                               "entries (from 0)")  # fmt: skip
         node[int(last)] = value
+    elif value is None:  # null: the key unset, its default applies
+        node.pop(last, None)
     else:
         node[last] = value
 

@@ -331,13 +331,18 @@ def evaluate(cfg: Any, designs: Designs, where: str = "config") -> dict[str, np.
 
 
 def evaluate_one(cfg: Any, design: Mapping[str, float], where: str = "config"
-                 ) -> tuple[dict[str, float], list[str]]:  # fmt: skip
+                 ) -> tuple[dict[str, float], list[str], dict[str, str]]:  # fmt: skip
     """One design's indices (:func:`evaluate`) as floats, with the study's warnings on
-    them, the lines ``run`` prints for its final design (``Study.warnings``)."""
+    them, the lines ``run`` prints for its final design (``Study.warnings``), and the
+    study's units of its variables and indices (``Study.units``). A front's config has
+    no weighted f: f and its SE are left out."""
     job = Job.build(cfg, where, n_designs=1)
     X = matrix(job.problem, design, where)
     res = {k: float(v[0]) for k, v in score(job.problem, X, batch=1).items()}
-    return res, list(job.study.warnings(cfg.study, res | {"x": np.asarray(X[0])}))
+    if getattr(cfg.study, "pareto", None) is not None:
+        res = {k: v for k, v in res.items() if k not in ("f", "f_se")}
+    warns = list(job.study.warnings(cfg.study, res | {"x": np.asarray(X[0])}))
+    return res, warns, dict(job.study.units(cfg.study))
 
 
 def scan(cfg: Any, text: str | None = None, where: str = "config", out: Path | None = None,

@@ -144,7 +144,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
     cfg, _ = _load(args)
     design = _parse_design(args.design)
-    res, warns = pipeline.evaluate_one(cfg, design, where=args.config)
+    res, warns, units = pipeline.evaluate_one(cfg, design, where=args.config)
     feasible = None if "violation" not in res else bool(res["violation"] <= 0)
     if args.json:  # valid JSON always: a value that is n/a (NaN) is null
         out = {k: (v if math.isfinite(v) else None) for k, v in res.items()}
@@ -159,8 +159,16 @@ def cmd_eval(args: argparse.Namespace) -> int:
             continue
         txt = value_text(v, res.get(k + "_se"), ".6g", ".2g", res.get(k + "_n"),
                          res.get(k + "_of"))  # fmt: skip
-        print(f"{k:>15} = {txt}")
-    print("design: " + ", ".join(f"{k} = {v:g}" for k, v in design.items()))
+        u = units.get(k, "")
+        print(f"{k:>15} = {txt}" + (f" {u}" if u not in ("", "-") and "n/a" not in txt else ""))
+    print("design: " + ", ".join(f"{k} = {v:g}" + (f" {units[k]}" if units.get(k, "-") != "-" else "")
+                                 for k, v in design.items()))  # fmt: skip
+    front = getattr(cfg.study, "pareto", None)
+    if front is not None:
+        from designopt.app.config import senses
+
+        print("a front's config: its objectives are " + ", ".join(
+            f"{k} ({s})" for k, s in senses(front).items()) + " (no weighted f)")  # fmt: skip
     if feasible is not None:
         print("constraints: " + ("feasible" if feasible else
                                  f"violated by {res['violation']:.3g} (an infeasible design)"))  # fmt: skip
@@ -216,21 +224,23 @@ def cmd_show(args: argparse.Namespace) -> int:
 
     p = Path(args.archive)
     rec = records.load(p)
+    out = None
+    if args.csv is not None:  # checked before anything is printed
+        if "targets" not in rec:
+            raise ConfigError(f"{p}: --csv writes the final design at every target of a task "
+                              "run (the archive's targets group); this archive has none")  # fmt: skip
+        out = Path(args.csv) if args.csv else p.with_name(f"{p.stem}_targets.csv")
+        if out.suffix.lower() != ".csv" or out.is_dir():
+            raise ConfigError(f"--csv {args.csv}: give a .csv file name")
     at = rec.attrs
     print(f"{p}: {at.get('kind', 'run')}, study {at.get('study', '-')}, seed {at.get('seed')}, "
           f"complete {bool(at.get('complete'))}")  # fmt: skip
     for line in rec.summary():
         print(line)
-    if args.csv is not None:
+    if out is not None:
         from designopt.io import writer
         from designopt.results.run import targets_csv_text
 
-        if "targets" not in rec:
-            raise ConfigError(f"{p}: --csv writes the final design at every target of a task "
-                              "run (the archive's targets group); this archive has none")  # fmt: skip
-        out = Path(args.csv) if args.csv else p.with_name(f"{p.stem}_targets.csv")
-        if out.suffix.lower() != ".csv":
-            raise ConfigError(f"--csv {args.csv}: give a .csv file name")
         writer.write_file(out, targets_csv_text(rec["targets"]).encode(), "targets CSV")
         print(f"wrote {out}")
     return 0

@@ -275,13 +275,13 @@ def parse_sets(items: list[str]) -> dict[str, object]:
         if not eq or not key or any(not part for part in key.split(".")):
             raise ConfigError(f"--set {item}: give KEY=VALUE with a dotted key from the "
                               "config's top, e.g. --set study.task.port=[0.5,0.1,-0.2]")  # fmt: skip
+        if not text.strip():
+            raise ConfigError(f"--set {item}: give a value after '=' (null: the key unset)")
         try:
-            out[key] = yaml.safe_load(text) if text.strip() else None
+            out[key] = yaml.safe_load(text)  # null: as if the file did not give the key
         except yaml.YAMLError:
             raise ConfigError(f"--set {item}: the value is not YAML (a number, a word, a "
                               "[list] or a {mapping})") from None  # fmt: skip
-        if out[key] is None:
-            raise ConfigError(f"--set {item}: give a value after '='")
     return out
 
 

@@ -100,10 +100,11 @@ def _mesh_vertices(link: str, filename: str, urdf_path) -> np.ndarray:
     import trimesh
 
     path = resolve_mesh(filename, urdf_path)
-    where = f"<link name=\"{link}\"> <collision> mesh '{filename}'"
+    where = f"collision.links: the URDF's link {link!r}, <collision> mesh '{filename}'"
     if path is None:
-        near = f" (looked beside {urdf_path})" if urdf_path else ""
-        raise ValueError(f"{where}: no such file{near}")
+        near = f" (looked beside {urdf_path} and in the folders above it" if urdf_path else " ("
+        raise ValueError(f"{where}: no such file{near}; for package:// names, set "
+                         "ROS_PACKAGE_PATH to the folder that holds the package)")  # fmt: skip
     try:
         m = trimesh.load(str(path), force="mesh")
         v = np.asarray(m.vertices, np.float64).reshape(-1, 3)

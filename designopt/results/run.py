@@ -29,9 +29,10 @@ def _pm(name: str, v: float, se: float | None, fin: Any = None) -> str:
 
 def targets_csv_text(g: Mapping[str, Any]) -> str:
     """The ``targets`` group (the final design at every target) as CSV: one row per arm
-    and target, each column headed with its unit: arm, target (from 1), x, y, z, reached
-    (0/1), the joints (degrees for a revolute joint; the archive keeps radians), inv_k,
-    clearance; full float precision (``repr``)."""
+    and target, each column headed with its unit: arm (from 0, as ``reach_<k>``), target
+    (from 1, as ``designopt ik``'s rows), x, y, z, reached (0/1), the joints (degrees for
+    a revolute joint; the archive keeps radians), inv_k, clearance, the last three empty
+    where the target is not reached; full float precision (``repr``)."""
     at = g.get("attrs", {})
     u = str(at.get("length_unit", ""))
     names = [str(n) for n in at.get("joints", [])]
@@ -52,9 +53,11 @@ def targets_csv_text(g: Mapping[str, Any]) -> str:
     w.writerow(head)
     for a in range(A):
         for i in range(N):
-            w.writerow([a, i + 1, *(repr(float(c)) for c in p[i]), int(ok[a, i]),
-                        *(repr(float(c)) for c in q[a, i]),
-                        *(repr(float(np.asarray(g[k])[a, i])) for k, _ in extra)])  # fmt: skip
+            hit = bool(ok[a, i])  # an unreached target has no solution: empty cells
+            w.writerow([a, i + 1, *(repr(float(c)) for c in p[i]), int(hit),
+                        *(repr(float(c)) if hit else "" for c in q[a, i]),
+                        *(repr(float(np.asarray(g[k])[a, i])) if hit else ""
+                          for k, _ in extra)])  # fmt: skip
     return buf.getvalue()
 
 

@@ -136,5 +136,8 @@ def _index_names(g: Mapping[str, Any], skip: Sequence[str] = ()) -> list[str]:
     for k, v in g.items():
         if k == "attrs" or k.endswith("_se") or k in skip or isinstance(v, Mapping):
             continue
+        stem, _, tail = k.rpartition("_")
+        if tail in ("n", "of") and stem in g:  # a ratio's counts: shown with its n/a
+            continue
         out.append(k)
     return sorted(out, key=lambda k: (k != "f", k))

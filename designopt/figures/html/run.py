@@ -3,6 +3,7 @@ gradient polish, a replayed trajectory (``teleop/``) and a checkpoint."""
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping
 from typing import Any
 
@@ -33,6 +34,7 @@ from designopt.figures.html.plots import (
     _value_band,
     merged,
 )
+from designopt.results.base import value_text
 
 
 def _run_sections(tree: Mapping[str, Any], ids: _Ids, units: dict[str, str],
@@ -129,8 +131,17 @@ def _final_tables(tree: Mapping[str, Any], units: dict[str, str]) -> str:
         if v.ndim:
             continue
         se = float(_f(fin[k + "_se"])) if k + "_se" in fin else None
+        if np.isnan(v):  # n/a: a ratio over too few items, with its counts
+            n, of = (float(_f(fin[k + s])) if k + s in fin else None for s in ("_n", "_of"))
+            rows.append((k, value_text(float(v), n=n, of=of), style.unit_of(k, units)))
+            continue
         rows.append((k, _num(float(v), se), style.unit_of(k, units)))
     at = fin.get("attrs", {})
+    warns = at.get("warnings", [])
+    warns = json.loads(warns) if isinstance(warns, str | bytes) else list(warns)
+    if warns:  # what run and show print, on the page too
+        parts.append("<h3>Warnings</h3><ul>" + "".join(f"<li>{esc(_s(w))}</li>" for w in warns)
+                     + "</ul>")  # fmt: skip
     cap = f"stage: {_s(at['stage'])}" if "stage" in at else ""
     if "n_samples_used" in at:
         cap += f"; Monte-Carlo samples: {_s(at['n_samples_used'])}"

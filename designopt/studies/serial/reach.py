@@ -42,11 +42,17 @@ def check(s: SerialSettings) -> None:
     its base)."""
     if s.task is None:
         return
+    _check_reach(s)  # first: a region out of reach is the cause, whatever the ports say
     _check_ports(s)
     if s.collision is not None:
         from designopt.studies.serial import bodies
 
         bodies.check(s, build(s))
+
+
+def _check_reach(s: SerialSettings) -> None:
+    """ValueError naming ``task.region`` when no design (some arm in no design) reaches
+    any point of the task region (:func:`check`)."""
     u = length_unit(s)
     far = largest_reach(s)
     if s.arms is not None:

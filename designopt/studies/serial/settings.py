@@ -8,6 +8,7 @@ name of a design variable or fixed value.
 from __future__ import annotations
 
 import math
+import re
 from functools import lru_cache
 from pathlib import Path
 from typing import Annotated, Any, Literal, NamedTuple, Union
@@ -33,6 +34,19 @@ TASK_INDEX_NAMES = ("reach", "gci", "gci_q05", "manipulability", "joint_margin")
 """The indices under ``measure: task`` (docs/task.md)."""
 
 
+_NUMBER = re.compile(r"^\s*[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?\s*$")
+
+
+def _number_or_name(v: Any) -> Any:
+    """A number that YAML read as text (``1e3``, ``4e-1``: YAML 1.1 takes an exponent
+    without a dot for a word) as the number; names and everything else as given."""
+    if isinstance(v, str) and _NUMBER.match(v):
+        return float(v)
+    if isinstance(v, list | tuple):
+        return type(v)(_number_or_name(x) for x in v)
+    return v
+
+
 class Joint(Section):
     """One DH row: joint type, the four DH entries (α, θ in degrees) and the joint limits
     (degrees for R joints, length units for P joints)."""
@@ -43,6 +57,9 @@ class Joint(Section):
     d: float | str = 0.0
     theta: float | str = 0.0
     limits: tuple[float, float]
+
+    _numbers = field_validator("a", "alpha", "d", "theta", mode="before")(
+        classmethod(lambda cls, v: _number_or_name(v)))
 
     @field_validator("limits")
     @classmethod
@@ -98,10 +115,12 @@ class UrdfChain(Section):
             return v
         out: dict[Any, Any] = {}
         for k, x in v.items():
-            if isinstance(x, dict) and x:
-                out |= {f"{k}.{kk}": xx for kk, xx in cls._flat(x).items()}
-            else:
-                out[k] = x
+            items = ({f"{k}.{kk}": xx for kk, xx in cls._flat(x).items()}
+                     if isinstance(x, dict) and x else {k: _number_or_name(x)})  # fmt: skip
+            for kk, xx in items.items():
+                if kk in out:
+                    raise ValueError(f"{kk}: given twice (once dotted, once nested); give it once")
+                out[kk] = xx
         return out
 
     @model_validator(mode="after")
@@ -316,6 +335,9 @@ class ArmBase(Section):
     xyz: tuple[Entry, Entry, Entry] = (0.0, 0.0, 0.0)
     rpy: tuple[Entry, Entry, Entry] = (0.0, 0.0, 0.0)
 
+    _numbers = field_validator("xyz", "rpy", mode="before")(
+        classmethod(lambda cls, v: _number_or_name(v)))
+
 
 class Arm(Section):
     """One of several identical arms (copies of ``chain``): its base and its port (else
@@ -480,8 +502,8 @@ class SerialSettings(StudySettings):
                                  "task.tool_axis cone is for one arm")  # fmt: skip
             given = [a.port is not None for a in self.arms]
             if any(given) and not all(given):
-                raise ValueError("arms: give every arm a port or none (task.port is the "
-                                 "default for arms without one)")  # fmt: skip
+                raise ValueError("arms: give every arm its own port (arms.<k>.port) or none "
+                                 "(then task.port, if given, is every arm's)")  # fmt: skip
             if all(given) and self.task.port is not None:  # type: ignore[union-attr]
                 raise ValueError("arms: every arm has its own port; remove task.port")
             for k, a in enumerate(self.arms):

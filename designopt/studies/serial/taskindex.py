@@ -280,15 +280,19 @@ that its sense ranks worst (0 when maximised, 1 when minimised)."""
 
 
 def ratio(y: jax.Array, x: jax.Array, n_min: int = N_MIN) -> tuple[jax.Array, jax.Array]:
-    """The ratio estimator Σy/Σx along the last axis with its delta-method SE
-    √(Σ(y − r x)² / (N (N − 1))) / x̄; NaN and NaN where Σx < ``n_min`` (a ratio over a
-    handful of items claims what the sample cannot show)."""
+    """The ratio estimator Σy/Σx of 0/1 values y ≤ x along the last axis (the share of
+    the counted items that pass) with its delta-method SE √(Σ(y − r x)² / (N (N − 1))) / x̄,
+    never below the Agresti–Coull SE of Σy of Σx (:func:`_share`: a share of 0 or 1 is
+    not exact); NaN and NaN where Σx < ``n_min`` (a ratio over a handful of items claims
+    what the sample cannot show)."""
     N = y.shape[-1]
-    sx = jnp.sum(x, -1)
+    sx, sy = jnp.sum(x, -1), jnp.sum(y, -1)
     ok = sx >= max(n_min, 1)
-    r = jnp.where(ok, jnp.sum(y, -1) / jnp.where(ok, sx, 1.0), 0.0)
+    r = jnp.where(ok, sy / jnp.where(ok, sx, 1.0), 0.0)
     res = y - r[..., None] * x
     se = jnp.sqrt(jnp.sum(res * res, -1) / (N * (N - 1))) / jnp.where(ok, sx / N, 1.0)
+    pt = (sy + 2.0) / (sx + 4.0)
+    se = jnp.maximum(se, jnp.sqrt(pt * (1.0 - pt) / (sx + 4.0)))
     return jnp.where(ok, r, jnp.nan), jnp.where(ok, se, jnp.nan)
 
 
