@@ -279,7 +279,7 @@ def draw_front_robots(rec: Any, picks: Sequence[tuple[str, int]], folder: Path) 
         d = dict(zip(s.variables, rec.X[i], strict=True))
         lines.append(f"{name} (design {i}): {_design(s, d)}; drawn at {label}")
     where = ("one representative tuple of targets of its own IK solution (stars): " +
-             ("the tuple (one target per arm, as arms_free draws them) of median gap between "
+             ("the tuple (one target per arm, as arms_ok draws them) of median gap between "
               "the arms" if s.arms is not None else "the reached target of median 1/k")
              if s.indices.measure == "task" else "the home pose")  # fmt: skip
     head = (f"The front's extremes and knee ({len(rec.X)} designs of {rec.study}; the knee: "
@@ -373,7 +373,7 @@ def _task_caption(rec: RunRecord, sol_all: dict[str, np.ndarray], sol: dict[str,
         what = (f"{len(s.arms)} arms: the mean 1/k of the arms ({s.indices.norm}-norm; rows "
                 f"{rows_txt}) where every arm reaches the target, of {N}; not reached by "
                 f"every arm (grey crosses): {bad}; the arms drawn at one tuple of targets "
-                "(one per arm, as arms_free draws them): the tightest, colliding pairs in red")  # fmt: skip
+                "(one per arm, as arms_ok draws them): the tightest, colliding pairs in red")  # fmt: skip
     ta = s.task.tool_axis  # type: ignore[union-attr]
     if ta is not None:
         what += f"; tool axis within {ta.cone:g}° of {_vec(np.asarray(ta.direction))}"
