@@ -144,11 +144,14 @@ def test_same_numbers_particles_and_samples(child: dict, name: str, axis: str) -
     are gathered and added in chunk order (bitwise indices); master9's elementwise tail
     after the sums may round differently by an ulp (≤ 1e-6 of the run's f scale, the same
     best design; with the objective as its own program, as the CLI runs it, ≤ 5e-6;
-    docs/scaling.md)."""
-    for tol, r in ((1e-6, child[f"{name}/{axis}"]), (5e-6, child[f"{name}/{axis}/separate"])):
+    docs/scaling.md). XLA's CPU code for the gathered sums differs between processors: on
+    an Intel Xeon (AVX-512) the serial history moved by 1 float32 ulp (1.1e-7, best f and
+    design bitwise) and master9's best f by 3.5e-6 (1.7e-6 separate); on the AMD EPYC box
+    both were as above."""
+    for tol, r in ((5e-6, child[f"{name}/{axis}"]), (5e-6, child[f"{name}/{axis}/separate"])):
         assert r["x"], r
-        if name == "master9" and axis == "samples":
-            assert r["final"] <= tol, r  # separate objective: 1.7e-6 measured
+        if axis == "samples":  # the same best design; f within a few float32 ulps
+            assert r["final"] <= tol and r["rel"] <= 2 * tol, r
         else:
             assert r["f"] and r["history"], r
 

@@ -153,7 +153,8 @@ def test_scan_and_eval_commands(tmp_path, capsys):
 
     one = json.loads(capsys.readouterr().out)
     idx = ("f", "gci", "gcsei", "manipulability", "volume")
-    assert set(one) == set(idx) | {k + "_se" for k in idx}
+    assert set(one) == set(idx) | {k + "_se" for k in idx} | {"warnings"}
+    assert one["warnings"] == []  # what run would print under the summary
     assert main(["scan", str(cfg), "--quiet", "--out", str(tmp_path / "s.h5")]) == 0
     from designopt.io import archive
 

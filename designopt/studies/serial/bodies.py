@@ -315,8 +315,7 @@ def pair_lines(s: SerialSettings, mech: Mechanism | None = None,
     set it (self-collision pairs, and each capsule against each obstacle, in each arm's
     base frame; the port's exemption is not applied: it depends on the target).
     No ``study.collision``: one line saying so."""
-    from designopt.studies.serial.drawing import home, joint_values
-    from designopt.studies.serial.mechanism import build
+    from designopt.studies.serial.mechanism import build, home, joint_values
     from designopt.studies.serial.settings import length_unit
 
     mech = build(s) if mech is None else mech

@@ -390,10 +390,6 @@ def cmd_view(args: argparse.Namespace, ctx: Any) -> int:
         doc = page.document([page.robot_section(view)], f"designopt view: {Path(where).name}")
         writer.write_file(html, doc.encode("utf-8"), "HTML view")
         written.append(html)
-    if s.collision is not None:  # what the collision check holds, and what sets it here
-        from designopt.studies.serial import bodies
-
-        print("\n".join(bodies.pair_lines(s, mech, design, q)))
     for p in written:
         print(p)
     return 0

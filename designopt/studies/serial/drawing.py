@@ -29,8 +29,13 @@ import numpy as np
 
 from designopt.figures.robot import Arm, Cone, Scene, Targets
 from designopt.numerics import montecarlo as mc
-from designopt.studies.serial.mechanism import Mechanism
-from designopt.studies.serial.settings import ROWS, SerialSettings, UrdfChain, length_unit
+from designopt.studies.serial.mechanism import (  # noqa: F401 (re-exported)
+    Mechanism,
+    home,
+    joint_names,
+    joint_values,
+)
+from designopt.studies.serial.settings import ROWS, SerialSettings, UrdfChain
 
 REPRESENTATIVE = (("worst-conditioned", "#9467bd"), ("median", "#1f77b4"),
                   ("best-conditioned", "#2ca02c"))  # fmt: skip
@@ -64,31 +69,6 @@ def full(mech: Mechanism, x: Any) -> np.ndarray:
     x = np.atleast_2d(np.asarray(x, np.float64))
     fixed = np.broadcast_to(mech.fixed, (x.shape[0], len(mech.fixed)))
     return np.concatenate([x, fixed], -1) * mech.scale
-
-
-def home(mech: Mechanism) -> np.ndarray:
-    """The home pose: each joint at 0 where its limits allow it, else mid-range."""
-    lo, hi = np.asarray(mech.lower), np.asarray(mech.upper)
-    return np.where((lo <= 0) & (0 <= hi), 0.0, (lo + hi) / 2)
-
-
-def joint_names(s: SerialSettings) -> list[str]:
-    """The active joints' names: the URDF's, or q1 … qn of a DH table."""
-    if isinstance(s.chain, UrdfChain):
-        return list(s.chain.imported.active)
-    return [f"q{i + 1}" for i in range(len(s.chain.joints))]
-
-
-def joint_values(s: SerialSettings, q: Sequence[float], sep: str = ", ") -> str:
-    """``q1 = 10 deg, q3 = 0.135 m``: degrees for R joints, the chain's length unit for
-    P joints."""
-    u = length_unit(s)
-    out = []
-    for name, j, v in zip(joint_names(s), s.chain.joints, q, strict=True):
-        out.append(
-            f"{name} = {math.degrees(v):.4g} deg" if j.type == "R" else f"{name} = {v:.4g} {u}"
-        )
-    return sep.join(out)
 
 
 def obstacles_and_ports(s: SerialSettings) -> dict[str, Any]:

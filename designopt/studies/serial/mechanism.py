@@ -10,13 +10,14 @@ entries named by a variable are given in degrees and converted by ``scale``.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from designopt.kinematics.kernel import SerialModel, dh_model
-from designopt.studies.serial.settings import SerialSettings, UrdfChain
+from designopt.studies.serial.settings import SerialSettings, UrdfChain, length_unit
 
 
 @dataclass(frozen=True)
@@ -95,3 +96,28 @@ def set_values(s: Any, design: dict[str, float]) -> dict[tuple[str, str], float]
         x = vals[v] if isinstance(v, str) else float(v)
         out[(joint, fld)] = math.radians(x) if fld in ANGLE_FIELDS else x
     return out
+
+
+def home(mech: Mechanism) -> np.ndarray:
+    """The home pose: each joint at 0 where its limits allow it, else mid-range."""
+    lo, hi = np.asarray(mech.lower), np.asarray(mech.upper)
+    return np.where((lo <= 0) & (0 <= hi), 0.0, (lo + hi) / 2)
+
+
+def joint_names(s: SerialSettings) -> list[str]:
+    """The active joints' names: the URDF's, or q1 … qn of a DH table."""
+    if isinstance(s.chain, UrdfChain):
+        return list(s.chain.imported.active)
+    return [f"q{i + 1}" for i in range(len(s.chain.joints))]
+
+
+def joint_values(s: SerialSettings, q: Sequence[float], sep: str = ", ") -> str:
+    """``q1 = 10 deg, q3 = 0.135 m``: degrees for R joints, the chain's length unit for
+    P joints."""
+    u = length_unit(s)
+    out = []
+    for name, j, v in zip(joint_names(s), s.chain.joints, q, strict=True):
+        out.append(
+            f"{name} = {math.degrees(v):.4g} deg" if j.type == "R" else f"{name} = {v:.4g} {u}"
+        )
+    return sep.join(out)
