@@ -88,3 +88,18 @@ def test_a_far_region_with_ports_is_named_as_the_region(tmp_path, capsys):
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert "task.region" in err and "insertion" not in err.split(":")[2]
+
+
+def test_an_na_objective_term_is_said_beside_f():
+    from designopt.app.config import validate
+    from designopt.studies.serial import reach
+
+    cfg = yaml.safe_load(open("configs/two_arms_front.yaml"))
+    cfg["study"]["objective"] = {"arms_free": -1.0}
+    cfg["optimizer"] = {"name": "ptpso", "n_particles": 4, "n_iters": 1}
+    s = validate(cfg, "test").study
+    final = {"f": 0.0, "arms_free": float("nan"), "arms_free_se": float("nan"),
+             "arms_free_n": 3.0, "arms_free_of": 64.0, "reach_all": 0.05, "reach_all_se": 0.02}  # fmt: skip
+    w = reach.warnings(s, final)
+    assert any(x.startswith("f: its term(s) arms_free n/a") for x in w), w
+    assert any("arms_free: n/a (3 of 64" in x for x in w), w

@@ -331,6 +331,10 @@ def warnings(s: SerialSettings, final: Mapping[str, Any]) -> list[str]:
                        "solutions collide (clearance below the margin): no target is "
                        "reached; check the obstacles, the margin and the capsules "
                        "(designopt chain lists the pairs)")  # fmt: skip
+    na = [k for k in s.weights() if (v := _num(final, k)) is not None and math.isnan(v)]
+    if na:  # f is then a search value: the worst end of each n/a term's range
+        out.append(f"f: its term(s) {', '.join(na)} n/a; f counts each at the worst end of "
+                   "its range (the value a search ranks it by), not an estimate")  # fmt: skip
     return out
 
 
