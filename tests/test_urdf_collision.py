@@ -340,7 +340,7 @@ def test_a_mesh_that_cannot_be_found_or_read_names_the_link_and_the_file(arm, tm
         UC.capsules(bad, str(path), imp)
     (path.parent / "junk.stl").write_text("not a mesh at all")
     bad = text.replace("../meshes/part.stl", "junk.stl")
-    with pytest.raises(ValueError, match=r'<link name="l4">.*junk\.stl'):
+    with pytest.raises(ValueError, match=r"link 'l4'.*junk\.stl"):
         UC.capsules(bad, str(path), imp)
     bad = text.replace('<sphere radius="0.04"/>', '<sphere radius="-1"/>')
     with pytest.raises(ValueError, match=r'<link name="b">.*radius'):
