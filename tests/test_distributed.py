@@ -80,7 +80,9 @@ def test_two_processes_match_one_device(tmp_path: Path) -> None:
     for k in KEYS:
         assert np.array_equal(a[k], b[k]), k
     assert b["parallel"] == {"axis": "runs", "devices": 4, "processes": 2, "platform": "cpu"}
-    said = [[ln for ln in out.splitlines() if not ln.startswith("[Gloo]")] for _, out, _ in res]
+    # (Gloo's C++ log lines share stdout; a blank line from them was seen once under load)
+    said = [[ln for ln in out.splitlines() if ln.strip() and not ln.startswith("[Gloo]")]
+            for _, out, _ in res]  # fmt: skip
     assert any(ln.startswith("archive:") for ln in said[0]) and said[1] == []  # 1 prints nothing
     # process 0 alone wrote: the archive and nothing else in the folder
     assert sorted(p.name for p in out.parent.iterdir()) == ["a.h5"]
