@@ -58,3 +58,14 @@ def test_bad_set_items_are_one_line(tmp_path, capsys, item, says):
     assert main(["eval", "configs/planar2r.yaml", "--set", item]) == 2
     err = capsys.readouterr().err
     assert says in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_view_takes_set_as_the_other_config_commands(tmp_path, capsys):
+    """--set on a study's own command that loads a config (view): an edit that is
+    refused names its key, one that is taken draws."""
+    capsys.readouterr()
+    argv = ["view", "configs/urdf_puma560_port.yaml", "--out", str(tmp_path / "v.png")]
+    assert main([*argv, "--set", "study.task.port=[0.5, 0.1]"]) == 2
+    assert "key 'study.task.port'" in capsys.readouterr().err
+    assert main([*argv, "--set", "study.task.port=[0.45, 0.1, -0.2]"]) == 0
+    assert (tmp_path / "v.png").exists()

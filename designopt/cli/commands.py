@@ -406,6 +406,8 @@ def build_parser() -> argparse.ArgumentParser:
         for c in study.commands:
             q = sub.add_parser(c.name, help=c.help, description=c.description or None)
             c.arguments(q)
+            if any(a.dest == "config" for a in q._actions):  # loads a config: --set too
+                set_argument(q)
             q.set_defaults(func=lambda a, c=c: c.run(a, Context()), writes=c.writes)
     p = sub.add_parser("report", help="draw the figures of an archive (PNG + PDF beside it)")
     p.add_argument("archive")
