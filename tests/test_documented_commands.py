@@ -377,7 +377,6 @@ SKIP: dict[str, str] = {
     'pip install -e ".[bench]"': "installs the benchmark peers (network)",
     "pip install roboticstoolbox-python ikpy": "installs the benchmark peers (network)",
     "python -m pytest -q -n auto --dist loadfile": "the test suite itself",
-    "python -m pytest -q": "the test suite itself",
     "srun designopt run configs/big.yaml --devices 32 --quiet":
         "a SLURM cluster and a cluster's own config (configs/big.yaml is an example name)",
     "python benchmarks/main_job.py --repeat 3": BENCH + " (cold and warm pairs of master9)",
