@@ -154,13 +154,15 @@ def cmd_eval(args: argparse.Namespace) -> int:
     box = cfg.study.variables
     design = {k: design.get(k, 0.5 * (lo + hi)) for k, (lo, hi) in box.items()}
     counts = ("_se", "_n", "_of")  # an index's SE and a ratio's counts: printed with it
+    shown = [k for k in res if not (k.endswith(counts) and k.rsplit("_", 1)[0] in res)]
+    w = max([15, *(len(k) for k in shown)])  # the names right-aligned on their "="
     for k, v in res.items():
-        if k.endswith(counts) and k.rsplit("_", 1)[0] in res:
+        if k not in shown:
             continue
         txt = value_text(v, res.get(k + "_se"), ".6g", ".2g", res.get(k + "_n"),
                          res.get(k + "_of"))  # fmt: skip
         u = units.get(k, "")
-        print(f"{k:>15} = {txt}" + (f" {u}" if u not in ("", "-") and "n/a" not in txt else ""))
+        print(f"{k:>{w}} = {txt}" + (f" {u}" if u not in ("", "-") and "n/a" not in txt else ""))
     print("design: " + ", ".join(f"{k} = {v:g}" + (f" {units[k]}" if units.get(k, "-") != "-" else "")
                                  for k, v in design.items()))  # fmt: skip
     front = getattr(cfg.study, "pareto", None)

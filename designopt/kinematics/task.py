@@ -405,31 +405,35 @@ def depths(p: np.ndarray, port: Vec3) -> np.ndarray:
     return np.linalg.norm(np.asarray(p, np.float64) - np.asarray(port, np.float64), axis=-1)
 
 
-def check_port(task: Task, n: int = 8192, port: Vec3 | None = None,
+def check_port(task: Task, n: int = 8192, port: Any = None,
                where: str = "task.port", insertion: tuple[float, float] | None = None,
                insertion_key: str = "task.insertion") -> None:  # fmt: skip
     """ValueError naming ``task.insertion`` when no point of the region lies at a depth
-    past the port (``port``, else ``task.port``) within the insertion range (checked on
-    n samples of the region, or every point of a points file): then no target could ever
-    be reached. ``insertion`` (named ``insertion_key``): an arm's own range, else
-    ``task.insertion``."""
+    past the port within the insertion range (checked on n samples of the region, or
+    every point of a points file): then no target could ever be reached. ``port``: one
+    port (3,), or the ports (D, 3) of D designs, refused when none of them leaves a
+    target in range (else ``task.port``). ``insertion`` (named ``insertion_key``): an
+    arm's own range, else ``task.insertion``."""
     port = task.port if port is None else port
     if port is None:
         return
+    ports = np.asarray(port, np.float64).reshape(-1, 3)
     if isinstance(task.region, Points):
         p = task.region.xyz()
     else:
         dt = jnp.float64 if jax.config.jax_enable_x64 else jnp.float32
         p = np.asarray(_targets(kind(task.region), region_params(task.region, dt),
                                 jax.random.key(0), n, None, None)[0], np.float64)  # fmt: skip
-    d = depths(p, port)
+    d = np.linalg.norm(p[None] - ports[:, None], axis=-1)  # (D, N)
     ins = task.insertion if insertion is None else insertion
     d0, d1 = (0.0, math.inf) if ins is None else ins
     if not np.any((d >= d0) & (d <= d1) & (d > 0)):
         key = insertion_key if ins is not None else where
+        at = f"port {[float(f'{v:.6g}') + 0.0 for v in ports[0]]} ({where})" if len(ports) == 1 \
+            else f"ports of {len(ports)} designs across the box ({where})"  # fmt: skip
         raise ValueError(
             f"{key}: no target of the region lies at a depth in [{d0:g}, {d1:g}] past the "
-            f"port {list(port)} ({where}): the region's depths run from {d.min():.4g} to "
+            f"{at}: the region's depths run from {d.min():.4g} to "
             f"{d.max():.4g} (the chain's length unit); move the port or widen the insertion"
         )
 

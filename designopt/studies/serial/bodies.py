@@ -119,6 +119,7 @@ class Geometry:
     near: tuple[tuple[int, int], ...] = ()  # left out: near in every sampled configuration
     never: tuple[tuple[int, int], ...] = ()  # left out: near in none
     bands: tuple[tuple[int, int, float, float], ...] = ()  # (i, j, least, largest distance)
+    tool_radius: float = 0.0  # the instrument's radius inside the patient (inside obstacles)
 
     def outer(self, model: Any, X: jax.Array, q: jax.Array) -> jax.Array:
         """Capsule end points (M, C, L, 2, 3) for designs X (M, P) and joints q (C, n)."""
@@ -184,7 +185,7 @@ def _geometry(s: SerialSettings, mech: Mechanism) -> Geometry:
         raise ValueError("collision: every link of the chain has zero length")
     radii = tuple(radius[i] for i in links)
     g = Geometry(links, radii, (), (), float(c.margin), bool(c.self_), cap,
-                 tuple(f"link {i + 1}" for i in links))  # fmt: skip
+                 tuple(f"link {i + 1}" for i in links), tool_radius=_tool_radius(c, radii))  # fmt: skip
     pairs = col.nonadjacent_pairs(len(links)) if c.self_ else ()
     return _drop_always(g, s, mech, pairs, rng)
 
@@ -207,8 +208,15 @@ def _urdf_geometry(s: SerialSettings, mech: Mechanism, c: Any, cap: float) -> Ge
                   if abs(pos[i] - pos[j]) >= 2) if c.self_ else ()  # fmt: skip
     g = Geometry(tuple(range(len(caps))), tuple(float(k.radius) for k in caps), (), (),
                  float(c.margin), bool(c.self_), cap, tuple(k.link for k in caps),
-                 (imp, urdf_bindings(s), caps))  # fmt: skip
+                 (imp, urdf_bindings(s), caps),
+                 tool_radius=_tool_radius(c, tuple(float(k.radius) for k in caps)))  # fmt: skip
     return _drop_always(g, s, mech, pairs, np.random.default_rng(0))
+
+
+def _tool_radius(c: Any, radii: tuple[float, ...]) -> float:
+    """``collision.tool_radius``, else the last capsule's radius (the instrument's)."""
+    r = getattr(c, "tool_radius", None)
+    return float(radii[-1] if r is None else r)
 
 
 def _drop_always(g: Geometry, s: SerialSettings, mech: Mechanism, pairs: tuple,
@@ -397,37 +405,77 @@ def rpy_matrix(r: Any, p: Any, y: Any) -> jax.Array:
     ], -2)  # fmt: skip
 
 
+def _entries(names: tuple[str, ...], rows: list[tuple[Any, ...]], angles: tuple[int, ...] = ()
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """(const, col, sign) (K, W) of K rows of base or port entries: a number's value (an
+    angle column of ``angles`` in rad), the design column (variables then fixed) a name
+    reads (−1 for a number), −1 for "-name"."""
+    W = len(rows[0]) if rows else 0
+    const, cols, sign = np.zeros((len(rows), W)), -np.ones((len(rows), W), np.int32), \
+        np.ones((len(rows), W))  # fmt: skip
+    for k, row in enumerate(rows):
+        for i, v in enumerate(row):
+            if isinstance(v, str):
+                cols[k, i] = names.index(v.removeprefix("-"))
+                sign[k, i] = -1.0 if v.startswith("-") else 1.0
+            else:
+                const[k, i] = math.radians(v) if i in angles else float(v)
+    return const, cols, sign
+
+
 def base_params(s: SerialSettings, mech: Mechanism, dtype: Any) -> dict[str, jax.Array]:
     """The arms' base entries as arrays: ``arm_const`` (A, 6) (xyz in length units, rpy in
     rad) and ``arm_col`` (A, 6) int, the design column (variables then fixed, kernel
     units) an entry reads, −1 for a number, and ``arm_sign`` (A, 6), −1 for "-name".
-    Empty without ``arms``."""
+    Empty without ``arms``. (The ports: :func:`port_params`.)"""
     if s.arms is None:
         return {}
-    const = np.zeros((len(s.arms), 6))
-    cols = -np.ones((len(s.arms), 6), np.int32)
-    sign = np.ones((len(s.arms), 6))
-    for k, a in enumerate(s.arms):
-        for i, v in enumerate((*a.base.xyz, *a.base.rpy)):
-            if isinstance(v, str):
-                cols[k, i] = mech.names.index(v.removeprefix("-"))
-                sign[k, i] = -1.0 if v.startswith("-") else 1.0
-            else:
-                const[k, i] = math.radians(v) if i >= 3 else float(v)
-    ports = np.asarray(s.ports() if s.ports()[0] is not None else np.zeros((0, 3)))
-    out = {"arm_const": jnp.asarray(const, dtype), "arm_col": jnp.asarray(cols),
-           "arm_sign": jnp.asarray(sign, dtype)}  # fmt: skip
-    return out | ({"arm_port": jnp.asarray(ports, dtype)} if len(ports) else {})
+    rows = [(*a.base.xyz, *a.base.rpy) for a in s.arms]
+    const, cols, sign = _entries(tuple(mech.names), rows, (3, 4, 5))
+    return {"arm_const": jnp.asarray(const, dtype), "arm_col": jnp.asarray(cols),
+            "arm_sign": jnp.asarray(sign, dtype)}  # fmt: skip
+
+
+def port_params(s: SerialSettings, dtype: Any) -> dict[str, Any]:
+    """Each arm's port entries (A or 1, 3) as ``scene_port`` {const, col, sign} (as
+    :func:`base_params`'), and with ``task.body_wall`` the wall's numbers as
+    ``scene_wall`` (``wall.wall_params``). Empty without ports."""
+    from designopt.kinematics.wall import wall_params
+
+    ports = s.ports()
+    if ports[0] is None:
+        return {}
+    const, cols, sign = _entries((*s.variables, *s.fixed), list(ports))
+    out: dict[str, Any] = {"scene_port": {"const": jnp.asarray(const, dtype),
+                                          "col": jnp.asarray(cols),
+                                          "sign": jnp.asarray(sign, dtype)}}  # fmt: skip
+    wall = s.task.body_wall  # type: ignore[union-attr]
+    return out | ({} if wall is None else {"scene_wall": wall_params(wall, dtype)})
+
+
+def _values(const: jax.Array, col: jax.Array, sign: jax.Array, full: jax.Array) -> jax.Array:
+    """The entries (K, M, W) for designs ``full`` (M, P) (:func:`_entries`' arrays)."""
+    c, sg = const.astype(full.dtype), sign.astype(full.dtype)
+    return c[:, None, :] + jnp.where(col[:, None, :] >= 0,
+                                     sg[:, None, :] * jnp.moveaxis(full[:, jnp.maximum(col, 0)], 0, 1),
+                                     0.0)  # fmt: skip
 
 
 def base_frames(params: dict[str, Any], full: jax.Array) -> tuple[jax.Array, jax.Array]:
     """(R (A, M, 3, 3), t (A, M, 3)) of every arm's base for designs ``full`` (M, P)."""
-    c, k = params["arm_const"].astype(full.dtype), params["arm_col"]
-    sg = params["arm_sign"].astype(full.dtype)
-    v = c[:, None, :] + jnp.where(k[:, None, :] >= 0,
-                                  sg[:, None, :] * jnp.moveaxis(full[:, jnp.maximum(k, 0)], 0, 1),
-                                  0.0)  # fmt: skip
+    v = _values(params["arm_const"], params["arm_col"], params["arm_sign"], full)
     return rpy_matrix(v[..., 3], v[..., 4], v[..., 5]), v[..., :3]
+
+
+def port_points(params: dict[str, Any], full: jax.Array, wall: str | None) -> jax.Array:
+    """Every arm's port (A or 1, M, 3) for designs ``full`` (M, P), projected onto the
+    body wall of kind ``wall`` (``wall.project``) when there is one (ports are lengths:
+    a design column's kernel unit is the config's)."""
+    from designopt.kinematics import wall as kw
+
+    sp = params["scene_port"]
+    v = _values(sp["const"], sp["col"], sp["sign"], full)
+    return v if wall is None else kw.project(wall, params["scene_wall"], v)
 
 
 # ---------------------------------------------------------------------- clearance
@@ -472,18 +520,64 @@ def cut_at_port(seg: jax.Array, port: jax.Array, z: jax.Array, radii: jax.Array)
     return jnp.where(out[..., None, None], cut[..., None, :, :], seg)
 
 
+def inside_pieces(seg: jax.Array, port: jax.Array, z: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """The part of the chain beyond the port plane (the instrument inside the patient):
+    (pieces (..., L, 2, 3), inside (..., L) bool). With c the capsule through the port
+    (:func:`cut_at_port`), its piece runs from its crossing of the plane to its inner
+    end, and the capsules after c are whole; the others are not inside (``inside``
+    False, their piece left as it is). Nothing is inside when no capsule has a part on
+    the outer side (no port crossing) or when c does not reach the plane."""
+    a, b = seg[..., 0, :], seg[..., 1, :]
+    sa = jnp.sum((a - port[..., None, :]) * z[..., None, :], -1)  # (..., L)
+    sb = jnp.sum((b - port[..., None, :]) * z[..., None, :], -1)
+    idx = jnp.arange(seg.shape[-3])
+    c = jnp.max(jnp.where(jnp.minimum(sa, sb) < 0, idx, -1), -1)  # -1: none outside
+    swap = (sb < sa)[..., None]
+    o, i = jnp.where(swap, b, a), jnp.where(swap, a, b)  # outer end, inner end
+    so, si = jnp.minimum(sa, sb), jnp.maximum(sa, sb)
+    cross = si > 0  # the inner end is beyond the plane (so < 0 at c)
+    t = jnp.clip(-so / jnp.where(si > so, si - so, 1.0), 0.0, 1.0)
+    first = jnp.stack([o + t[..., None] * (i - o), i], -2)  # c's piece: crossing to inner end
+    at_c = (idx == c[..., None])[..., None, None]
+    pieces = jnp.where(at_c, first, seg)
+    inside = (c[..., None] >= 0) & ((idx > c[..., None]) | ((idx == c[..., None]) & cross))
+    return pieces, inside
+
+
+def geometry_params(g: Geometry | None, dtype: Any) -> dict[str, Any]:
+    """The geometry's numbers as ``params`` (``scene_geometry``: the capsules' ``radii``
+    (L,), the ``margin``, the instrument's ``tool_radius`` and the ``cap`` on a
+    clearance), so that editing a radius or the margin compiles nothing (while the
+    self-collision pairs they select stay the same). Empty without collisions."""
+    if g is None:
+        return {}
+    return {"scene_geometry": {"radii": jnp.asarray(np.asarray(g.radii, np.float64), dtype),
+                               "margin": jnp.asarray(g.margin, dtype),
+                               "tool_radius": jnp.asarray(g.tool_radius, dtype),
+                               "cap": jnp.asarray(g.cap, dtype)}}  # fmt: skip
+
+
 def obstacle_and_self(g: Geometry, obst: Any, seg: jax.Array, port: jax.Array | None,
-                      z: jax.Array | None) -> jax.Array:  # fmt: skip
+                      z: jax.Array | None, inside: Any = None,
+                      gp: dict[str, Any] | None = None) -> jax.Array:  # fmt: skip
     """The clearance (...,) of one arm's capsules (..., L, 2, 3) (world frame): the least
-    signed distance to the obstacles (the part beyond the port excluded) and between its
-    non-adjacent links, at most ``g.cap`` (the longest reach: finite where nothing is
-    checked)."""
-    r = jnp.asarray(g.radii, seg.dtype)
+    signed distance to the obstacles (the part beyond the port excluded), between its
+    non-adjacent links and, with a port, of the part beyond the port plane (its radius
+    ``g.tool_radius``, :func:`inside_pieces`) to the obstacles ``inside`` (the anatomy),
+    at most ``g.cap`` (the longest reach: finite where nothing is checked). ``gp``: the
+    geometry's numbers as arrays (:func:`geometry_params`; None: ``g``'s)."""
+    gp = geometry_params(g, seg.dtype)["scene_geometry"] if gp is None else gp
+    r = gp["radii"].astype(seg.dtype)
     cut = seg if port is None else cut_at_port(seg, port, z, r)
     d = col.clearance(cut, r, obst, ())
     if g.pairs:
         d = jnp.minimum(d, col.clearance(seg, r, None, g.pairs))
-    return jnp.minimum(d, g.cap)  # +inf where nothing is checked
+    if inside is not None and port is not None:
+        pieces, mask = inside_pieces(seg, port, z)  # type: ignore[arg-type]
+        tr = gp["tool_radius"].astype(seg.dtype)
+        di = col.clearance(pieces[..., :, None, :, :], tr, inside, ())  # (..., L)
+        d = jnp.minimum(d, jnp.min(jnp.where(mask, di, jnp.inf), -1))
+    return jnp.minimum(d, gp["cap"].astype(seg.dtype))  # +inf where nothing is checked
 
 
 def check(s: SerialSettings, mech: Mechanism) -> None:
@@ -507,6 +601,8 @@ def check(s: SerialSettings, mech: Mechanism) -> None:
     last = len(g.links) - 1
     radii = jnp.asarray(g.radii)
     for i, ob in enumerate(c.obstacles):
+        if getattr(ob, "inside", False):
+            continue  # the anatomy: only the instrument beyond the port meets it
         op = col.obstacle_params([ob], radii.dtype)
         for k, (R, t) in enumerate(frames):
             seg = S @ R.T + t  # (256, L, 2, 3)

@@ -133,17 +133,20 @@ def constraints_fn(s: SerialSettings, names: tuple[str, ...], params: dict[str, 
         """G = A x − b (M, n_c): the linear constraints, feasible when ≤ 0."""
         return X @ p["lin_A"].astype(X.dtype).T - p["lin_b"].astype(X.dtype)
 
-    def bound(c: IndexConstraint, aux: Mapping[str, jax.Array]) -> jax.Array:
+    def bound(c: IndexConstraint, b: jax.Array, aux: Mapping[str, jax.Array]) -> jax.Array:
         v = search_value(c.index, aux[c.index], c.le is not None)  # n/a: violated most
-        return c.ge - v if c.ge is not None else v - c.le
+        return b - v if c.ge is not None else v - b
 
     archived = [c.model_dump(exclude_none=True) for c in s.constraints]
     if not idx:
         return linear, archived
+    # the bounds are inputs (editing one compiles nothing); which side each is on is not
+    params["idx_b"] = jnp.asarray([c.ge if c.ge is not None else c.le for c in idx], dtype)
 
     @reads_indices
     def with_indices(p, X, aux):
-        cols = [bound(c, aux)[:, None].astype(X.dtype) for c in idx]
+        b = p["idx_b"].astype(X.dtype)
+        cols = [bound(c, b[i], aux)[:, None].astype(X.dtype) for i, c in enumerate(idx)]
         return jnp.concatenate(([linear(p, X)] if lin else []) + cols, -1)
 
     return with_indices, archived
@@ -217,7 +220,7 @@ def problem(s: SerialSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Pro
         from designopt.studies.serial import bodies
 
         params |= (taskindex.targets(s, keys["samples"], dtype) | bodies.base_params(s, mech, dtype)
-                   | taskindex.scene_params(s, dtype))  # fmt: skip
+                   | taskindex.scene_params(s, dtype, mech))  # fmt: skip
     norm_bounds = None
     b = np.asarray([[0.0, 1.0]] * len(weights))  # params["bounds"]: unit rows unless normalised
     if s.objective.get("normalize", False):

@@ -186,20 +186,74 @@ def _seg_point(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
     return float(np.linalg.norm(p - a - t * d))
 
 
+PORT_DESIGNS = 64
+"""Random designs (beside the middle and the corners of the ports' variables) over which
+a port that the design moves is checked before a run."""
+WALL_TOL = 1e-6
+"""A port given as numbers lies on ``task.body_wall`` when within this share of the
+wall's size (its largest semi-axis, or 1 for a plane) of its surface."""
+
+
+def port_designs(s: SerialSettings) -> list[dict[str, float] | None]:
+    """The designs a port check runs over: None (the middle of the box) alone when no
+    port entry names a variable; else the middle, the corners of the box of the
+    variables the ports name (at most 64 of them) and :data:`PORT_DESIGNS` random
+    designs (a fixed seed), the other variables at their middle."""
+    if not s.designed_ports():
+        return [None]
+    names = sorted({v.removeprefix("-") for p in s.ports() if p is not None for v in p
+                    if isinstance(v, str) and v.removeprefix("-") in s.variables})  # fmt: skip
+    mid = {k: (float(lo) + float(hi)) / 2 for k, (lo, hi) in s.variables.items()}
+    lo = np.array([float(s.variables[k][0]) for k in names])
+    hi = np.array([float(s.variables[k][1]) for k in names])
+    corners = np.array(np.meshgrid(*[[0.0, 1.0]] * len(names))).reshape(len(names), -1).T \
+        if len(names) <= 6 else np.zeros((0, len(names)))  # fmt: skip
+    u = np.concatenate([corners, np.random.default_rng(0).uniform(size=(PORT_DESIGNS, len(names)))])
+    return [mid] + [mid | dict(zip(names, (lo + w * (hi - lo)).tolist(), strict=True)) for w in u]
+
+
+def ports_of(s: SerialSettings, k: int, designs: list[dict[str, float] | None]) -> np.ndarray:
+    """Arm ``k``'s port (D, 3) at each design, on ``task.body_wall`` when there is one."""
+    from designopt.studies.serial.settings import port_at
+
+    p = np.asarray([port_at(s, k, d) for d in designs], np.float64)
+    wall = s.task.body_wall  # type: ignore[union-attr]
+    if wall is None:
+        return p
+    import jax.numpy as jnp
+
+    from designopt.kinematics import wall as kw
+
+    dt = jnp.float64 if _x64() else jnp.float32
+    return np.asarray(kw.project(wall.shape, kw.wall_params(wall, dt), jnp.asarray(p, dt)),
+                      np.float64)  # fmt: skip
+
+
+def _x64() -> bool:
+    import jax
+
+    return bool(jax.config.jax_enable_x64)
+
+
 def _check_ports(s: SerialSettings) -> None:
-    """ValueError when a port leaves no target within the insertion range, or sits on
-    an arm's base (inside its base link: within a capsule radius of the base origin
-    under ``links: auto``, inside a <collision> shape's capsule of the URDF's base link
-    under ``links: urdf``, at the origin without collision capsules)."""
+    """ValueError when a port given as numbers lies off ``task.body_wall``, when no
+    design in the box (:func:`port_designs`) has its port leave a target within the
+    insertion range, or when every such design puts the port on an arm's base (inside
+    its base link: within a capsule radius of the base origin under ``links: auto``,
+    inside a <collision> shape's capsule of the URDF's base link under ``links: urdf``,
+    at the origin without collision capsules)."""
     shapes = None
-    for k, port in enumerate(s.ports()):
-        if port is None:
+    designs = port_designs(s)
+    for k, entries in enumerate(s.ports()):
+        if entries is None:
             continue
         arm = None if s.arms is None else s.arms[k]
         where = "task.port" if arm is None or arm.port is None else f"arms.{k}.port"
+        ports = ports_of(s, k, designs)
+        _on_wall(s, entries, ports[0], where)
         ins = getattr(arm, "insertion", None)
         kw = {} if ins is None else {"insertion": ins, "insertion_key": f"arms.{k}.insertion"}
-        tk.check_port(s.task, port=port, where=where, **kw)  # type: ignore[arg-type]
+        tk.check_port(s.task, port=ports, where=where, **kw)  # type: ignore[arg-type]
         xyz = (0.0, 0.0, 0.0) if arm is None else arm.base.xyz
         rpy = (0.0, 0.0, 0.0) if arm is None else arm.base.rpy
         if not all(isinstance(v, float | int) for v in (*xyz, *rpy)):
@@ -208,17 +262,43 @@ def _check_ports(s: SerialSettings) -> None:
             shapes = _base_shapes(s)
         R = rpy_matrix(*(math.radians(float(v)) for v in rpy))
         t = np.asarray(xyz, np.float64)
-        p = np.asarray(port, np.float64)
-        for a, b, r in shapes:
-            d = _seg_point(p, R @ a + t, R @ b + t)
-            if d <= max(r, 1e-9):
-                what = "" if r == 0 or not np.any(a) and not np.any(b) else \
-                    f" (a <collision> shape of its URDF base link, radius {r:.3g})"  # fmt: skip
-                raise ValueError(
-                    f"{where}: the port {list(port)} lies inside the arm's base link{what} "
-                    f"({float(np.linalg.norm(p - t)):.3g} from its base origin); the "
-                    "instrument must enter the body away from the base"
-                )
+        dist = [(np.array([_seg_point(p, R @ a + t, R @ b + t) for p in ports]), a, b, r)
+                for a, b, r in shapes]  # fmt: skip
+        hit = [(d <= max(r, 1e-9), a, b, r) for d, a, b, r in dist]
+        if not np.all(np.any([h for h, *_ in hit], axis=0)):
+            continue  # some design puts the port outside the base
+        _, a, b, r = next(x for x in hit if x[0][0])
+        p = ports[0]
+        what = "" if r == 0 or not np.any(a) and not np.any(b) else \
+            f" (a <collision> shape of its URDF base link, radius {r:.3g})"  # fmt: skip
+        every = " in every design of the box" if len(ports) > 1 else ""
+        raise ValueError(
+            f"{where}: the port {_fmt(p)} lies inside the arm's base link{what}{every} "
+            f"({float(np.linalg.norm(p - t)):.3g} from its base origin); the "
+            "instrument must enter the body away from the base"
+        )
+
+
+def _fmt(p: Any) -> list[float]:
+    return [float(f"{v:.6g}") + 0.0 for v in np.asarray(p, np.float64)]
+
+
+def _on_wall(s: SerialSettings, entries: Any, projected: np.ndarray, where: str) -> None:
+    """ValueError naming ``where`` when a port of numbers lies off ``task.body_wall``
+    (by more than :data:`WALL_TOL` of the wall's size): a port the design moves is
+    projected onto the wall, a port of numbers is taken as given."""
+    wall = s.task.body_wall  # type: ignore[union-attr]
+    if wall is None or any(isinstance(v, str) for v in entries):
+        return
+    p = np.asarray(entries, np.float64)
+    size = max(wall.radii) if wall.shape == "ellipsoid" else 1.0
+    off = float(np.linalg.norm(p - projected))
+    if off > WALL_TOL * size:
+        raise ValueError(
+            f"{where}: the port {_fmt(p)} lies {off:.4g} {length_unit(s)} off task.body_wall "
+            f"(its nearest point on the wall is {_fmt(projected)}); give a point on the "
+            "wall, or design variables (a designed port is projected onto the wall)"
+        )
 
 
 def _num(final: Mapping[str, Any], k: str) -> float | None:
@@ -339,7 +419,7 @@ def warnings(s: SerialSettings, final: Mapping[str, Any]) -> list[str]:
 
 
 def _arm_warnings(s: SerialSettings, final: Mapping[str, Any]) -> list[str]:
-    """Arms on one base; every tuple colliding; ``arms_free`` n/a."""
+    """Arms on one base; every tuple colliding; ``arms_free`` or ``instrument_angle`` n/a."""
     out = []
     bases = _bases(s, _design(s, final))
     if bases is not None:
@@ -362,6 +442,11 @@ def _arm_warnings(s: SerialSettings, final: Mapping[str, Any]) -> list[str]:
         k = _counts(final, "arms_free", "tuples reached by every arm", None)
         out.append(f"arms_free: n/a ({k}; under {_n_min()}): too few to say what share of "
                    "them keeps the arms apart")  # fmt: skip
+    ang = _num(final, "instrument_angle")
+    if ang is not None and math.isnan(ang):
+        k = _counts(final, "instrument_angle", "tuples reached by every arm", None)
+        out.append(f"instrument_angle: n/a ({k}; under {_n_min()}): too few to say at what "
+                   "angle the instruments meet")  # fmt: skip
     zero = "arms_free" if free is not None and free == 0 else \
         "arms_ok" if ok is not None and ok == 0 and (reach_all or 0) > 0 else None  # fmt: skip
     if zero is not None:

@@ -23,9 +23,11 @@ from pydantic import (
     model_validator,
 )
 
+from designopt.core import validation
 from designopt.core.errors import ConfigError
 from designopt.kinematics.collision import Collision
 from designopt.kinematics.task import Task
+from designopt.kinematics.wall import BodyWall
 from designopt.studies.base import Section, StudySettings, check_replicates
 
 ROWS = ("vx", "vy", "vz", "wx", "wy", "wz")
@@ -306,10 +308,44 @@ class TaskIK(Section):
         return self
 
 
-class SerialTask(Task):
-    """``study.task``: the region, the optional tool-axis cone and the IK's settings."""
+Entry = float | str
+"""A number, or the name of a design variable or fixed value."""
 
+
+class SerialTask(Task):
+    """``study.task``: the region, the optional tool-axis cone, the port (numbers, or the
+    names of design variables or fixed values, or minus one), the body wall the ports lie
+    on and the IK's settings."""
+
+    port: tuple[Entry, Entry, Entry] | None = None  # type: ignore[assignment]
+    body_wall: BodyWall | None = None
+    """The wall every port is projected onto (``designopt.kinematics.wall``)."""
+    instrument_angle: tuple[float, float] | None = None
+    """[lo, hi] degrees: the band of the angle between two arms' instruments that
+    ``instrument_ok`` counts (unset by default)."""
     ik: TaskIK = TaskIK()
+
+    @field_validator("instrument_angle")
+    @classmethod
+    def _band(cls, v: tuple[float, float] | None) -> tuple[float, float] | None:
+        if v is not None and not (math.isfinite(v[0]) and math.isfinite(v[1])
+                                  and 0 <= v[0] < v[1] <= 180):  # fmt: skip
+            raise ValueError(f"needs 0 ≤ lo < hi ≤ 180 (degrees), got {list(v)}")
+        return v
+
+    @field_validator("port", mode="before")
+    @classmethod
+    def _port_numbers(cls, v: Any) -> Any:
+        return _number_or_name(v)
+
+    @field_validator("port")
+    @classmethod
+    def _port(cls, v: Any) -> Any:  # (overrides Task._port: names are checked by the study)
+        if v is not None:
+            bad = validation.first_bad([x for x in v if not isinstance(x, str)])
+            if bad is not None:
+                raise ValueError(bad[1])
+        return v
 
 
 class Units(Section):
@@ -319,10 +355,6 @@ class Units(Section):
     length unit). A URDF chain is in metres by the URDF specification."""
 
     length: str | None = Field(None, min_length=1, max_length=16, pattern=r"^[^\s\[\]]+$")
-
-
-Entry = float | str
-"""A number, or the name of a design variable or fixed value."""
 
 
 class ArmBase(Section):
@@ -344,9 +376,14 @@ class Arm(Section):
     ``task.port``, if any)."""
 
     base: ArmBase = ArmBase()
-    port: tuple[float, float, float] | None = None
+    port: tuple[Entry, Entry, Entry] | None = None
+    """This arm's port (numbers, or names of design variables or fixed values, or minus
+    one): placed on ``task.body_wall`` when one is given (docs/planning.md)."""
     insertion: tuple[float, float] | None = None
     """[d0, d1]: this arm's tool depth past its port (else ``task.insertion``)."""
+
+    _port_numbers = field_validator("port", mode="before")(
+        classmethod(lambda cls, v: _number_or_name(v)))
 
     @field_validator("insertion")
     @classmethod
@@ -357,7 +394,7 @@ class Arm(Section):
         return v
 
 
-ARM_INDEX_NAMES = ("reach_all", "arms_ok", "arms_free")
+ARM_INDEX_NAMES = ("reach_all", "arms_ok", "arms_free", "instrument_angle")
 """Indices of a multi-arm study beside ``reach_<k>`` per arm (docs/task.md)."""
 COLLISION_INDEX_NAMES = ("clearance", "collision_free")
 """Indices under ``study.collision`` (docs/task.md)."""
@@ -416,12 +453,7 @@ class SerialSettings(StudySettings):
                         raise ValueError(
                             f"joints.{i}.{e}: '{v}' is used as an angle and as a length"
                         )
-        unused = sorted(set(info.data.get("variables", {})) - set(kinds))
-        if unused:
-            raise ValueError(f"design variable(s) {unused} appear in no DH entry of the chain"
-                             + (" or arm base" if info.data.get("arms") else ""))  # fmt: skip
-        _no_unused_fixed(info, kinds, "DH entry of the chain")
-        return chain
+        return chain  # names no entry uses: ``_unused`` (a port may use them too)
 
     @model_validator(mode="after")
     def _consistent(self) -> SerialSettings:
@@ -436,6 +468,7 @@ class SerialSettings(StudySettings):
         if ind.normalized and ind.norm != "fro":
             raise ValueError("indices.normalized: applies to norm 'fro' only")
         self._check_task()
+        self._unused()
         # (volume is checked below, with its own message)
         names = self.index_names() if ind.measure == "task" else INDEX_NAMES
         obj = self.objective
@@ -510,11 +543,24 @@ class SerialSettings(StudySettings):
                 if a.insertion is not None and self.ports()[k] is None:
                     raise ValueError(f"arms.{k}.insertion: is the tool's depth past a port; "
                                      f"give arms.{k}.port or task.port")  # fmt: skip
+        if self.task is not None and self.task.instrument_angle is not None \
+                and self.arms is None:  # fmt: skip
+            raise ValueError("task.instrument_angle: is the band of the angle between two "
+                             "arms' instruments; give study.arms")  # fmt: skip
+        if self.task is not None and self.task.body_wall is not None \
+                and all(p is None for p in self.ports()):  # fmt: skip
+            raise ValueError("task.body_wall: places the ports on the patient's wall; give "
+                             "task.port" + (" or every arm's port" if self.arms else ""))  # fmt: skip
         if self.task is not None and self.task.insertion is not None \
                 and all(p is None for p in self.ports()):  # fmt: skip
             raise ValueError("task.insertion: is the tool's depth past a port; give "
                              "task.port" + (" or every arm's port" if self.arms else ""))  # fmt: skip
         c = self.collision
+        for i, o in enumerate(c.obstacles if c is not None else []):
+            if getattr(o, "inside", False) and all(p is None for p in self.ports()):
+                raise ValueError(f"collision.obstacles.{i}.inside: an obstacle inside the "
+                                 "patient meets the instrument past its port; give task.port"
+                                 + (" or every arm's port" if self.arms else ""))  # fmt: skip
         if c is not None and isinstance(c.radius, list):
             n = len(self.chain.joints)
             if len(c.radius) != n:
@@ -523,6 +569,43 @@ class SerialSettings(StudySettings):
         if c is not None and c.links == "urdf" and not isinstance(self.chain, UrdfChain):
             raise ValueError("collision.links: 'urdf' takes a URDF chain's <collision> "
                              "shapes; a DH chain uses links: auto with a radius")  # fmt: skip
+
+    def _unused(self) -> None:
+        """The task's port names are variables or fixed values (lengths); a variable or
+        fixed value no entry (the chain's, an arm's base or port, ``task.port``) uses is
+        an error: a typo would otherwise go unnoticed."""
+        known = set(self.variables) | set(self.fixed)
+        used = dict(_chain_kinds(self.chain))
+        for a in self.arms or []:
+            for kind, row in (("length", a.base.xyz), ("angle", a.base.rpy),
+                              ("length", a.port or ())):  # fmt: skip
+                used |= {v.removeprefix("-"): kind for v in row if isinstance(v, str)}
+        for i, v in enumerate(self.task.port or () if self.task is not None else ()):
+            if not isinstance(v, str):
+                continue
+            v = v.removeprefix("-")
+            if v not in known:
+                raise ValueError(f"task.port.{i}: '{v}' is neither a design variable (give it "
+                                 f"bounds under variables) nor a fixed value (variables: "
+                                 f"{sorted(self.variables)}, fixed: {sorted(self.fixed)})")  # fmt: skip
+            if used.setdefault(v, "length") != "length":
+                raise ValueError(f"task.port.{i}: '{v}' is used as an angle and as a length")
+        where = "chain.set entry" if isinstance(self.chain, UrdfChain) else \
+            "DH entry of the chain"  # fmt: skip
+        extra = " or arm base" if self.arms else ""
+        if any(isinstance(v, str) for p in self.ports() if p is not None for v in p):
+            extra += " or port"
+        unused = sorted(set(self.variables) - set(used))
+        if unused:
+            raise ValueError(f"design variable(s) {unused} appear in no {where}{extra}")
+        unused = sorted(set(self.fixed) - set(used))
+        if unused:
+            raise ValueError(f"fixed value(s) {unused} appear in no {where}{extra}; use or "
+                             "remove them")  # fmt: skip
+
+    def designed_ports(self) -> bool:
+        """Whether some port entry names a design variable or fixed value."""
+        return any(isinstance(v, str) for p in self.ports() if p is not None for v in p)
 
     def needs_float64(self) -> str | None:
         if self.indices.measure == "task":
@@ -545,6 +628,8 @@ class SerialSettings(StudySettings):
                 out += COLLISION_INDEX_NAMES
             if self.arms is not None:
                 out += tuple(f"reach_{k}" for k in range(len(self.arms))) + ARM_INDEX_NAMES
+                if self.task.instrument_angle is not None:  # type: ignore[union-attr]
+                    out += ("instrument_ok",)
             return out
         return tuple(k for k in INDEX_NAMES if k != "volume" or self.has_volume())
 
@@ -583,8 +668,9 @@ class SerialSettings(StudySettings):
             return [d]
         return [a.insertion if a.insertion is not None else d for a in self.arms]
 
-    def ports(self) -> list[tuple[float, float, float] | None]:
-        """The port of each arm (one entry without ``arms``): its own, else ``task.port``."""
+    def ports(self) -> list[tuple[Entry, Entry, Entry] | None]:
+        """The port entries of each arm (one entry without ``arms``): its own, else
+        ``task.port`` (numbers, or names of variables or fixed values: :func:`port_at`)."""
         tp = None if self.task is None else self.task.port
         if self.arms is None:
             return [tp]
@@ -596,22 +682,35 @@ def _arm_names(arms: list[Arm] | None, known: set[str], info: ValidationInfo) ->
     that is neither a design variable (with its bounds) nor a fixed value."""
     kinds: dict[str, str] = {}
     for k, arm in enumerate(arms or []):
-        for fld, kind in (("xyz", "length"), ("rpy", "angle")):
-            for i, v in enumerate(getattr(arm.base, fld)):
+        entries = [(f"base.{fld}", kind, getattr(arm.base, fld))
+                   for fld, kind in (("xyz", "length"), ("rpy", "angle"))]  # fmt: skip
+        entries += [("port", "length", arm.port or ())]
+        for fld, kind, row in entries:
+            for i, v in enumerate(row):
                 if not isinstance(v, str):
                     continue
                 v = v.removeprefix("-")  # "-b": minus the variable b
                 if v not in known:
                     raise ValueError(
-                        f"arms.{k}.base.{fld}.{i}: '{v}' is neither a design variable (give "
+                        f"arms.{k}.{fld}.{i}: '{v}' is neither a design variable (give "
                         f"it bounds under variables) nor a fixed value (variables: "
                         f"{sorted(info.data.get('variables', {}))}, fixed: "
                         f"{sorted(info.data.get('fixed', {}))})"
                     )
                 if kinds.setdefault(v, kind) != kind:
-                    raise ValueError(f"arms.{k}.base.{fld}.{i}: '{v}' is used as an angle "
+                    raise ValueError(f"arms.{k}.{fld}.{i}: '{v}' is used as an angle "
                                      "and as a length")  # fmt: skip
     return kinds
+
+
+def _chain_kinds(chain: Chain | UrdfChain) -> dict[str, str]:
+    """{name: angle | length} of the names the chain's entries use."""
+    if isinstance(chain, UrdfChain):
+        return {v: "angle" if k.rsplit(".", 1)[-1] in ("roll", "pitch", "yaw") else "length"
+                for k, v in chain.set.items() if isinstance(v, str)}  # fmt: skip
+    return {getattr(j, e): "angle" if e in ("alpha", "theta") else "length"
+            for j in chain.joints for e in ("a", "alpha", "d", "theta")
+            if isinstance(getattr(j, e), str)}  # fmt: skip
 
 
 def _urdf_names(chain: UrdfChain, info: ValidationInfo, known: set[str],
@@ -631,20 +730,33 @@ def _urdf_names(chain: UrdfChain, info: ValidationInfo, known: set[str],
         kind = "angle" if key.rsplit(".", 1)[-1] in ("roll", "pitch", "yaw") else "length"
         if kinds.setdefault(v, kind) != kind:
             raise ValueError(f"set.{key}: '{v}' is used as an angle and as a length")
-    unused = sorted(set(info.data.get("variables", {})) - set(kinds))
-    if unused:
-        raise ValueError(f"design variable(s) {unused} appear in no chain.set entry"
-                         + (" or arm base" if info.data.get("arms") else ""))  # fmt: skip
-    _no_unused_fixed(info, kinds, "chain.set entry")
-    return chain
+    return chain  # names no entry uses: SerialSettings._unused (a port may use them too)
 
 
-def _no_unused_fixed(info: ValidationInfo, used: dict[str, str], where: str) -> None:
-    """A ``fixed`` value no entry uses is an error, like an unused design variable (a
-    typo would otherwise go unnoticed)."""
-    unused = sorted(set(info.data.get("fixed", {})) - set(used))
-    if unused:
-        raise ValueError(f"fixed value(s) {unused} appear in no {where}; use or remove them")
+
+
+def entry_value(s: SerialSettings, v: Entry, design: Any = None) -> float:
+    """One base or port entry's number: a number, a fixed value, or a design variable's
+    value in ``design`` (a mapping of the variables, config units; None: the middle of
+    each variable's box), or minus one of these ("-b")."""
+    if not isinstance(v, str):
+        return float(v)
+    name = v.removeprefix("-")
+    if name in s.fixed:
+        x = float(s.fixed[name])
+    elif design is not None:
+        x = float(design[name])
+    else:
+        lo, hi = s.variables[name]
+        x = (float(lo) + float(hi)) / 2
+    return -x if v.startswith("-") else x
+
+
+def port_at(s: SerialSettings, k: int = 0, design: Any = None) -> tuple[float, float, float] | None:
+    """Arm ``k``'s port entries as numbers for ``design`` (:func:`entry_value`), before
+    any projection onto ``task.body_wall``; None without a port."""
+    p = s.ports()[k]
+    return None if p is None else tuple(entry_value(s, v, design) for v in p)  # type: ignore[return-value]
 
 
 def length_unit(s: SerialSettings) -> str:
@@ -679,5 +791,6 @@ def units(s: SerialSettings) -> dict[str, str]:
         out |= {"reach": "-", "gci": "-", "gci_q05": "-", "manipulability": man,
                 "joint_margin": "-"}  # fmt: skip
         out |= {"clearance": u, "collision_free": "-"} if s.collision is not None else {}
+        out |= {"instrument_angle": "deg", "instrument_ok": "-"} if s.arms is not None else {}
         return out | {k: "-" for k in s.index_names() if k.startswith(("reach_", "arms_"))}
     return out | {"gci": "-", "gcsei": "-", "manipulability": man, "volume": vol}

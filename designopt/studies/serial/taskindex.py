@@ -51,26 +51,40 @@ def estimates_of(s: SerialSettings, mech: Mechanism, per: dict[str, jax.Array],
     if g is None:
         return estimates(per)
     key = jax.random.fold_in(params["sample_key"], 2)  # the arms' target tuples
-    return estimates(per, key, g.radii, g.margin)
+    sc_p = params if "scene_insertion" in params else scene_params(s, per["success"].dtype, mech)
+    gp = sc_p["scene_geometry"]
+    return estimates(per, key, gp["radii"], gp["margin"], sc_p.get("scene_band"))
 
 
-def scene_params(s: SerialSettings, dtype: Any) -> dict[str, Any]:
+def scene_params(s: SerialSettings, dtype: Any, mech: Mechanism | None = None) -> dict[str, Any]:
     """The scene's numbers as ``params`` entries, so that one compiled program serves any
     values of them (only their counts shape it): ``scene_obstacles`` (the collision
     obstacles grouped by shape, ``collision.obstacle_params``; empty groups without
     ``collision``), ``scene_insertion`` (A or 1, 2) each arm's insertion range [d0, d1]
-    (d1 = ∞ without one) and, for one arm with a port, ``scene_port`` (1, 3). (The arms'
-    bases and ports are ``bodies.base_params``'s, the targets :func:`targets`'.) Made on
-    the host."""
+    (d1 = ∞ without one) and, with ports, ``scene_port`` and ``scene_wall``
+    (``bodies.port_params``: a port's entries may be design variables), ``scene_inside``
+    (the obstacles marked ``inside``), ``scene_band`` (``task.instrument_angle``) and
+    ``scene_geometry`` (the capsules' radii, the margin: ``bodies.geometry_params``;
+    ``mech``: the chain, else built here). (The arms' bases are
+    ``bodies.base_params``'s, the targets :func:`targets`'.) Made on the host."""
     from designopt.kinematics.collision import obstacle_params
+    from designopt.studies.serial import bodies
 
     obst = [] if s.collision is None else s.collision.obstacles
-    out = {"scene_obstacles": obstacle_params(obst, dtype),
+    outer = [o for o in obst if not getattr(o, "inside", False)]
+    inner = [o for o in obst if getattr(o, "inside", False)]
+    out = {"scene_obstacles": obstacle_params(outer, dtype),
            "scene_insertion": jnp.asarray(np.asarray(s.insertions(), np.float64), dtype)}  # fmt: skip
-    port = s.ports()[0]
-    if s.arms is None and port is not None:
-        out["scene_port"] = jnp.asarray(np.asarray([port], np.float64), dtype)
-    return out
+    if inner:  # the anatomy: checked against the instrument beyond the port plane
+        out["scene_inside"] = obstacle_params(inner, dtype)
+    band = None if s.task is None else s.task.instrument_angle
+    if band is not None and s.arms is not None:  # [lo, hi] in degrees
+        out["scene_band"] = jnp.asarray(np.asarray(band, np.float64), dtype)
+    if s.collision is not None:
+        from designopt.studies.serial.mechanism import build
+
+        out |= bodies.geometry_params(bodies.geometry(s, mech or build(s)), dtype)
+    return out | bodies.port_params(s, dtype)
 
 
 def counts_of(s: SerialSettings, mech: Mechanism, per: dict[str, jax.Array],
@@ -114,10 +128,12 @@ def chunk(s: SerialSettings) -> int:
 
 def targets(s: SerialSettings, key: jax.Array, dtype: Any) -> dict[str, jax.Array]:
     """The task's targets as ``params`` entries: ``target_p`` (N, 3) and, with a tool
-    axis, ``target_R`` (N, 3, 3) (its last column is the sampled tool axis)."""
+    axis, ``target_R`` (N, 3, 3) (its last column is the sampled tool axis). (With a
+    port, each design's tool frames come from its own port, in :func:`per_target`.)"""
     from designopt.kinematics import task as tk
 
-    p, R = tk.targets(s.task, key, n_targets(s), dtype)  # type: ignore[arg-type]
+    task = s.task.model_copy(update={"port": None})  # type: ignore[union-attr]  # (per_target's)
+    p, R = tk.targets(task, key, n_targets(s), dtype)
     return {"target_p": p} | ({} if R is None else {"target_R": R})
 
 
@@ -149,18 +165,23 @@ def per_target(mech: Mechanism, s: SerialSettings, params: dict[str, Any], full:
     arms = s.arms is not None
     A = len(s.arms) if arms else 1
     # the scene's numbers are inputs (:func:`scene_params`): editing them compiles nothing
-    sc_p = params if "scene_insertion" in params else scene_params(s, dtype)
+    sc_p = params if "scene_insertion" in params else scene_params(s, dtype, mech)
+    gp = sc_p.get("scene_geometry")
     obst = None if geo is None else jax.tree_util.tree_map(lambda a: a.astype(dtype),
                                                              sc_p["scene_obstacles"])  # fmt: skip
+    inner = None if geo is None or "scene_inside" not in sc_p else \
+        jax.tree_util.tree_map(lambda a: a.astype(dtype), sc_p["scene_inside"])  # fmt: skip
     has_port = s.ports()[0] is not None
     ins = sc_p["scene_insertion"].astype(dtype)  # (A or 1, 2): each arm's [d0, d1]
-    d0, d1 = ins[:, :1], ins[:, 1:]
+    d0, d1 = ins[:, :1, None], ins[:, 1:, None]  # (A or 1, 1, 1)
+    wall = None if s.task.body_wall is None else s.task.body_wall.shape  # type: ignore[union-attr]
+    # each arm's port for each design (A or 1, M, 3): its entries may be design variables
+    port = bodies.port_points(sc_p, full.astype(dtype), wall) if has_port else None
+    moved = s.designed_ports()  # the design moves a port (static: it shapes the IK's batch)
     if arms:
         Rb, tb = bodies.base_frames(params, full)  # (A, M, 3, 3), (A, M, 3)
-        port = params["arm_port"].astype(dtype) if has_port else None  # (A, 3)
         X = jnp.tile(full, (A, 1))  # (A·M, P), arm-major
     else:
-        port = sc_p["scene_port"].astype(dtype) if has_port else None  # (1, 3)
         X = full
 
     def padded(a):
@@ -178,24 +199,30 @@ def per_target(mech: Mechanism, s: SerialSettings, params: dict[str, Any], full:
         if arms:  # arm a's capsules in the world frame
             seg = jnp.einsum("bij,blej->blei", Rb[a, m % M], seg) + tb[a, m % M][:, None, None]
         if port is None:
-            return bodies.obstacle_and_self(geo, obst, seg, None, None), seg  # type: ignore[arg-type]
-        pa = port[a if arms else jnp.zeros_like(a)]
+            return bodies.obstacle_and_self(geo, obst, seg, None, None, None, gp), seg  # type: ignore[arg-type]
+        pa = port[a, m % M]  # (B, 3)
         z = pt - pa
         z = z / jnp.maximum(jnp.linalg.norm(z, axis=-1, keepdims=True), 1e-300)
-        return bodies.obstacle_and_self(geo, obst, seg, pa, z), seg  # type: ignore[arg-type]
+        return bodies.obstacle_and_self(geo, obst, seg, pa, z, inner, gp), seg  # type: ignore[arg-type]
 
     def one_chunk(args):
         pt, Rt = args
+        # with a port, the tool axes point from the port to the targets: (A|1, M|1, C, 3, 3)
+        # (a port no design variable moves is every design's: one set of frames)
+        Rw = None if port is None else \
+            port_frames(pt[None, None], (port if moved else port[:, :1])[:, :, None, :])  # fmt: skip
         if arms:  # each arm's targets in its own base frame, (A·M, C, ...)
             pl = jnp.einsum("amji,amcj->amci", Rb, pt[None, None] - tb[:, :, None, :])
             p_ik = pl.reshape(A * M, C, 3)
-            if port is not None:
-                Rw = port_frames(pt[None], port[:, None, :])  # (A, C, 3, 3)
-                R_ik = jnp.einsum("amji,acjk->amcik", Rb, Rw).reshape(A * M, C, 3, 3)
-            else:
-                R_ik = None
-        else:
+            R_ik = None if Rw is None else jnp.einsum(
+                "amji,amcjk->amcik", Rb, jnp.broadcast_to(Rw, (A, M, C, 3, 3))
+            ).reshape(A * M, C, 3, 3)  # fmt: skip
+        elif Rw is None:
             p_ik, R_ik = pt, Rt
+        elif moved:  # each design's own targets' frames: (M, C, ...)
+            p_ik, R_ik = jnp.broadcast_to(pt, (M, C, 3)), Rw[0]
+        else:
+            p_ik, R_ik = pt, Rw[0, 0]
 
         def jac(q):  # the study's Jacobian block (A·M, C, rows, n) at joints q (A·M, C, n)
             return jax.vmap(lambda x, q: mech.model.jacobian(x, q, rows=rows))(X, q)
@@ -207,17 +234,16 @@ def per_target(mech: Mechanism, s: SerialSettings, params: dict[str, Any], full:
         if geo is not None:
 
             def accept(m, t, q):
-                return clearance(m, pt[t], q)[0] >= geo.margin  # type: ignore[union-attr]
+                return clearance(m, pt[t], q)[0] >= gp["margin"].astype(dtype)  # type: ignore[index]
 
         res = ik.solve(mech.model, X, p_ik, R_ik, lo, hi, key, md, opts, score, accept)
         J = jac(res.q)
         inv_k, man = inv_cond(J * sc[:, None], ind.norm, ind.normalized, with_volume=True)
         ok, conv = res.success, res.converged
-        if port is not None:  # the insertion depth |target − port| of each arm
-            depth = jnp.linalg.norm(pt[None] - port[:, None, :], axis=-1)  # (A or 1, C)
+        if port is not None:  # the insertion depth |target − port| of each arm and design
+            depth = jnp.linalg.norm(pt[None, None] - port[:, :, None, :], axis=-1)  # (A|1, M, C)
             # each arm's own insertion range
-            inside = (depth >= d0) & (depth <= d1) & (depth > 0)
-            inside = jnp.repeat(inside, M, 0) if arms else inside
+            inside = ((depth >= d0) & (depth <= d1) & (depth > 0)).reshape(ok.shape)
             ok, conv = ok & inside, conv & inside
         margin = jnp.min(jnp.minimum(res.q - lo, hi - res.q) / half, -1)
         z = jnp.zeros_like(inv_k)
@@ -232,6 +258,10 @@ def per_target(mech: Mechanism, s: SerialSettings, params: dict[str, Any], full:
             out["clearance"] = jnp.where(ok, c.reshape(ok.shape), z)
             if arms:
                 out["segments"] = seg.reshape(*ok.shape, *seg.shape[1:])
+        if arms:  # each arm's tool axis in the world (the tip frame's z): instrument_angle
+            Rt_ = jax.vmap(lambda x, q: mech.model.fk(x, q)[0])(X, res.q)  # (A·M, C, 3, 3)
+            zt = jnp.einsum("amij,amcj->amci", Rb, Rt_[..., 2].reshape(A, M, C, 3))
+            out["axis"] = zt.reshape(A * M, C, 3)
         return out
 
     out = jax.lax.map(one_chunk, (pc, Rc))  # each (n_chunks, A·M, C, ...)
@@ -271,10 +301,10 @@ N_MIN = 30
 """A ratio estimator whose denominator counts fewer items (tuples every arm reaches,
 converged targets) is not reported: its value and SE are NaN (printed ``n/a``), and a
 search ranks it worst (``NA_WORST``)."""
-RATIOS = ("collision_free", "arms_free")
+RATIOS = ("collision_free", "arms_free", "instrument_angle")
 """The ratio estimators among the indices: each archived with ``<name>_n``, its
 denominator's count, and ``<name>_of``, the count it is out of."""
-NA_WORST = {k: (0.0, 1.0) for k in RATIOS}
+NA_WORST = {k: (0.0, 180.0 if k == "instrument_angle" else 1.0) for k in RATIOS}
 """The range of each index that can be n/a: a search puts an n/a value at the end of it
 that its sense ranks worst (0 when maximised, 1 when minimised)."""
 
@@ -307,7 +337,33 @@ def counts(per: dict[str, jax.Array], key: jax.Array | None = None
         out["collision_free"] = (jnp.sum(per["converged"], (0, 2)), A * N)
     if A > 1 and key is not None and "segments" in per:
         out["arms_free"] = (jnp.sum(_tuples(per, key)[0], -1), N)
+        if "axis" in per:
+            out["instrument_angle"] = out["arms_free"]
     return out
+
+
+def ratio_mean(y: jax.Array, x: jax.Array, n_min: int = N_MIN) -> tuple[jax.Array, jax.Array]:
+    """The mean of ``y`` over the items where the 0/1 ``x`` is 1, along the last axis
+    (the ratio estimator Σ x y / Σ x), with its delta-method SE
+    √(Σ x² (y − r)² / (N (N − 1))) / x̄; NaN and NaN where Σx < ``n_min``."""
+    N = y.shape[-1]
+    sx = jnp.sum(x, -1)
+    ok = sx >= max(n_min, 1)
+    r = jnp.where(ok, jnp.sum(x * y, -1) / jnp.where(ok, sx, 1.0), 0.0)
+    res = x * (y - r[..., None])
+    se = jnp.sqrt(jnp.sum(res * res, -1) / (N * (N - 1))) / jnp.where(ok, sx / N, 1.0)
+    return jnp.where(ok, r, jnp.nan), jnp.where(ok, se, jnp.nan)
+
+
+def instrument_angles(per: dict[str, jax.Array], key: jax.Array) -> jax.Array:
+    """The angle (degrees, (M, N)) between arm 0's and arm 1's tool axes (``per["axis"]``,
+    world frame) at each target tuple of :func:`_tuples` (the triangulation of the two
+    instruments)."""
+    A, M, N = per["success"].shape
+    perm = jax.random.permutation(jax.random.fold_in(key, 1), N)
+    a, b = per["axis"][0], per["axis"][1][:, perm]
+    c = jnp.clip(jnp.sum(a * b, -1), -1.0, 1.0)
+    return jnp.degrees(jnp.arccos(c))
 
 
 def _tuples(per: dict[str, jax.Array], key: jax.Array) -> tuple[jax.Array, list[jax.Array]]:
@@ -323,7 +379,7 @@ def _tuples(per: dict[str, jax.Array], key: jax.Array) -> tuple[jax.Array, list[
 
 
 def estimates(per: dict[str, jax.Array], key: jax.Array | None = None,
-              radii: tuple[float, ...] = (), margin: float = 0.0,
+              radii: tuple[float, ...] = (), margin: float = 0.0, band: Any = None,
               ) -> dict[str, tuple[jax.Array, jax.Array]]:  # fmt: skip
     """(value, SE) (M,) of every task index from the per-target values (A, M, N).
 
@@ -339,7 +395,12 @@ def estimates(per: dict[str, jax.Array], key: jax.Array | None = None,
     every arm reaches and whose arms keep that margin (Agresti–Coull SE): what a front or
     an objective should trade, since a ratio's denominator is the optimiser's to shrink.
     ``collision_free``: of the converged targets, the share whose solution is also free
-    of collisions (n/a under :data:`N_MIN` converged targets)."""
+    of collisions (n/a under :data:`N_MIN` converged targets). With the tool axes
+    (``per["axis"]``): ``instrument_angle``, the mean angle (degrees) between arm 0's
+    and arm 1's tool axes over the tuples every arm reaches (:func:`ratio_mean`, n/a
+    under :data:`N_MIN` such tuples), and with ``band`` = [lo, hi] (degrees, an array)
+    ``instrument_ok``: the unconditional share of the tuples that every arm reaches free
+    of the others whose angle lies in the band."""
     A, M, N = per["success"].shape
     out = {}
     for k in MEANS + (("clearance",) if "clearance" in per else ()):
@@ -371,6 +432,12 @@ def estimates(per: dict[str, jax.Array], key: jax.Array | None = None,
         free = (gap >= margin).astype(ok.dtype)  # type: ignore[operator]
         out["arms_ok"] = _share(ok * free)
         out["arms_free"] = ratio(ok * free, ok)
+        if "axis" in per:
+            ang = instrument_angles(per, key)
+            out["instrument_angle"] = ratio_mean(ang, ok)
+            if band is not None:
+                lo, hi = band[0].astype(ang.dtype), band[1].astype(ang.dtype)
+                out["instrument_ok"] = _share(ok * free * ((ang >= lo) & (ang <= hi)))
     return out
 
 
@@ -395,18 +462,26 @@ def structure_key(s: SerialSettings) -> str:
         reg = s.task.region  # type: ignore[union-attr]
         task["region"] = (f"points:{len(reg.xyz())}" if isinstance(reg, Points)
                           else str(task["region"].get("shape")))  # fmt: skip
-        task["port"] = task.get("port") is not None
+        task["port"] = _entry_names(task.get("port"))
         task["insertion"] = task.get("insertion") is not None
+        if task.get("body_wall") is not None:
+            task["body_wall"] = task["body_wall"].get("shape")
     col = d.get("collision")
     if col is not None:
-        shapes = [str(o.get("shape")) for o in col.get("obstacles", [])]
+        shapes = [("inside " if o.get("inside") else "") + str(o.get("shape"))
+                  for o in col.get("obstacles", [])]  # fmt: skip
         col["obstacles"] = {k: shapes.count(k) for k in sorted(set(shapes))}
     for a in d.get("arms") or []:
-        a["port"] = a.get("port") is not None
+        a["port"] = _entry_names(a.get("port"))
         a["insertion"] = a.get("insertion") is not None
         for f in ("xyz", "rpy"):
             a["base"][f] = [v if isinstance(v, str) else "#" for v in a["base"][f]]
     return json.dumps(d, sort_keys=True)
+
+
+def _entry_names(row: Any) -> Any:
+    """A port's entries with the numbers left out (False: no port)."""
+    return False if row is None else [v if isinstance(v, str) else "#" for v in row]
 
 
 _SOLVERS: dict[tuple[str, str], tuple[Mechanism, Any]] = {}
@@ -456,7 +531,7 @@ def solution(s: SerialSettings, x: Any, keys: Any,
          "sample_key": keys["samples"]} | targets(s, keys["samples"], dtype)  # fmt: skip
     from designopt.studies.serial import bodies
 
-    p |= bodies.base_params(s, mech, dtype) | scene_params(s, dtype)
+    p |= bodies.base_params(s, mech, dtype) | scene_params(s, dtype, mech)
     xv = np.asarray([x[k] for k in s.variables] if hasattr(x, "keys") else x, np.float64)
     full = np.concatenate([xv.astype(dt), np.asarray(mech.fixed, dt)]) * np.asarray(mech.scale, dt)
     out = {k: np.asarray(v) for k, v in run(p, jnp.asarray(full[None])).items()}
