@@ -219,6 +219,18 @@ SCENARIOS: list[tuple] = [
      ("designopt sweep CONFIG [--out PATH]", "sweep configs/sweep_ptpso.yaml --out results/s.h5")),
     ("designopt bench configs/mo_benchmark.yaml",),
     ("designopt bench configs/pso_benchmark.yaml",),
+    # the spherical RCM and the Raven II arm (docs/sphere.md, configs/sphere_rcm.yaml,
+    # configs/raven2.yaml)
+    ("designopt run configs/sphere_rcm.yaml",),
+    ("designopt eval configs/sphere_rcm.yaml --design alpha12=75 --design alpha23=52",),
+    ("designopt scan configs/sphere_rcm.yaml",),
+    ("designopt run configs/sphere_rcm.yaml --set study.cone.axis_angle_deg=75 --set "
+     "study.objective.arc_length=0.5 --set study.constraints.reach_all_deg=30 --out "
+     "results/sphere_rcm/hybrid.h5",),
+    ("designopt run configs/raven2.yaml",),
+    ("designopt eval configs/raven2.yaml --design La12=75 --design La23=52",),
+    ("designopt chain configs/raven2.yaml --q 30,90,0.4,0,0,0",),
+    ("designopt scan configs/raven2.yaml",),
 ]  # fmt: skip
 
 # Every documented command runs by default (CI, the README's test command). With
@@ -278,6 +290,11 @@ SMALL: dict[str, dict] = {
     "rcm_eta_axis": {"study": {"eta": {"n_samples": 1024}},
                      "scan": {"vary": {"c": {"num": 3}}, "batch": 3}},
     "rcm_teleop": {},
+    "raven2": {"study": {"indices": {"n_samples": 256, "replicates": 2}}, "optimizer": OPT,
+               "scan": {"vary": {"La12": {"num": 2}, "La23": {"num": 2}}}},
+    "sphere_rcm": {"study": {"index": {"n_samples": 256, "replicates": 2}}, "optimizer": OPT,
+                   "scan": {"vary": {"alpha12": {"num": 3}, "alpha23": {"num": 3}},
+                            "batch": 9}},
     "sweep_ptpso": {"study": {"indices": {"n_samples": 1024}, "n_norm": 8}, "optimizer": OPT,
                     "sweep": {"vary": {"optimizer.gamma": [1.0e-7, 1.0e-4],
                                        "optimizer.rho_c": [0.5]}}},
