@@ -327,9 +327,10 @@ def _changed(s: Any, design: dict[str, float]) -> bool:
         abs(a - b) > 1e-12 * max(1.0, abs(b)) for _, a, b, _ in drawing.changes(s, design))
 
 
-def _task_around(s: Any) -> dict[str, Any]:
+def _task_around(s: Any, design: Any = None) -> dict[str, Any]:
     """What the view draws around the robot: the task region, the tool-axis cone, the
-    obstacles and the ports, as ``figures.robot.Scene`` keywords."""
+    obstacles and the ports (of ``design``: ports may be design variables), as
+    ``figures.robot.Scene`` keywords."""
     from designopt.figures import robot
     from designopt.studies.serial import drawing
 
@@ -338,7 +339,7 @@ def _task_around(s: Any) -> dict[str, Any]:
     if region is not None:
         rp = robot.scene_points(robot.Scene(arms=[], region=region))
         cone = drawing.cone(s, rp, 0.4 * float(np.ptp(rp, 0).max()) if len(rp) > 1 else 0.1)
-    return {"region": region, "cone": cone, **drawing.obstacles_and_ports(s)}
+    return {"region": region, "cone": cone, **drawing.obstacles_and_ports(s, design)}
 
 
 def cmd_view(args: argparse.Namespace, ctx: Any) -> int:
@@ -372,7 +373,7 @@ def cmd_view(args: argparse.Namespace, ctx: Any) -> int:
         if p is not None:
             writer.check(p, overwrite=True)
     x = np.asarray([design[k] for k in s.variables], np.float64)
-    around = _task_around(s)
+    around = _task_around(s, design)
     mine = drawing.study_arms(s, mech, x, q, label="this design", color="#ff7f0e")
     scenes = [robot.Scene(arms=mine, title="this design", **around)]
     if _changed(s, design):

@@ -71,12 +71,20 @@ def full(mech: Mechanism, x: Any) -> np.ndarray:
     return np.concatenate([x, fixed], -1) * mech.scale
 
 
-def obstacles_and_ports(s: SerialSettings) -> dict[str, Any]:
+def obstacles_and_ports(s: SerialSettings, design: Any = None) -> dict[str, Any]:
     """A scene's ``obstacles`` (``study.collision``) and ``ports`` (each arm's, or
-    ``task.port``) as :class:`Scene` keywords."""
+    ``task.port``) as :class:`Scene` keywords. ``design``: the variables (a mapping, or a
+    sequence in ``s.variables`` order; None: the middle of the box) that place a port
+    named by design variables (on ``task.body_wall`` when there is one)."""
+    from designopt.studies.serial.reach import ports_of
+
     obs = list(s.collision.obstacles) if s.collision is not None else []
-    ports = [np.asarray(p, np.float64) for p in dict.fromkeys(
-        tuple(p) for p in s.ports() if p is not None)] if s.task is not None else []  # fmt: skip
+    if s.task is None or s.ports()[0] is None:
+        return {"obstacles": obs, "ports": []}
+    if design is not None and not hasattr(design, "keys"):
+        design = dict(zip(s.variables, np.asarray(design, np.float64).tolist(), strict=True))
+    ports = [ports_of(s, k, [design])[0] for k in range(len(s.ports()))]
+    ports = [np.asarray(p) for p in dict.fromkeys(tuple(p.tolist()) for p in ports)]
     return {"obstacles": obs, "ports": ports}
 
 
@@ -467,7 +475,7 @@ def task_scene(s: SerialSettings, mech: Mechanism, x: Any, sol: Mapping[str, np.
     return Scene(arms=out, region=s.task.region if s.task is not None else None,
                  cone=cone(s, p, size),
                  targets=Targets(p, ik, np.asarray(sol["success"], bool), "1/k"),
-                 marks=[(p[i], cols[n]) for n, i in reps], **obstacles_and_ports(s))  # fmt: skip
+                 marks=[(p[i], cols[n]) for n, i in reps], **obstacles_and_ports(s, x))  # fmt: skip
 
 
 def arms_scene(s: SerialSettings, mech: Mechanism, x: Any, sol: Mapping[str, np.ndarray],
@@ -481,7 +489,7 @@ def arms_scene(s: SerialSettings, mech: Mechanism, x: Any, sol: Mapping[str, np.
     arms_, pairs, title = ([], [], "") if not tup else (tup[0][1], tup[0][2], tup[0][0])
     return Scene(arms=arms_, title=title, region=s.task.region if s.task is not None else None,
                  targets=Targets(p, c["inv_k"], c["success"], "1/k"), collisions=pairs,
-                 **obstacles_and_ports(s))  # fmt: skip
+                 **obstacles_and_ports(s, x))  # fmt: skip
 
 
 def hover(s: SerialSettings, label: str, q: np.ndarray, inv_k: float | None = None) -> str:

@@ -187,7 +187,8 @@ def _workspace(p: np.ndarray, c: np.ndarray, s: SerialSettings, folder: Path,
             home_txt = (f"\n(each of the {len(arm)} arms at its base) and the arms at their "
                         "home pose\n(each joint at 0 where its limits allow, else mid-range)")  # fmt: skip
     planar = np.ptp(p[:, 2]) <= 1e-9 * max(np.ptp(p[:, :2]), 1e-300)
-    scene = robot.Scene(arms=arm, region=region, **drawing.obstacles_and_ports(s),
+    design = None if rec is None else dict(rec.x)
+    scene = robot.Scene(arms=arm, region=region, **drawing.obstacles_and_ports(s, design),
                         targets=robot.Targets(p, c, np.ones(len(p), bool), size=1.5, alpha=1.0))  # fmt: skip
     if planar:
         ax = fig.add_subplot(1, 1, 1)
@@ -240,7 +241,7 @@ def draw_robot(rec: RunRecord, folder: Path) -> list[Path]:
     orig = drawing.original_arms(s, mech, x, q)  # every arm at its base in the world
     final = drawing.study_arms(s, mech, x, q, label="final design", color="#ff7f0e")
     note = drawing.meshes_note(s, design, q)
-    around = drawing.obstacles_and_ports(s)  # the patient and the port, where configured
+    around = drawing.obstacles_and_ports(s, design)  # the patient and the port, where configured
     scenes = [robot.Scene(arms=orig, region=region, title="original: the URDF's own numbers",
                           **around),
               robot.Scene(arms=final, region=region, title="final design", **around)]  # fmt: skip
@@ -266,14 +267,14 @@ def draw_front_robots(rec: Any, picks: Sequence[tuple[str, int]], folder: Path) 
         return []
     mech = build(s)
     objs, cols, _ = front_columns(rec)
-    around = {"region": s.task.region if s.task is not None else None,
-              **drawing.obstacles_and_ports(s)}  # fmt: skip
+    region = s.task.region if s.task is not None else None
     scenes, lines = [], []
     for (name, i), col in zip(picks, ("#2ca02c", "#ff7f0e", "#9467bd"), strict=False):
         label, Q, tg = drawing.design_pose(s, mech, rec.X[i], rec.keys())
         arms = drawing.study_arms(s, mech, rec.X[i], Q, color=col,  # several: "arm k"
                                   label=f"design {i}" if s.arms is None else "")  # fmt: skip
         val = ", ".join(f"{k} = {c[i]:.4g}" for (k, _), c in zip(objs, cols, strict=True))
+        around = {"region": region, **drawing.obstacles_and_ports(s, rec.X[i])}  # its ports
         scenes.append(robot.Scene(arms=arms, title=f"{name}: design {i}\n{val}",
                                   marks=[(p, "#d62728") for p in tg], **around))  # fmt: skip
         d = dict(zip(s.variables, rec.X[i], strict=True))

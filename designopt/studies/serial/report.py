@@ -62,7 +62,7 @@ def run_view(rec: Any):
     u = length_unit(s)
     q0 = home(mech)
     scene = Scene(arms=[], region=s.task.region if s.task is not None else None,
-                  **obstacles_and_ports(s))  # fmt: skip
+                  **obstacles_and_ports(s, x))  # fmt: skip
     if s.arms is not None:  # every arm at tuples of targets: the tightest, median, loosest
         from designopt.figures.html.robot import Pose
         from designopt.studies.serial.drawing import arm_tuples, arms_scene
@@ -148,7 +148,14 @@ def front_view(rec: Any):
     return FrontView(title=f"Pareto front ({n} designs)", unit=length_unit(s), x=cols[0],
                      y=cols[1], xlabel=labels[0], ylabel=labels[1], robots=robots, hover=hov,
                      reference=ref, region=s.task.region if s.task is not None else None,
-                     note=note + (f"; {mn}" if mn else ""), **obstacles_and_ports(s))  # fmt: skip
+                     note=note + (f"; {mn}" if mn else ""), **_front_scene(s))  # fmt: skip
+
+
+def _front_scene(s: SerialSettings) -> dict[str, Any]:
+    """The obstacles and ports a front's view draws: ports that the design moves differ
+    from design to design, so none is drawn then (each robot's own figure has them)."""
+    around = obstacles_and_ports(s)
+    return around | {"ports": []} if s.designed_ports() else around
 
 
 def report(rec: Any) -> dict[str, Any] | None:
