@@ -1,6 +1,7 @@
 """Collision geometry: batched, differentiable signed distances between the capsules of an
-arm's links, the world's obstacles (balls, capsules, axis-aligned boxes, half-spaces) and
-the links of another arm, and the ``study.collision`` config section that describes them.
+arm's links, the world's obstacles (balls, capsules, axis-aligned boxes, half-spaces,
+closed meshes) and the links of another arm, and the ``study.collision`` config section
+that describes them.
 
 Conventions
 -----------
@@ -29,6 +30,9 @@ Conventions
   n = 35 in float32 (≤ 2.4e-8·|a1 − a0|, below float32's resolution). The search runs on
   values only; the gradient is the SDF's partial gradient at the minimiser found (the
   envelope theorem), so no derivative goes through the loop.
+* Capsule–mesh: the mesh's SDF is sampled once on a grid on the host and interpolated
+  trilinearly; the capsule's distance is the least over samples of its centre line
+  (:mod:`designopt.kinematics.sdf`, which states and tests the error bound).
 
 :func:`clearance` combines these into one number per sample: the least signed distance
 of an arm's link capsules to every obstacle and between its non-adjacent links, less the
@@ -39,6 +43,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Annotated, Any, Literal, Union
 
 import jax
@@ -54,11 +59,13 @@ from pydantic import (
     StrictBool,
     Tag,
     TypeAdapter,
+    ValidationInfo,
     field_validator,
     model_validator,
 )
 
 from designopt.core.settings import Section
+from designopt.kinematics import sdf
 
 MAX_LENGTH = 1e6
 """The largest magnitude of a coordinate, radius, size or margin of the collision section
@@ -99,7 +106,14 @@ Length = Annotated[float, AfterValidator(_positive)]
 Point = tuple[Coord, Coord, Coord]
 
 
-class BallObstacle(Section):
+class _Obstacle(Section):
+    """What every obstacle has: ``inside`` marks anatomy inside the patient, checked
+    against the instrument past its port instead of the arm outside (docs/planning.md)."""
+
+    inside: StrictBool = False
+
+
+class BallObstacle(_Obstacle):
     """A solid ball."""
 
     shape: Literal["ball"]
@@ -107,7 +121,7 @@ class BallObstacle(Section):
     radius: Length
 
 
-class CapsuleObstacle(Section):
+class CapsuleObstacle(_Obstacle):
     """A solid capsule: the points within ``radius`` of the segment ``a``–``b`` (e.g. a
     bar, another instrument, an assistant's arm); ``a == b`` makes it a ball."""
 
@@ -117,7 +131,7 @@ class CapsuleObstacle(Section):
     radius: Length
 
 
-class BoxObstacle(Section):
+class BoxObstacle(_Obstacle):
     """A solid axis-aligned box of edge lengths ``size`` (each > 0) about ``center``."""
 
     shape: Literal["box"]
@@ -125,7 +139,7 @@ class BoxObstacle(Section):
     size: tuple[Length, Length, Length]
 
 
-class HalfSpace(Section):
+class HalfSpace(_Obstacle):
     """The solid side of a plane: the points x with (x − point)·normal < 0, i.e. the
     normal points out of the solid (e.g. up from a table, or out of the patient at the
     skin). ``normal`` need not be a unit vector but must not be zero."""
@@ -147,7 +161,60 @@ class HalfSpace(Section):
         return (self.normal[0] / n, self.normal[1] / n, self.normal[2] / n)
 
 
-OBSTACLE_SHAPES = ("ball", "capsule", "box", "halfspace")
+class MeshObstacle(_Obstacle):
+    """A solid bounded by a closed triangle mesh (e.g. an organ from a CT segmentation):
+    ``file`` (STL, OBJ, PLY, … whatever trimesh reads; a relative path is read from the
+    config file's folder) scaled by ``scale`` about the file's origin, then turned by
+    ``rpy`` (degrees, R = Rz(yaw)·Ry(pitch)·Rx(roll)) and moved by ``xyz``:
+    x = R·(scale·x_file) + xyz. Its signed distance is sampled on a grid of
+    ``resolution``³ points (32 to 128) over its bounding box grown by ``padding`` on every
+    side (default 4 cells), computed once (:mod:`designopt.kinematics.sdf`). A mesh that
+    cannot be read or is not watertight is refused."""
+
+    shape: Literal["mesh"]
+    file: str
+    xyz: Point = (0.0, 0.0, 0.0)
+    rpy: Point = (0.0, 0.0, 0.0)
+    scale: Length = 1.0
+    resolution: int = sdf.DEFAULT_RESOLUTION
+    padding: Length | None = None
+
+    @field_validator("file")
+    @classmethod
+    def _read(cls, v: str, info: ValidationInfo) -> str:
+        ctx = info.context if isinstance(info.context, dict) else {}
+        p = Path(v).expanduser()
+        if not p.is_absolute():
+            folder = ctx.get("config_dir")
+            p = (Path(folder) if folder is not None else Path.cwd()) / p
+        if not p.exists():
+            raise ValueError(f"{p}: no such mesh file (a relative path is read from the "
+                             "config file's folder)")  # fmt: skip
+        sdf.load_mesh(p)  # ValueError naming the file: unreadable, not watertight
+        return str(p.resolve())
+
+    @field_validator("resolution", mode="before")
+    @classmethod
+    def _resolution(cls, v: Any) -> Any:
+        lo, hi = sdf.MIN_RESOLUTION, sdf.MAX_RESOLUTION
+        if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
+            raise ValueError(f"must be an integer from {lo} to {hi} (grid points per axis), "
+                             f"got {v!r}")  # fmt: skip
+        return v
+
+    def pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """(R (3, 3), t (3,)): x_world = R x_mesh + t (x_mesh after the scale), float64."""
+        from designopt.kinematics.urdf import rpy_matrix
+
+        r, p, y = (math.radians(a) for a in self.rpy)
+        return rpy_matrix(r, p, y), np.asarray(self.xyz, np.float64)
+
+    def grid(self) -> sdf.MeshGrid:
+        """The mesh's SDF grid in its own frame (built once per file version and settings)."""
+        return sdf.mesh_grid(self.file, self.scale, self.resolution, self.padding)
+
+
+OBSTACLE_SHAPES = ("ball", "capsule", "box", "halfspace", "mesh")
 
 
 def _obstacle_kind(v: Any) -> str:
@@ -160,10 +227,11 @@ Obstacle = Annotated[
     Union[  # noqa: UP007
         Annotated[BallObstacle, Tag("ball")], Annotated[CapsuleObstacle, Tag("capsule")],
         Annotated[BoxObstacle, Tag("box")], Annotated[HalfSpace, Tag("halfspace")],
+        Annotated[MeshObstacle, Tag("mesh")],
     ],
     Discriminator(_obstacle_kind, custom_error_type="obstacle",
                   custom_error_message="unknown obstacle shape: give shape ball, capsule, "
-                                       "box or halfspace"),
+                                       "box or halfspace, or mesh (with a file)"),
 ]  # fmt: skip
 _OBSTACLE: TypeAdapter[Any] = TypeAdapter(Obstacle)
 
@@ -177,8 +245,11 @@ class Collision(Section):
     - ``radius``: one capsule radius for every link, or a list with one per link (its
       length is checked against the chain by the study: :meth:`link_radii`).
     - ``self``: also check the arm's non-adjacent link pairs against each other.
-    - ``obstacles``: world geometry in the base frame (ball, capsule, box, halfspace).
+    - ``obstacles``: world geometry in the base frame (ball, capsule, box, halfspace,
+      mesh).
     - ``margin``: a clearance below this (≥ 0) counts as a collision.
+    - ``tool_radius``: the instrument's radius past the port, against the obstacles
+      marked ``inside`` (default: the last capsule's radius).
     """
 
     model_config = ConfigDict(populate_by_name=True)  # `self` in YAML, `self_` in Python
@@ -188,6 +259,9 @@ class Collision(Section):
     self_: StrictBool = Field(True, alias="self")
     obstacles: list[Obstacle] = []
     margin: Annotated[float, AfterValidator(_finite)] = 0.0
+    tool_radius: Length | None = None
+    """The instrument's radius past the port, against ``inside`` obstacles (None: the
+    last capsule's radius)."""
 
     @field_validator("radius", mode="before")
     @classmethod
@@ -253,9 +327,13 @@ def obstacle_params(obstacles: Sequence[Any], dtype=jnp.float64) -> ObstaclePara
     - ``ball``: ``c`` (nb, 3) centres, ``r`` (nb,) radii;
     - ``capsule``: ``a``, ``b`` (nc, 3) segment ends, ``r`` (nc,) radii;
     - ``box``: ``c`` (nx, 3) centres, ``half`` (nx, 3) half sizes;
-    - ``halfspace``: ``p`` (nh, 3) plane points, ``n`` (nh, 3) unit outward normals.
+    - ``halfspace``: ``p`` (nh, 3) plane points, ``n`` (nh, 3) unit outward normals;
+    - ``mesh``: ``grid`` (nm, G, G, G) the SDF grids (G the largest resolution),
+      ``origin``, ``cell`` (nm, 3), ``cells`` (nm,), ``R`` (nm, 3, 3), ``t`` (nm, 3)
+      (:func:`sdf.stack`; the grids are built on the host, once per file and settings).
 
-    Every group is present; a shape without obstacles has zero-length arrays."""
+    Every group is present; a shape without obstacles has zero-length arrays (the mesh
+    group's grid (0, 64, 64, 64))."""
     groups: dict[str, list[Any]] = {k: [] for k in OBSTACLE_SHAPES}
     for o in obstacles:
         if isinstance(o, dict):
@@ -269,7 +347,9 @@ def obstacle_params(obstacles: Sequence[Any], dtype=jnp.float64) -> ObstaclePara
         shape = (len(rows), width) if width else (len(rows),)
         return jnp.asarray(np.asarray(rows, np.float64).reshape(shape), dtype)
 
-    b, c, x, h = (groups[k] for k in OBSTACLE_SHAPES)
+    b, c, x, h, m = (groups[k] for k in OBSTACLE_SHAPES)
+    poses = [o.pose() for o in m]
+    meshes = sdf.stack([o.grid() for o in m], [R for R, _ in poses], [t for _, t in poses], dtype)
     return {
         "ball": {"c": arr([o.center for o in b], 3), "r": arr([o.radius for o in b], None)},
         "capsule": {
@@ -282,6 +362,7 @@ def obstacle_params(obstacles: Sequence[Any], dtype=jnp.float64) -> ObstaclePara
             "half": arr([[s / 2 for s in o.size] for o in x], 3),
         },
         "halfspace": {"p": arr([o.point for o in h], 3), "n": arr([o.unit_normal() for o in h], 3)},
+        "mesh": meshes,
     }
 
 
@@ -493,9 +574,13 @@ def clearance_terms(
         obs.append(capsule_box(A0, A1, R, o["box"]["c"], o["box"]["half"]))
     if "halfspace" in o and o["halfspace"]["p"].shape[0]:
         obs.append(capsule_halfspace(A0, A1, R, o["halfspace"]["p"], o["halfspace"]["n"]))
+    if "mesh" in o and o["mesh"]["grid"].shape[0]:
+        g = o["mesh"]
+        obs.append(sdf.capsule_mesh(A0, A1, R, g["grid"], g["origin"], g["cell"], g["cells"],
+                                    g["R"], g["t"]))  # fmt: skip
     inf = jnp.full(batch, jnp.inf, dt)
     obstacle_min = inf
-    for d in obs:  # one term per shape (at most four), each (..., L, n_shape)
+    for d in obs:  # one term per shape (at most five), each (..., L, n_shape)
         obstacle_min = jnp.minimum(obstacle_min, jnp.min(d, axis=(-2, -1)))
 
     self_min = inf

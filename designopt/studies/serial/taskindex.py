@@ -468,9 +468,12 @@ def structure_key(s: SerialSettings) -> str:
             task["body_wall"] = task["body_wall"].get("shape")
     col = d.get("collision")
     if col is not None:
-        shapes = [("inside " if o.get("inside") else "") + str(o.get("shape"))
-                  for o in col.get("obstacles", [])]  # fmt: skip
+        obs = col.get("obstacles", [])
+        shapes = [("inside " if o.get("inside") else "") + str(o.get("shape")) for o in obs]
+        res = [int(o.get("resolution", 64)) for o in obs if o.get("shape") == "mesh"]
         col["obstacles"] = {k: shapes.count(k) for k in sorted(set(shapes))}
+        if res:  # meshes share one grid array of the largest resolution
+            col["mesh_resolution"] = max(res)
     for a in d.get("arms") or []:
         a["port"] = _entry_names(a.get("port"))
         a["insertion"] = a.get("insertion") is not None
