@@ -177,6 +177,9 @@ SCENARIOS: list[tuple] = [
     ("designopt eval configs/two_ur5_front.yaml --design a2=0.425 a3=0.39225 b=0.6",),
     ("designopt view configs/two_ur5_front.yaml --design b=0.6 --q 0,-60,80,-110,-90,0",),
     ("designopt run configs/two_ur5_front.yaml",),
+    # the planning case (configs/port_placement.yaml, docs/planning.md)
+    ("designopt eval configs/port_placement.yaml --design b=0.6 by=0 px=0.03 py0=0 py1=0",),
+    ("designopt run configs/port_placement.yaml",),
     ("designopt run configs/two_arms_front.yaml",
      ("designopt report ARCHIVE --html", "report results/two_arms/two_arms_front.h5 --html")),
     # URDF (docs/urdf.md, configs/urdf_*.yaml)
@@ -302,6 +305,8 @@ SMALL: dict[str, dict] = {
                        "optimizer": NSGA},
     "two_ur5_front": {"study": {"indices": {"n_samples": 32}}, "front": {"n_samples": 64},
                       "optimizer": NSGA},
+    "port_placement": {"study": {"indices": {"n_samples": 32}}, "front": {"n_samples": 64},
+                       "optimizer": NSGA},
     "urdf_arm": {"study": {"indices": {"n_samples": 512}}, "optimizer": OPT,
                  "scan": {"vary": {"l_wrist": {"num": 2}, "l_jaw": {"num": 2}}}},
     "urdf_mesh_arm": {"study": {"indices": {"n_samples": 512}}, "optimizer": OPT},

@@ -27,6 +27,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -240,7 +241,29 @@ def _frame(axis: Sequence[float]) -> np.ndarray:
 
 
 OBSTACLE = "#7f7f7f"
+ANATOMY = "#d6604d"  # obstacles inside the patient (``inside: true``)
+WALL = "#f4a582"  # the body wall the ports lie on
 PORT = "#000000"
+
+
+def is_wall(ob: Any) -> bool:
+    """Whether ``ob`` is a body wall (``designopt.kinematics.wall``), drawn as the skin."""
+    from designopt.kinematics.wall import EllipsoidWall, HalfSpaceWall
+
+    return isinstance(ob, EllipsoidWall | HalfSpaceWall)
+
+
+def obstacle_colour(ob: Any) -> str:
+    """The body wall skin-coloured, the anatomy (``inside``) red, the rest grey."""
+    return WALL if is_wall(ob) else ANATOMY if getattr(ob, "inside", False) else OBSTACLE
+
+
+def obstacle_name(k: int, ob: Any) -> str:
+    """``obstacle 2: ball``, ``anatomy 3: mesh organ.stl``, ``body wall: ellipsoid``."""
+    if is_wall(ob):
+        return f"body wall: {ob.shape}"
+    what = ob.shape + (f" {Path(ob.file).name}" if ob.shape == "mesh" else "")
+    return f"{'anatomy' if getattr(ob, 'inside', False) else 'obstacle'} {k}: {what}"
 
 
 def obstacle_mesh(ob: Any, center: np.ndarray, ext: float):
@@ -250,6 +273,15 @@ def obstacle_mesh(ob: Any, center: np.ndarray, ext: float):
     kind = ob.shape
     if kind == "ball":
         return ball(np.asarray(ob.center, np.float64), float(ob.radius), 16)
+    if kind == "ellipsoid":  # a body wall
+        V, F = ball(np.zeros(3), 1.0, 24)
+        return np.asarray(ob.center, np.float64) + V * np.asarray(ob.radii, np.float64), F
+    if kind == "mesh":
+        from designopt.kinematics.sdf import load_mesh
+
+        V, F = load_mesh(Path(ob.file))
+        R, t = ob.pose()
+        return (float(ob.scale) * np.asarray(V, np.float64)) @ R.T + t, np.asarray(F)
     if kind == "capsule":
         a, b, r = np.asarray(ob.a, np.float64), np.asarray(ob.b, np.float64), float(ob.radius)
         return merge([tube(a, b, r), ball(a, r, 16), ball(b, r, 16)])
@@ -459,6 +491,10 @@ def describe_obstacle(ob: Any, unit: str = "") -> str:
         return f"capsule {_vec(ob.a)}–{_vec(ob.b)}{u}, r = {float(ob.radius):.4g}{u}"
     if ob.shape == "box":
         return f"box at {_vec(ob.center)}{u}, size {_vec(ob.size)}{u}"
+    if ob.shape == "mesh":
+        return f"mesh {Path(ob.file).name} at {_vec(ob.xyz)}{u}"
+    if ob.shape == "ellipsoid":
+        return f"ellipsoid at {_vec(ob.center)}{u}, semi-axes {_vec(ob.radii)}{u}"
     return f"half-space through {_vec(ob.point)}{u}, normal {_vec(ob.normal)}"
 
 
@@ -539,8 +575,11 @@ def legend_handles(scene: Scene) -> list:
                          label=f"tool z axes within {scene.cone.half_angle:g}°"))  # fmt: skip
     if scene.collisions:
         hs.append(Line2D([], [], color=COLLIDING, marker="x", lw=1, label="colliding pair"))
-    if scene.obstacles:
-        hs.append(Patch(facecolor=OBSTACLE, alpha=0.35, label="obstacles"))
+    kinds = {obstacle_colour(ob) for ob in scene.obstacles}
+    for colour, label in ((OBSTACLE, "obstacles"), (ANATOMY, "anatomy (inside the patient)"),
+                          (WALL, "body wall")):  # fmt: skip
+        if colour in kinds:
+            hs.append(Patch(facecolor=colour, alpha=0.35, label=label))
     if scene.ports:
         hs.append(Line2D([], [], color=PORT, marker="o", mfc="white", ls="none", label="port"))
     return hs
@@ -568,8 +607,11 @@ def draw_3d(ax: Any, scene: Scene, unit: str, legend: bool = True,
     if scene.cone is not None:
         for k, line in enumerate(cone_rays(scene.cone)):
             ax.plot(*line.T, color="#8c564b", lw=1.2 if k == 0 else 0.7, ls="--", zorder=1.5)
-    for _, _, Vo, Fo in clipped_obstacles(scene.obstacles, lo, hi)[0]:
-        ax.add_collection3d(Poly3DCollection(Vo[Fo], facecolor=OBSTACLE, alpha=0.18,
+    for _, ob, Vo, Fo in clipped_obstacles(scene.obstacles, lo, hi)[0]:
+        wall = is_wall(ob)
+        ax.add_collection3d(Poly3DCollection(Vo[Fo], facecolor=obstacle_colour(ob),
+                                             alpha=0.10 if wall else 0.18 if not
+                                             getattr(ob, "inside", False) else 0.45,
                                              edgecolor="none", zorder=1))  # fmt: skip
     for pt in scene.ports:
         ax.scatter(*np.asarray(pt, np.float64)[:, None], marker="o", s=60, c="white",
@@ -707,8 +749,8 @@ def draw_obstacles_2d(ax: Any, scene: Scene, E: np.ndarray) -> None:
             continue
         H = hull_2d(V @ E)  # clipped to the view: a far-away obstacle does not widen it
         if len(H) >= 3:
-            ax.add_patch(Polygon(H, closed=True, fc=OBSTACLE, alpha=0.3, ec="0.35", lw=0.8,
-                                 zorder=1.2))  # fmt: skip
+            ax.add_patch(Polygon(H, closed=True, fc=obstacle_colour(ob), alpha=0.3, ec="0.35",
+                                 lw=0.8, zorder=1.2))  # fmt: skip
     for pt in scene.ports:
         uv = np.asarray(pt, np.float64) @ E
         ax.plot(uv[0], uv[1], marker="o", ms=8, mfc="white", mec=PORT, mew=1.5, ls="none",

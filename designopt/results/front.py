@@ -176,6 +176,11 @@ class FrontRecord(Record):
                  f"hypervolume {self.hypervolume:.6g} against the reference point "
                  f"{np.round(self.reference, 6).tolist()}; {len(self.ambiguous)} pairs "
                  f"ambiguous (order within {at.get('z', 2):g} SE in some objective)"]  # fmt: skip
+        if n and self.hypervolume == 0:  # a zero that says nothing about the front
+            lines.append("  (a hypervolume of 0: no design of the front is better than the "
+                         "reference point in every objective; where the reference is the "
+                         "first generation's worst, that generation already held the "
+                         "front's value in some objective)")  # fmt: skip
         lines += self._history_line()
         rows = np.unique(np.linspace(0, n - 1, min(n, SHOWN)).round().astype(int))
         others = self.indices

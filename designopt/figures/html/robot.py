@@ -25,7 +25,6 @@ from designopt.figures.html.plots import _layout
 from designopt.figures.robot import (
     COLLIDING,
     FRAME_COLOURS,
-    OBSTACLE,
     Arm,
     Scene,
     axis_arrows,
@@ -33,6 +32,9 @@ from designopt.figures.robot import (
     clip_note,
     clipped_obstacles,
     cone_rays,
+    is_wall,
+    obstacle_colour,
+    obstacle_name,
     radii,
     region_faces,
     region_wire,
@@ -176,8 +178,8 @@ def _static(scene: Scene, unit: str, box: tuple[np.ndarray, np.ndarray]) -> list
                     "line": {"color": "#3182bd", "width": 2}})  # fmt: skip
     for k, ob, Vo, Fo in clipped_obstacles(scene.obstacles, *box)[0]:  # clipped to the view
         out.append({"type": "mesh3d", **_xyz(Vo), "i": Fo[:, 0], "j": Fo[:, 1], "k": Fo[:, 2],
-                    "color": OBSTACLE, "opacity": 0.2, "name": f"obstacle {k}: {ob.shape}",
-                    "hoverinfo": "name", "showlegend": True})  # fmt: skip
+                    "color": obstacle_colour(ob), "opacity": 0.12 if is_wall(ob) else 0.2,
+                    "name": obstacle_name(k, ob), "hoverinfo": "name", "showlegend": True})  # fmt: skip
     if scene.ports:
         out.append({"type": "scatter3d", "mode": "markers",
                     **_xyz(np.asarray(scene.ports, np.float64)), "name": "port",

@@ -72,13 +72,15 @@ def full(mech: Mechanism, x: Any) -> np.ndarray:
 
 
 def obstacles_and_ports(s: SerialSettings, design: Any = None) -> dict[str, Any]:
-    """A scene's ``obstacles`` (``study.collision``) and ``ports`` (each arm's, or
-    ``task.port``) as :class:`Scene` keywords. ``design``: the variables (a mapping, or a
+    """A scene's ``obstacles`` (``study.collision``'s, then ``task.body_wall``) and
+    ``ports`` (each arm's, or ``task.port``) as :class:`Scene` keywords. ``design``: the variables (a mapping, or a
     sequence in ``s.variables`` order; None: the middle of the box) that place a port
     named by design variables (on ``task.body_wall`` when there is one)."""
     from designopt.studies.serial.reach import ports_of
 
     obs = list(s.collision.obstacles) if s.collision is not None else []
+    if s.task is not None and s.task.body_wall is not None:
+        obs.append(s.task.body_wall)  # drawn as the skin (``figures.robot.is_wall``)
     if s.task is None or s.ports()[0] is None:
         return {"obstacles": obs, "ports": []}
     if design is not None and not hasattr(design, "keys"):
