@@ -241,3 +241,32 @@ def test_instrument_angle_is_the_angle_of_the_two_port_lines():
     se = ang[both].std(ddof=1) / np.sqrt(both.sum())
     assert 0.8 * se < float(est["instrument_angle"][1][0]) < 1.25 * se
     assert 0 < float(est["instrument_ok"][0][0]) <= float(est["arms_ok"][0][0])
+
+
+def test_a_port_is_projected_onto_a_mesh_wall_within_the_grid_bound():
+    """A mesh body wall (the abdomen's mesh of the planning case): designed ports land on
+    its surface to within the grid's error bound (trimesh's exact distance), and a port of
+    numbers off it is refused naming the key."""
+    import trimesh
+
+    from designopt.kinematics import sdf
+
+    path = ROOT / "configs/data/abdomen.stl"
+    wall = kw.MeshWall(shape="mesh", file=str(path), resolution=48, padding=0.03)
+    par = kw.wall_params(wall)
+    rng = np.random.default_rng(1)
+    p = np.c_[rng.uniform(-0.15, 0.15, (40, 2)), np.full(40, 0.3)]  # above the abdomen
+    q = np.asarray(kw.project("mesh", par, jnp.asarray(p)))
+    m = trimesh.load(str(path), force="mesh")
+    exact = np.abs(sdf.exact_sdf(m.vertices, m.faces, q))
+    assert exact.max() <= wall.grid().bound(), exact.max()
+    # each the nearest wall point to within the bound: no wall point is much closer
+    near = np.abs(sdf.exact_sdf(m.vertices, m.faces, p))
+    assert np.all(np.linalg.norm(q - p, axis=1) <= near + 2 * wall.grid().bound())
+
+
+def test_a_port_of_numbers_off_a_mesh_wall_is_refused(tmp_path, capsys):
+    cfg = _puma([0.5, 0.1, -0.2])
+    cfg["study"]["task"]["body_wall"] = {"shape": "mesh", "file": str(ROOT / "configs/data/organ.stl"),
+                                         "xyz": [0.5, 0.1, -0.4]}  # fmt: skip
+    _run_eval(tmp_path, capsys, cfg, "task.port", "off task.body_wall")

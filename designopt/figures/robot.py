@@ -248,9 +248,9 @@ PORT = "#000000"
 
 def is_wall(ob: Any) -> bool:
     """Whether ``ob`` is a body wall (``designopt.kinematics.wall``), drawn as the skin."""
-    from designopt.kinematics.wall import EllipsoidWall, HalfSpaceWall
+    from designopt.kinematics.wall import EllipsoidWall, HalfSpaceWall, MeshWall
 
-    return isinstance(ob, EllipsoidWall | HalfSpaceWall)
+    return isinstance(ob, EllipsoidWall | HalfSpaceWall | MeshWall)
 
 
 def obstacle_colour(ob: Any) -> str:

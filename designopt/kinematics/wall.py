@@ -20,6 +20,7 @@ position is that of the exact projection.
 from __future__ import annotations
 
 import math
+from functools import partial
 from typing import Annotated, Any, Literal
 
 import jax
@@ -29,6 +30,8 @@ from pydantic import Discriminator, Field, Tag, field_validator
 
 from designopt.core import validation
 from designopt.core.settings import Section
+from designopt.kinematics import sdf
+from designopt.kinematics.collision import MeshObstacle
 
 Vec3 = tuple[float, float, float]
 BISECTIONS = 80
@@ -84,23 +87,42 @@ class EllipsoidWall(Section):
         return v
 
 
+class MeshWall(MeshObstacle):
+    """The patient is inside a closed mesh (e.g. the skin from a CT segmentation): the
+    keys of a mesh obstacle (``file``, ``xyz``, ``rpy``, ``scale``, ``resolution``,
+    ``padding``; ``designopt.kinematics.collision.MeshObstacle``). A port is projected
+    onto the zero level of its interpolated signed distance (:data:`MESH_STEPS` steps
+    p ← p − d(p) ∇d/|∇d|): on the wall to within the grid's error bound."""
+
+    inside: Literal[False] = False  # type: ignore[assignment]
+
+
 def _wall_kind(v: Any) -> str:
     return str(v.get("shape") if isinstance(v, dict) else getattr(v, "shape", ""))
 
 
 BodyWall = Annotated[
-    Annotated[HalfSpaceWall, Tag("halfspace")] | Annotated[EllipsoidWall, Tag("ellipsoid")],
+    Annotated[HalfSpaceWall, Tag("halfspace")]
+    | Annotated[EllipsoidWall, Tag("ellipsoid")]
+    | Annotated[MeshWall, Tag("mesh")],
     Discriminator(_wall_kind),
-    Field(description="the body wall the ports lie on: {shape: halfspace | ellipsoid, ...}"),
+    Field(description="the body wall the ports lie on: {shape: halfspace | ellipsoid | mesh, ...}"),
 ]
-WALL_SHAPES = ("halfspace", "ellipsoid")
+WALL_SHAPES = ("halfspace", "ellipsoid", "mesh")
+MESH_STEPS = 8
+"""Projection steps onto a mesh wall's zero level (each exact for a plane; the grid's
+SDF is 1-Lipschitz and piecewise trilinear, so a few steps land within its error)."""
 
 
 def wall_params(
-    wall: HalfSpaceWall | EllipsoidWall, dtype: Any = jnp.float64
+    wall: HalfSpaceWall | EllipsoidWall | MeshWall, dtype: Any = jnp.float64
 ) -> dict[str, jax.Array]:
     """The wall's numbers as arrays: ``c`` (3,) (the plane's point, the ellipsoid's
-    centre) and ``v`` (3,) (the plane's unit normal, the ellipsoid's semi-axes)."""
+    centre) and ``v`` (3,) (the plane's unit normal, the ellipsoid's semi-axes); for a
+    mesh, its grid and pose (``sdf.stack`` of one mesh)."""
+    if isinstance(wall, MeshWall):
+        R, t = wall.pose()
+        return sdf.stack([wall.grid()], R[None], t[None], dtype)
     if isinstance(wall, HalfSpaceWall):
         n = np.asarray(wall.normal, np.float64)
         c, v = np.asarray(wall.point, np.float64), n / np.linalg.norm(n)
@@ -109,15 +131,36 @@ def wall_params(
     return {"c": jnp.asarray(c, dtype), "v": jnp.asarray(v, dtype)}
 
 
+@partial(jax.jit, static_argnames=("kind",))
 def project(kind: str, params: dict[str, jax.Array], p: jax.Array) -> jax.Array:
     """The wall's closest point (..., 3) to each point ``p`` (..., 3) (``kind``: a
     :data:`WALL_SHAPES` name, static)."""
+    if kind == "mesh":
+        return _mesh_closest(params, p)
     c, v = params["c"].astype(p.dtype), params["v"].astype(p.dtype)
     if kind == "halfspace":
         return p - jnp.sum((p - c) * v, -1, keepdims=True) * v
     if kind == "ellipsoid":
         return c + _ellipsoid_closest(p - c, v)
     raise ValueError(f"unknown body wall {kind!r}; known: {list(WALL_SHAPES)}")
+
+
+def _mesh_closest(params: dict[str, jax.Array], p: jax.Array) -> jax.Array:
+    """Points p (..., 3) moved onto the zero level of a mesh wall's interpolated SDF."""
+    g = {k: v[0] for k, v in params.items()}  # the one mesh of the stack
+
+    def d(x):  # the SDF at one point
+        return sdf.mesh_sdf(x, g["grid"], g["origin"], g["cell"], g["cells"], g["R"], g["t"])
+
+    grad = jax.vmap(jax.value_and_grad(d))
+    flat = p.reshape(-1, 3)
+
+    def step(_, x):
+        v, n = grad(x)
+        norm = jnp.linalg.norm(n, axis=-1, keepdims=True)
+        return x - v[:, None] * n / jnp.where(norm > 0, norm, 1.0)
+
+    return jax.lax.fori_loop(0, MESH_STEPS, step, flat).reshape(p.shape)
 
 
 def distance(kind: str, params: dict[str, jax.Array], p: jax.Array) -> jax.Array:

@@ -191,7 +191,8 @@ PORT_DESIGNS = 64
 a port that the design moves is checked before a run."""
 WALL_TOL = 1e-6
 """A port given as numbers lies on ``task.body_wall`` when within this share of the
-wall's size (its largest semi-axis, or 1 for a plane) of its surface."""
+wall's size (its largest semi-axis, or 1 for a plane) of its surface (a mesh wall: within
+its grid's error bound, ``sdf.MeshGrid.bound``, plus this)."""
 
 
 def port_designs(s: SerialSettings) -> list[dict[str, float] | None]:
@@ -291,9 +292,12 @@ def _on_wall(s: SerialSettings, entries: Any, projected: np.ndarray, where: str)
     if wall is None or any(isinstance(v, str) for v in entries):
         return
     p = np.asarray(entries, np.float64)
-    size = max(wall.radii) if wall.shape == "ellipsoid" else 1.0
+    if wall.shape == "mesh":  # on the wall to within the grid's interpolation error
+        tol = wall.grid().bound() + WALL_TOL
+    else:
+        tol = WALL_TOL * (max(wall.radii) if wall.shape == "ellipsoid" else 1.0)
     off = float(np.linalg.norm(p - projected))
-    if off > WALL_TOL * size:
+    if off > tol:
         raise ValueError(
             f"{where}: the port {_fmt(p)} lies {off:.4g} {length_unit(s)} off task.body_wall "
             f"(its nearest point on the wall is {_fmt(projected)}); give a point on the "

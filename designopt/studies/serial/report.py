@@ -148,14 +148,17 @@ def front_view(rec: Any):
     return FrontView(title=f"Pareto front ({n} designs)", unit=length_unit(s), x=cols[0],
                      y=cols[1], xlabel=labels[0], ylabel=labels[1], robots=robots, hover=hov,
                      reference=ref, region=s.task.region if s.task is not None else None,
-                     note=note + (f"; {mn}" if mn else ""), **_front_scene(s))  # fmt: skip
+                     note=note + (f"; {mn}" if mn else ""), **_front_scene(s, X))  # fmt: skip
 
 
-def _front_scene(s: SerialSettings) -> dict[str, Any]:
+def _front_scene(s: SerialSettings, X: Any) -> dict[str, Any]:
     """The obstacles and ports a front's view draws: ports that the design moves differ
-    from design to design, so none is drawn then (each robot's own figure has them)."""
+    from design to design, so every front design's ports are drawn then."""
     around = obstacles_and_ports(s)
-    return around | {"ports": []} if s.designed_ports() else around
+    if not s.designed_ports():
+        return around
+    ports = [p for x in np.asarray(X, np.float64) for p in obstacles_and_ports(s, x)["ports"]]
+    return around | {"ports": [np.asarray(p) for p in dict.fromkeys(tuple(p) for p in ports)]}
 
 
 def report(rec: Any) -> dict[str, Any] | None:

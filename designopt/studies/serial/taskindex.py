@@ -464,8 +464,9 @@ def structure_key(s: SerialSettings) -> str:
                           else str(task["region"].get("shape")))  # fmt: skip
         task["port"] = _entry_names(task.get("port"))
         task["insertion"] = task.get("insertion") is not None
-        if task.get("body_wall") is not None:
-            task["body_wall"] = task["body_wall"].get("shape")
+        w = task.get("body_wall")
+        if w is not None:  # its kind (a mesh: and its grid's size) shapes the program
+            task["body_wall"] = [w.get("shape"), w.get("resolution")]
     col = d.get("collision")
     if col is not None:
         obs = col.get("obstacles", [])
