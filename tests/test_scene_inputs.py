@@ -1,7 +1,9 @@
 """The scene's numbers are inputs of the compiled programs (issue: compile once per
 structure): the program traced for one scene, fed another scene's params (the port, the
-insertion range, the obstacles, the task region's targets, the arms' bases moved),
-compiles nothing new and gives that scene's own indices, bit for bit."""
+insertion range, the obstacles, the task region's targets, the arms' bases moved; in the
+planning case the body wall under designed ports, the meshes' poses, the anatomy, the
+instruments' band and radius), compiles nothing new and gives that scene's own indices,
+bit for bit."""
 
 from __future__ import annotations
 
@@ -50,9 +52,34 @@ def _arms(edit: bool) -> dict:
     return cfg
 
 
+def _planning(edit: bool) -> dict:
+    """The planning case: designed ports on an ellipsoid wall, a mesh outside, a capsule
+    and a mesh inside, the instruments' band and radius."""
+    path = Path("configs/port_placement.yaml").resolve()
+    with open(path) as f:
+        cfg = yaml.safe_load(f)
+    s = cfg["study"]
+    s["indices"]["n_samples"] = 24
+    s["chain"]["urdf"] = str(path.parent / s["chain"]["urdf"])
+    for o in s["collision"]["obstacles"]:
+        if o["shape"] == "mesh":
+            o["file"] = str(path.parent / o["file"])
+    if edit:  # move the wall, the abdomen's mesh, the vessel, the organ; the band, the tool
+        s["task"]["body_wall"]["center"] = [0.0, 0.01, 0.065]
+        s["task"]["instrument_angle"] = [40, 80]
+        s["collision"]["tool_radius"] = 0.005
+        ob = s["collision"]["obstacles"]
+        ob[0]["xyz"] = [0.0, 0.01, 0.005]
+        ob[1]["a"], ob[1]["b"] = [-0.06, 0.01, 0.1], [0.06, -0.01, 0.1]
+        ob[2]["xyz"] = [0.01, -0.08, 0.05]
+        ob[2]["rpy"] = [0, 0, 10]
+    return cfg
+
+
 @pytest.mark.parametrize("make, X", [
     (_puma, [[0.43, 0.43, 0.4], [0.5, 0.35, 0.3]]),
     (_arms, [[0.6, 0.45, 0.45], [0.5, 0.3, 0.55]]),
+    (_planning, [[0.6, 0.0, 0.03, 0.0, 0.0], [0.5085, -0.018, 0.021, -0.1185, 0.1261]]),
 ])  # fmt: skip
 def test_a_scene_edit_runs_in_the_same_program(make, X):
     X = jnp.asarray(X, jnp.float64)
