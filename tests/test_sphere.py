@@ -478,3 +478,19 @@ def test_raven_design_question_prefers_right_angles_to_the_as_built():
         sv = np.linalg.svd(J[:, 3:, :], compute_uv=False)
         np.testing.assert_allclose(sv[:, -1] / sv[:, 0],
                                    np.sqrt(1 / (2 + abs(np.cos(np.deg2rad(la12))))), atol=1e-12)  # fmt: skip
+
+
+def test_gci_reached_is_na_over_a_handful_of_reached_directions(capsys):
+    """A ratio over the reached directions is not reported on fewer than 30 of them: the
+    (30°, 30.5°) design reaches 2 of 4,096 directions of the default cone."""
+    import json
+
+    from designopt.cli.commands import main
+
+    capsys.readouterr()
+    assert main(["eval", "configs/sphere_rcm.yaml", "--design", "alpha12=30",
+                 "alpha23=30.5", "--json"]) == 0  # fmt: skip
+    out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert out["gci_reached"] is None and out["gci_reached_se"] is None
+    assert out["gci_reached_n"] == 2 and out["gci_reached_of"] == 4096
+    assert out["reach"] == 2 / 4096

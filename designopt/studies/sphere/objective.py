@@ -11,8 +11,8 @@ never NaN. Indices, each with its standard error (``designopt.numerics.montecarl
 
 - ``gci``: the mean of 1/k over the cone (unreached = 0);
 - ``reach``: the share of the cone's directions the design reaches;
-- ``gci_reached``: the mean of 1/k over the reached directions only (a ratio; 0 where
-  nothing is reached);
+- ``gci_reached``: the mean of 1/k over the reached directions only (a ratio: n/a under
+  :data:`N_MIN` reached directions);
 - ``arc_length``: α12 + α23 (rad), the links' arcs on the unit sphere: the compactness
   term of a hybrid objective (no sampling, SE 0).
 
@@ -120,14 +120,26 @@ def estimates(s: SphereSettings, params: Mapping[str, Any], X: Array,
     return {n: mc.finish(mc.mean(ps), pl) for n, ps in acc.items()} | {"a12": a12, "a23": a23}
 
 
+N_MIN = 30
+"""``gci_reached`` is a ratio over the reached directions: n/a (NaN, with
+``gci_reached_n`` of ``gci_reached_of``) when fewer than this many are reached, as every
+ratio index of designopt (docs/task.md, the n/a rule)."""
+
+
 def build_fn(s: SphereSettings, mesh: Any = None):
     """fn(params, X, key) -> (f, every index with its SE)."""
+    n_used = sample_plan(s).n_used
 
     def fn(params, X, key):
         e = estimates(s, params, X, mesh)
         out: dict[str, Array] = {}
         for k in ("gci", "reach", "gci_reached"):
             out[k], out[k + "_se"] = e[k].value, e[k].se
+        n = jnp.round(e["reach"].value * n_used)  # the reached directions
+        few = n < N_MIN
+        out["gci_reached"] = jnp.where(few, jnp.nan, out["gci_reached"])
+        out["gci_reached_se"] = jnp.where(few, jnp.nan, out["gci_reached_se"])
+        out["gci_reached_n"], out["gci_reached_of"] = n, jnp.full_like(n, n_used)
         out["arc_length"] = e["a12"] + e["a23"]
         out["arc_length_se"] = jnp.zeros_like(out["arc_length"])
         w_arc = params["weights"][2].astype(X.dtype)
@@ -198,9 +210,11 @@ def problem(s: SphereSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Pro
         "dtype": dtype.name,
     }
 
+    na = {"gci_reached": (0.0, 1.0)}  # n/a under N_MIN reached directions
+
     def shard_samples(mesh: Any) -> Problem:
         return Problem(names, lower, upper, build_fn(s, mesh), params, info,
-                       build_constraints(s), n_samples_used=pl.n_used)  # fmt: skip
+                       build_constraints(s), n_samples_used=pl.n_used, na_range=na)  # fmt: skip
 
     return Problem(names, lower, upper, build_fn(s), params, info, build_constraints(s),
-                   shard_samples, n_samples_used=pl.n_used)  # fmt: skip
+                   shard_samples, n_samples_used=pl.n_used, na_range=na)  # fmt: skip
