@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from test_ik_command import fk as puma_fk  # the PUMA 560's standard-DH FK in NumPy
 
 from designopt.cli.commands import main
 
@@ -435,23 +436,6 @@ def _merge(a: dict, b: dict) -> dict:
     return out
 
 
-def _puma_fk(q: np.ndarray, a2: float = 0.45, d4: float = 0.45) -> np.ndarray:
-    """(N, 4, 4) standard-DH FK of configs/puma560_task.yaml's chain at the middle of its
-    box (a2 = d4 = 0.45 m: the design ``designopt ik`` uses without --design)."""
-    alpha = np.radians([90, 0, -90, 90, -90, 0])
-    a, d = [0, a2, 0.0203, 0, 0, 0], [0, 0, 0.15005, d4, 0, 0]
-    T = np.broadcast_to(np.eye(4), (len(q), 4, 4)).copy()
-    for i in range(6):
-        ct, st, ca, sa = np.cos(q[:, i]), np.sin(q[:, i]), np.cos(alpha[i]), np.sin(alpha[i])
-        A = np.zeros((len(q), 4, 4))
-        A[:, 0] = np.stack([ct, -st * ca, st * sa, a[i] * ct], -1)
-        A[:, 1] = np.stack([st, ct * ca, -ct * sa, a[i] * st], -1)
-        A[:, 2, 1:] = [sa, ca, d[i]]
-        A[:, 3, 3] = 1.0
-        T = T @ A
-    return T
-
-
 def _write_csv(path: Path, head: list[str], rows: np.ndarray) -> None:
     path.write_text(",".join(head) + "\n"
                     + "".join(",".join(repr(float(v)) for v in r) + "\n" for r in rows))  # fmt: skip
@@ -463,7 +447,7 @@ def _poses_csv(path: Path) -> None:
     lim = np.radians([[-160, 160], [-45, 225], [-225, 45], [-110, 170], [-100, 100], [-266, 266]])
     q = lim[:, 0] + (lim[:, 1] - lim[:, 0]) * np.random.default_rng(1).random((4, 6))
     cols = [f"T{i}{j}" for i in range(4) for j in range(4)]
-    _write_csv(path, cols, _puma_fk(q).reshape(4, 16))
+    _write_csv(path, cols, puma_fk(q).reshape(4, 16))  # the middle design's FK
 
 
 def _axes_csv(path: Path, config: Path) -> None:

@@ -169,7 +169,10 @@ def _run_eval(tmp_path: Path, capsys, cfg: dict, *needles: str) -> str:
      ("task.port", "lies 0.1 m off task.body_wall", "[0.5, 0.1, -0.1]")),
     (lambda s: s["task"].update(body_wall={"shape": "ellipsoid", "center": [0, 0, 0],
                                            "radii": [0.3, 0, 0.2]}),
-     ("body_wall", "radii must be three positive numbers")),
+     ("body_wall.radii.1", "must be > 0")),
+    (lambda s: s["task"].update(body_wall={"shape": "halfspace", "point": [0, 0, -0.2],
+                                           "normal": [0, 0, 1], "inside": True}),
+     ("task.body_wall.inside", "not an obstacle")),
     (lambda s: (s["task"].pop("port"), s["task"].pop("insertion"), s["collision"].update(
         obstacles=[]), s["task"].update(body_wall={"shape": "halfspace", "point": [0, 0, 0],
                                                    "normal": [0, 0, 1]})),

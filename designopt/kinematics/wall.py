@@ -19,7 +19,6 @@ position is that of the exact projection.
 
 from __future__ import annotations
 
-import math
 from functools import partial
 from typing import Annotated, Any, Literal
 
@@ -28,63 +27,38 @@ import jax.numpy as jnp
 import numpy as np
 from pydantic import Discriminator, Field, Tag, field_validator
 
-from designopt.core import validation
 from designopt.core.settings import Section
 from designopt.kinematics import sdf
-from designopt.kinematics.collision import MeshObstacle
+from designopt.kinematics.collision import HalfSpace, Length, MeshObstacle, Point
 
-Vec3 = tuple[float, float, float]
 BISECTIONS = 80
 """Bisection steps of the ellipsoid projection (the bracket shrinks 2⁻⁸⁰: below a float64
 ulp of t for any wall the size of a patient)."""
 
 
-class HalfSpaceWall(Section):
+def _not_inside(cls: Any, v: bool) -> bool:
+    if v:
+        raise ValueError("a body wall places the ports and is not an obstacle; remove "
+                         "inside (give the anatomy under collision.obstacles)")  # fmt: skip
+    return v
+
+
+class HalfSpaceWall(HalfSpace):
     """The patient is the side of the plane through ``point`` opposite ``normal``
-    (``normal`` points out of the patient, e.g. up from a supine patient's belly)."""
+    (``normal`` points out of the patient, e.g. up from a supine patient's belly): the
+    keys of a half-space obstacle (``designopt.kinematics.collision.HalfSpace``)."""
 
-    shape: Literal["halfspace"]
-    point: Vec3
-    normal: Vec3
-
-    @field_validator("point", "normal")
-    @classmethod
-    def _finite(cls, v: Vec3) -> Vec3:
-        bad = validation.first_bad(list(v))
-        if bad is not None:
-            raise ValueError(bad[1])
-        return v
-
-    @field_validator("normal")
-    @classmethod
-    def _nonzero(cls, v: Vec3) -> Vec3:
-        if not math.hypot(*v) > 0:
-            raise ValueError(f"normal must be a non-zero vector, got {list(v)}")
-        return v
+    _flat = field_validator("inside")(classmethod(_not_inside))
 
 
 class EllipsoidWall(Section):
     """The patient is inside the ellipsoid with centre ``center`` and semi-axes ``radii``
-    along the world's x, y, z (an insufflated abdomen)."""
+    along the world's x, y, z (an insufflated abdomen). Coordinates and radii are checked
+    as an obstacle's are (finite, at most ``collision.MAX_LENGTH``; radii > 0)."""
 
     shape: Literal["ellipsoid"]
-    center: Vec3
-    radii: Vec3
-
-    @field_validator("center")
-    @classmethod
-    def _finite(cls, v: Vec3) -> Vec3:
-        bad = validation.first_bad(list(v))
-        if bad is not None:
-            raise ValueError(bad[1])
-        return v
-
-    @field_validator("radii")
-    @classmethod
-    def _positive(cls, v: Vec3) -> Vec3:
-        if not all(math.isfinite(r) and r > 0 for r in v):
-            raise ValueError(f"radii must be three positive numbers, got {list(v)}")
-        return v
+    center: Point
+    radii: tuple[Length, Length, Length]
 
 
 class MeshWall(MeshObstacle):
@@ -94,7 +68,7 @@ class MeshWall(MeshObstacle):
     onto the zero level of its interpolated signed distance (:data:`MESH_STEPS` steps
     p ← p − d(p) ∇d/|∇d|): on the wall to within the grid's error bound."""
 
-    inside: Literal[False] = False  # type: ignore[assignment]
+    _flat = field_validator("inside")(classmethod(_not_inside))
 
 
 def _wall_kind(v: Any) -> str:
@@ -124,8 +98,7 @@ def wall_params(
         R, t = wall.pose()
         return sdf.stack([wall.grid()], R[None], t[None], dtype)
     if isinstance(wall, HalfSpaceWall):
-        n = np.asarray(wall.normal, np.float64)
-        c, v = np.asarray(wall.point, np.float64), n / np.linalg.norm(n)
+        c, v = np.asarray(wall.point, np.float64), np.asarray(wall.unit_normal(), np.float64)
     else:
         c, v = np.asarray(wall.center, np.float64), np.asarray(wall.radii, np.float64)
     return {"c": jnp.asarray(c, dtype), "v": jnp.asarray(v, dtype)}

@@ -35,7 +35,7 @@ from designopt.studies.serial.mechanism import (  # noqa: F401 (re-exported)
     joint_names,
     joint_values,
 )
-from designopt.studies.serial.settings import ROWS, SerialSettings, UrdfChain
+from designopt.studies.serial.settings import ROWS, SerialSettings, UrdfChain, length_unit
 
 REPRESENTATIVE = (("worst-conditioned", "#9467bd"), ("median", "#1f77b4"),
                   ("best-conditioned", "#2ca02c"))  # fmt: skip
@@ -183,7 +183,7 @@ def arm_tuples(s: SerialSettings, mech: Mechanism, x: Any, sol: Mapping[str, np.
                     pairs.append((pa, pb))
                     coll |= {a, b}
         arms_j = [_with_base(a, a.base, colliding=k in coll) for k, a in enumerate(arms_j)]
-        what = f"arms {sorted(coll)} collide" if coll else f"gap {gap[j]:.3g}"
+        what = f"arms {sorted(coll)} collide" if coll else f"gap {gap[j]:.3g} {length_unit(s)}"
         out.append((f"{name} tuple {j}: {what}", arms_j, pairs, qs))
     return out
 
@@ -217,7 +217,7 @@ def representative(s: SerialSettings, mech: Mechanism, sol: Mapping[str, np.ndar
     idx = [int(perm[k][j]) for k in range(A)]
     Q = np.stack([np.asarray(sol["q"])[k][i] for k, i in enumerate(idx)])
     return (f"the tuple of median gap between the arms (tuple {j}: targets {idx}, gap "
-            f"{gap[j]:.3g})", Q, [p[i] for i in idx])  # fmt: skip
+            f"{gap[j]:.3g} {length_unit(s)})", Q, [p[i] for i in idx])  # fmt: skip
 
 
 def design_pose(s: SerialSettings, mech: Mechanism, x: Any,
