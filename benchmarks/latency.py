@@ -59,6 +59,8 @@ COMMANDS: list[tuple[str, list[str]]] = [
     ("urdf_puma560_front", ["run", "configs/urdf_puma560_front.yaml", "--out", "{out}.h5"]),
     ("urdf_puma560_port", ["run", "configs/urdf_puma560_port.yaml", "--out", "{out}.h5"]),
     ("two_arms_front", ["run", "configs/two_arms_front.yaml", "--out", "{out}.h5"]),
+    ("two_ur5_front", ["run", "configs/two_ur5_front.yaml", "--out", "{out}.h5"]),
+    ("port_placement", ["run", "configs/port_placement.yaml", "--out", "{out}.h5"]),
     ("urdf_mesh_arm", ["run", "configs/urdf_mesh_arm.yaml", "--out", "{out}.h5"]),
     ("sweep_ptpso", ["sweep", "configs/sweep_ptpso.yaml", "--out", "{out}.h5"]),
     ("mo_benchmark", ["bench", "configs/mo_benchmark.yaml", "--out", "{out}.h5"]),
@@ -66,8 +68,16 @@ COMMANDS: list[tuple[str, list[str]]] = [
     ("urdf_puma560_task-eval", ["eval", "configs/urdf_puma560_task.yaml", "--design",
                                 "a2=0.4318", "d4=0.4318"]),
     ("urdf_puma560_view", ["view", "configs/urdf_puma560_task.yaml", "--out", "{out}.png"]),
+    ("urdf_puma560_port-eval", ["eval", "configs/urdf_puma560_port.yaml", "--design",
+                                "a2=0.43", "d4=0.43", "l_tool=0.4"]),
+    ("urdf_puma560_port-moved", ["eval", "configs/urdf_puma560_port.yaml", "--design",
+                                 "a2=0.43", "d4=0.43", "l_tool=0.4",
+                                 "--set", "study.task.port=[0.51,0.11,-0.2]"]),
 ]  # fmt: skip
 """The shipped configs' commands (`pso_benchmark.yaml` runs for minutes: not here)."""
+EDITS = {"urdf_puma560_port-moved": "urdf_puma560_port-eval"}
+"""A scene edit (``--set``) run once with the cache of the command it edits (which must
+run first): what editing the scene costs after one warm run."""
 
 END_TO_END = re.compile(
     r"wall (?P<wall>[\d.]+) s end to end = start-up (?P<startup>[\d.]+) s .*figures "
@@ -185,7 +195,10 @@ def main() -> None:
     with tempfile.TemporaryDirectory(prefix="designopt-latency-") as tmp:
         for name, argv in todo:
             cache = Path(tmp) / f"cache-{name}"  # empty: the first run compiles everything
-            for which in ("cold", "warm"):
+            edit = EDITS.get(name)
+            if edit is not None:
+                cache = Path(tmp) / f"cache-{edit}"
+            for which in ("cold", "warm") if edit is None else ("edited",):
                 row = one(argv, cache, str(Path(tmp) / f"{name}-{which}"))
                 print(f"| {name} | {which} | " + " | ".join(fmt(row, k) for k in keys) + " |",
                       flush=True)  # fmt: skip

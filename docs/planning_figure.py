@@ -23,7 +23,7 @@ def main() -> Path:
     from designopt.app.config import validate
     from designopt.core.keys import streams
     from designopt.figures import robot
-    from designopt.studies.serial import drawing, taskindex
+    from designopt.studies.serial import blocks, drawing
     from designopt.studies.serial.mechanism import build
     from designopt.studies.serial.settings import length_unit
 
@@ -35,7 +35,7 @@ def main() -> Path:
     for name, d in (("naive: ports on a line above the target", NAIVE),
                     ("planned: the run's front design", BEST)):  # fmt: skip
         x = np.asarray([d[k] for k in s.variables], np.float64)
-        sol = taskindex.solution(s, x, keys)
+        sol = blocks.solution(s, x, keys)
         sc = drawing.arms_scene(s, mech, x, sol, keys)
         tup = drawing.arm_tuples(s, mech, x, sol, keys)
         label, arms, pairs, _ = tup[1] if len(tup) > 1 else tup[0]  # the median tuple

@@ -36,8 +36,10 @@ def _release_compiled_programs():
     yield
     from designopt.app import job
     from designopt.problems import evaluate
+    from designopt.studies.serial import blocks
 
     job._PROBLEMS.clear()
     evaluate._SCORERS.clear()
+    blocks._PROGRAMS.clear()
     jax.clear_caches()
     gc.collect()

@@ -17,7 +17,7 @@ import pytest
 
 from designopt.app.config import validate
 from designopt.core.keys import streams
-from designopt.studies.serial import bodies, taskindex
+from designopt.studies.serial import blocks, bodies
 
 jax.config.update("jax_enable_x64", True)
 ROOT = Path(__file__).resolve().parents[1]
@@ -77,7 +77,7 @@ def _solve(study: dict, x: list[float], obstacles: list[dict]) -> tuple[np.ndarr
                       "obstacles": obstacles}  # fmt: skip
     c = validate({"study": s, "optimizer": {"name": "ptpso", "n_particles": 4, "n_iters": 1},
                   "precision": "float64", "seed": 5}, "test")  # fmt: skip
-    out = taskindex.solution(c.study, x, streams(c.seed))
+    out = blocks.solution(c.study, x, streams(c.seed))
     return out["target_p"], out["success"]
 
 

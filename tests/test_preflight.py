@@ -36,12 +36,13 @@ def test_memory_terms_by_hand():
 
 def test_study_costs_by_hand():
     """The serial task study's IK (PUMA 560: 6 joints, 6×6 Jacobian, tool axis, n_best 2,
-    4096 database entries, three slot phases) and master9's fused chunk."""
+    4096 database entries; a block of 16 designs × 256 targets: 1024 slots, two slot
+    phases) and master9's fused chunk."""
     cfg = load(ROOT / "configs/puma560_task.yaml")[0]
     c = get("serial").cost(cfg.study)
-    assert (c.samples, c.chunk) == (2048, 1024)
+    assert (c.samples, c.chunk, c.designs) == (2048, 256, 16)
     assert preflight.extra(c) == (8 * 3 * (9 + 2 * 36), 8 * 12 * 4096,
-                                  int((250 + 3 * (40 + 4.6 * 36)) * MiB))  # fmt: skip
+                                  int((250 + 2 * (40 + 4.6 * 36)) * 1024 / 4096 * MiB))  # fmt: skip
     joint = load(ROOT / "configs/planar2r.yaml")[0]
     assert preflight.extra(get("serial").cost(joint.study)) == (24 * 2 * 2, 0, 0)
     m9 = load(ROOT / "configs/master9.yaml")[0]
@@ -88,8 +89,8 @@ def test_estimate_within_1_5x_of_the_measured_peak(tmp_path):
     """A small task job (planar 2R; 16 designs × 512 targets fill the IK's three slot
     phases, as a swarm does): the dry run's estimate and the real run's peak resident set
     (the child's VmHWM; --no-figures: figures fork children) agree within 1.5×. Its
-    peak is mostly XLA compiling the IK (0.8 GB measured, 0.93 GB estimated; the old
-    0.5 GB + 128 B model said 0.54 GB)."""
+    peak is mostly XLA compiling the IK: 0.54 GB measured with the block program of 16
+    designs × 256 targets (0.8 GB when the 16 designs × 512 targets were one program)."""
     cfg = tmp_path / "small.yaml"
     cfg.write_text(SMALL_TASK)
     cli = [sys.executable, "-m", "designopt", "run", str(cfg)]

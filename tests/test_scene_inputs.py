@@ -104,22 +104,22 @@ def test_a_scene_edit_runs_in_the_same_program(make, X):
 
 
 def test_the_figures_solution_of_an_edited_scene_reuses_its_program():
-    """taskindex.solution (the figures', the report's and the archive's per-target
-    solve) keys its program by the structure: an edited scene runs in the program
-    already compiled and gives what a fresh program gives."""
-    from designopt.studies.serial import taskindex
+    """blocks.solution (the figures', the report's and the archive's per-target
+    solve) runs the structure's block program (``blocks``): an edited scene runs in the
+    program already compiled and gives what a fresh program gives."""
+    from designopt.studies.serial import blocks, taskindex
 
     a, b = (validate(copy.deepcopy(_puma(e)), "test") for e in (False, True))
     assert taskindex.structure_key(a.study) == taskindex.structure_key(b.study)
     x = [0.43, 0.43, 0.4]
-    taskindex._SOLVERS.clear()
-    sa = taskindex.solution(a.study, x, streams(a.seed))
-    (_, run), = taskindex._SOLVERS.values()
+    blocks._PROGRAMS.clear()
+    sa = blocks.solution(a.study, x, streams(a.seed))
+    (_, run), = blocks._PROGRAMS.values()
     n = run._cache_size()
-    sb = taskindex.solution(b.study, x, streams(b.seed))
-    assert len(taskindex._SOLVERS) == 1 and run._cache_size() == n
-    taskindex._SOLVERS.clear()
-    fresh = taskindex.solution(b.study, x, streams(b.seed))
+    sb = blocks.solution(b.study, x, streams(b.seed))
+    assert len(blocks._PROGRAMS) == 1 and run._cache_size() == n
+    blocks._PROGRAMS.clear()
+    fresh = blocks.solution(b.study, x, streams(b.seed))
     for k in fresh:
         np.testing.assert_array_equal(sb[k], fresh[k], err_msg=k)
     assert not np.array_equal(sa["target_p"], sb["target_p"])

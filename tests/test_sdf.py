@@ -587,7 +587,7 @@ def test_planar_arm_reach_with_a_mesh_obstacle():
     capsules off the mesh (the exact distance, by dense sampling of the links), except
     where that distance is within the stated bound of zero."""
     from designopt.core.keys import streams
-    from designopt.studies.serial import taskindex
+    from designopt.studies.serial import blocks
 
     mesh = {"shape": "mesh", "file": "data/organ.stl", "xyz": [0.7, 0.25, 0.0],
             "rpy": [0, 0, 20], "scale": 2.5, "resolution": 48}  # fmt: skip
@@ -607,7 +607,7 @@ def test_planar_arm_reach_with_a_mesh_obstacle():
         "precision": "float64", "seed": 3}  # fmt: skip
     cfg = validate(raw, "test", folder=ROOT / "configs")
     l1, l2 = 0.9, 0.8
-    out = taskindex.solution(cfg.study, {"l1": l1, "l2": l2}, streams(cfg.seed))
+    out = blocks.solution(cfg.study, {"l1": l1, "l2": l2}, streams(cfg.seed))
     p, got = out["target_p"], out["success"]
     ob = cfg.study.collision.obstacles[0]
     v, f = sdf.load_mesh(ob.file)

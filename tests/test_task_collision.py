@@ -224,7 +224,7 @@ def test_the_tool_axis_passes_through_the_port_on_a_urdf_arm():
     import yaml
 
     from designopt.kinematics import urdf as U
-    from designopt.studies.serial import taskindex
+    from designopt.studies.serial import blocks
     from designopt.studies.serial.commands import set_values
 
     path = Path(__file__).parents[1] / "configs" / "urdf_puma560_port.yaml"
@@ -233,7 +233,7 @@ def test_the_tool_axis_passes_through_the_port_on_a_urdf_arm():
     c = validate(cfg, str(path))
     s = c.study
     x = {"a2": 0.43, "d4": 0.43, "l_tool": 0.4}
-    sol = taskindex.solution(s, x, streams(c.seed))
+    sol = blocks.solution(s, x, streams(c.seed))
     ok = sol["success"]
     assert ok.mean() > 0.5
     ref = U.Reference(U.export_text(s.chain.urdf_text, set_values(s, x), "port"))

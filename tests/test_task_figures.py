@@ -19,7 +19,7 @@ from PIL import Image
 
 import designopt
 from designopt.figures import canvas, html
-from designopt.studies.serial import drawing, report, taskindex
+from designopt.studies.serial import blocks, drawing, report
 from designopt.studies.serial import figures as serial_figs
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -60,7 +60,7 @@ def test_cloud_is_the_final_design_at_its_ik_solutions(run):
     _, rec = run
     l1, l2 = rec.x["l1"], rec.x["l2"]
     c = serial_figs.cloud(rec)
-    sol = taskindex.solution(rec.config.study, rec.x, rec.keys())
+    sol = blocks.solution(rec.config.study, rec.x, rec.keys())
     p, ok, flag = c["xyz"], ~c["flag"], c["flag"]
     N = len(p)
     assert N == 256 and p.shape == (N, 3) and np.all(p[:, 2] == 0)
@@ -100,7 +100,7 @@ def test_task_figure_shows_targets_by_inv_k_and_unreached(run, record, tmp_path)
     (fig,) = [f for n, f in record if n == "task"]
     (ax,) = [a for a in fig.axes if not hasattr(a, "_colorbar")]
     dots, crosses = ax.collections
-    sol = taskindex.solution(rec.config.study, rec.x, rec.keys())
+    sol = blocks.solution(rec.config.study, rec.x, rec.keys())
     ok = sol["success"]
     p = sol["target_p"]
     got = dots.get_offsets()
@@ -149,7 +149,7 @@ def test_task_figure_draws_the_arm_at_its_representative_targets(run, record, tm
     serial_figs.draw_task(rec, tmp_path)
     (fig,) = [f for n, f in record if n == "task"]
     (ax,) = [a for a in fig.axes if not hasattr(a, "_colorbar")]
-    sol = taskindex.solution(rec.config.study, rec.x, rec.keys())
+    sol = blocks.solution(rec.config.study, rec.x, rec.keys())
     ok, ik = sol["success"], sol["inv_k"]
     reps = drawing.representatives(sol)
     assert [n for n, _ in reps] == ["worst-conditioned", "median", "best-conditioned"]
@@ -178,7 +178,7 @@ def test_task_report_slider_moves_the_arm(run, tmp_path):
     from designopt.figures.html import robot as hrobot
 
     out, rec = run
-    sol = taskindex.solution(rec.config.study, rec.x, rec.keys())
+    sol = blocks.solution(rec.config.study, rec.x, rec.keys())
     view = report.run_view(rec)
     picks = drawing.slider_targets(sol)
     assert [p.label for p in view.poses] == [lab for lab, _ in picks] and len(picks) >= 5

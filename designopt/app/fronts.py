@@ -61,14 +61,20 @@ def objective_problem(problem: Problem, front: Mapping[str, Any]) -> Problem:
     fn0 = problem.fn
     na = problem.na_range  # an n/a index ranks worst (the archive keeps its NaN)
 
-    def fn(params, X, key):
-        f, aux = fn0(params, X, key)
-        aux = {"f": f, **aux, **{k: X @ jnp.asarray(w, X.dtype) for k, w in lin.items()}}
-        F = jnp.stack([na_worst(aux[k], *na[k], g > 0) if k in na else aux[k]
-                       for k, g in zip(names, sg, strict=True)], -1)  # fmt: skip
-        return F * jnp.asarray(sg, F.dtype), aux
+    def objectives(scoring):  # scoring(params, X, key, *values) → (f, aux): → (F, aux)
+        def fn(params, X, key, *values):
+            f, aux = scoring(params, X, key, *values)
+            aux = {"f": f, **aux, **{k: X @ jnp.asarray(w, X.dtype) for k, w in lin.items()}}
+            F = jnp.stack([na_worst(aux[k], *na[k], g > 0) if k in na else aux[k]
+                           for k, g in zip(names, sg, strict=True)], -1)  # fmt: skip
+            return F * jnp.asarray(sg, F.dtype), aux
 
-    return dataclasses.replace(problem, fn=fn, n_objectives=len(names), shard_samples=None)
+        return fn
+
+    st = problem.staged  # its reduction gives the front's objectives too
+    st = None if st is None else st._replace(reduce=objectives(st.reduce))
+    return dataclasses.replace(problem, fn=objectives(fn0), n_objectives=len(names),
+                               shard_samples=None, staged=st)  # fmt: skip
 
 
 def reference(cfg: Any) -> np.ndarray | None:
@@ -123,9 +129,12 @@ def rescoring_problem(job: Any) -> tuple[Problem, int]:
     cost = job.study.cost(cfg.study)
     n = cfg.front.n_samples or 4 * int(cost.samples)
     c = cfg
+    # a study scoring in blocks (Cost.designs) keeps its chunk: the re-scoring runs in the
+    # search's own compiled block program
+    keep = {cost.chunk_key: int(cost.chunk)} if cost.designs else {}
     if cost.samples > 1:
         try:
-            c = sweeps.apply(cfg, {cost.samples_key: n}, job.where)
+            c = sweeps.apply(cfg, {cost.samples_key: n} | keep, job.where)
         except (ValueError, ConfigError) as e:
             why = str(e).removeprefix(job.where + ": ")
             raise ConfigError(f"{job.where}: key 'front.n_samples': {why}") from None

@@ -145,6 +145,8 @@ def estimate(cfg: Any, study: Study, n_designs: int = 0, members: int = 1) -> Es
             rescore = (min(cfg.front.max_points, swarm), max(1, min(n_front, int(cost.chunk))))
     key, designs = max(flight.items(), key=lambda kv: kv[1])
     itemsize = 4 if getattr(cfg, "precision", "float64") == "float32" else 8
+    if cost.designs:  # a study scoring in blocks holds one block's designs at a time
+        designs, rescore = min(designs, cost.designs), (min(rescore[0], cost.designs), rescore[1])
     parts = memory(cost, designs, per_chunk, host, front, rescore, itemsize)
     device = parts["buffers"]
     total = sum(parts.values())

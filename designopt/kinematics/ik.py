@@ -516,7 +516,7 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
           opts: IKOptions = DEFAULTS,
           score: Callable[[jax.Array], jax.Array] | None = None,
           accept: Callable[[jax.Array, jax.Array, jax.Array], jax.Array] | None = None,
-          ) -> IKResult:  # fmt: skip
+          t0: jax.Array | int = 0) -> IKResult:  # fmt: skip
     """IK of the same T targets (p_t (T, 3), R_t (T, 3, 3) or None) for M designs
     X (M, D), or of each design's own T targets (p_t (M, T, 3), R_t (M, T, 3, 3)): every
     field has leading axes (M, T). The database draws and the seeds' hashes are shared
@@ -527,7 +527,10 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
     :attr:`IKResult.inv_k`). ``accept(m, t, q)`` (design indices (B,), target indices
     (B,), joints (B, n) → bool (B,)), e.g. "collision-free": a converged seed it refuses
     is dropped like one that failed and the target goes on with its next seed; only
-    accepted solutions count as successes (and towards ``n_best``)."""
+    accepted solutions count as successes (and towards ``n_best``). ``t0`` (an array
+    input): the index of the first target in the task's whole list; a target's random
+    seeds hash its index there, so a task solved in chunks of any size gets the seeds it
+    gets in one piece."""
     _check(mode, R_t, opts)
     X = jnp.asarray(X)
     per_design = p_t.ndim == 3
@@ -558,6 +561,7 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         near = jnp.zeros((M, T, 1), jnp.int32)
     attempts = max(n_near + opts.n_random * opts.rounds, 1)
     salt = jax.random.bits(k_hash, (), jnp.uint32)
+    t_base = jnp.asarray(t0).astype(jnp.uint32)  # the chunk's first target in the task
     xT = X.T  # (D, M)
     # (3, T) or, per design, (3, M·T) by item; R: row 3i + j holds R[i, j]
     ptT = p_t.reshape(-1, 3).T
@@ -576,7 +580,7 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         """Joints (n, B) of seed a of items i: a nearest entry, then hashed ones."""
         m, t = split(i)
         a_near = near[m, t, jnp.minimum(a, near.shape[2] - 1)]
-        h = (t.astype(jnp.uint32) * jnp.uint32(2654435761)
+        h = ((t.astype(jnp.uint32) + t_base) * jnp.uint32(2654435761)
              ^ (a.astype(jnp.uint32) + salt) * jnp.uint32(2246822519))  # fmt: skip
         h = h ^ (h >> 15)
         a_rand = (h % jnp.uint32(opts.n_db)).astype(jnp.int32)

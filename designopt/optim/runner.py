@@ -393,6 +393,13 @@ def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress
     ref = None if ref_point is None else jnp.asarray(ref_point, dtype)
 
     def objective(Xf, ek):  # the separate objective program: (f, v) of every group
+        if problem.staged is not None and plan is None:  # the study's fixed-shape programs
+            from designopt.problems.evaluate import staged_scores
+
+            R, N, D = Xf.shape
+            f, _, v = staged_scores(problem, np.asarray(Xf).reshape(R * N, D), pparams)
+            return (jnp.asarray(f.reshape((R, N) + f.shape[1:])),
+                    jnp.asarray(v.reshape(R, N), f.dtype))  # fmt: skip
         f, _, v = evaluate_batch(pparams, Xf, ek, fn=problem.fn, constraints=problem.constraints)
         return f, v
 

@@ -24,7 +24,7 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from functools import partial
-from typing import Any
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -41,6 +41,22 @@ def total_violation(g: Array) -> Array:
     g = jnp.asarray(g)
     v = jnp.sum(jnp.maximum(g, 0.0), axis=-1)
     return jnp.where(jnp.isnan(v), jnp.inf, v)
+
+
+class Staged(NamedTuple):
+    """A problem's scoring in two stages (``Problem.staged``, optional), for a study whose
+    costly part has a shape of its own (the task's IK: designs × targets): ``values``
+    runs on the host and computes that part of exactly ``designs`` designs X (designs, D)
+    through programs of one fixed shape each, whatever called it (the search, a front's
+    re-scoring, ``eval``, ``scan``, the normalisation probe, figures), and gives a
+    pytree of arrays; ``reduce(params, X, key, values)`` is pure and gives what ``fn``
+    gives: ``fn(params, X, key) == reduce(params, X, key, values(params, X))``. The
+    scoring (``designopt.problems.evaluate.staged_scores``) calls them block by block
+    of ``designs`` rows, the last one padded."""
+
+    values: Callable[[Any, Array], Any]
+    reduce: Callable[..., tuple[Array, dict[str, Array]]]
+    designs: int
 
 
 @dataclass(frozen=True, eq=False)
@@ -66,6 +82,9 @@ class Problem:
     """Indices that may be n/a (NaN, with NaN SE: a ratio over too few items) and the
     range of each: a search ranks an n/a value at the end of its range that is worst
     for its sense (:func:`na_worst`); the archive keeps the NaN."""
+    staged: Staged | None = None
+    """The scoring in two stages (:class:`Staged`): one compiled program per structure
+    for every phase; None: ``fn`` in one program per shape (``evaluate_batch``)."""
 
     def __post_init__(self) -> None:
         lo, hi = np.asarray(self.lower, np.float64), np.asarray(self.upper, np.float64)

@@ -25,6 +25,9 @@ def score(problem: Problem, X: np.ndarray, batch: int | None = None, plan: Any =
     of that shape through the run's own compiled objective (``evaluate_batch``), so
     scoring a run's designs compiles nothing new."""
     X = np.asarray(X, np.float64)
+    if problem.staged is not None and plan is None:  # one program per structure
+        f, aux, v = staged_scores(problem, X, dtype=dtype)
+        return {"f": f} | aux | ({} if problem.constraints is None else {"violation": v})
     # the run's program where at least half of its rows are real designs (a sweep's run
     # shape holds all members' runs: padding a member's few designs to it costs more)
     if eval_shape is not None and plan is None and 2 * len(X) >= eval_shape[0] * eval_shape[1]:
@@ -73,7 +76,50 @@ def _score_groups(problem: Problem, X: np.ndarray, shape: tuple[int, int],
     return {k: np.concatenate([o[k] for o in outs]) for k in outs[0]}
 
 
+def staged_scores(problem: Problem, X: Any, params: Any = None, dtype: Any = None
+                  ) -> tuple[np.ndarray, dict[str, np.ndarray], np.ndarray]:  # fmt: skip
+    """(f, aux, v) of designs X (n, D) through the problem's two stages
+    (``Problem.staged``): blocks of ``staged.designs`` rows (the last one padded with its
+    last design), each block's ``values`` (the study's fixed-shape programs), then the
+    block's ``reduce`` with the total constraint violation (one jitted program per
+    (reduce, constraints), key 0). ``params``: the problem's unless given (a runner's
+    placed copy); ``dtype``: of the designs (the run's)."""
+    st = problem.staged
+    assert st is not None
+    params = problem.params if params is None else params
+    X = np.asarray(X)
+    X = X.astype(X.dtype if dtype is None else np.dtype(dtype))
+    n, B = X.shape[0], st.designs
+    red = _reducer(st.reduce, problem.constraints)
+    key = jax.random.key(0)
+    outs = []
+    for i in range(0, n, B):  # dispatched asynchronously: the blocks queue up
+        Xi = X[i : i + B]
+        if len(Xi) < B:
+            Xi = np.concatenate([Xi, np.repeat(Xi[-1:], B - len(Xi), 0)])
+        Xj = jnp.asarray(Xi)
+        outs.append(red(params, Xj, key, st.values(params, Xj)))
+    f = np.concatenate([np.asarray(o[0]) for o in outs])[:n]
+    aux = {k: np.concatenate([np.asarray(o[1][k]) for o in outs])[:n] for k in outs[0][1]}
+    v = np.concatenate([np.asarray(o[2]) for o in outs])[:n]
+    return f, aux, v
+
+
 _SCORERS: dict[Any, Any] = {}
+
+
+def _reducer(reduce: Callable, constraints: Callable | None) -> Callable:
+    """``reduce`` and the total violation of ``constraints``, jitted (cached per pair)."""
+    key = ("staged", reduce, constraints)
+    if key not in _SCORERS:
+        from designopt.problems.base import violation_of
+
+        def run(params, X, k, values):
+            f, aux = reduce(params, X, k, values)
+            return f, aux, violation_of(constraints, params, X, aux)
+
+        _SCORERS[key] = jax.jit(run)
+    return _SCORERS[key]
 
 
 def _scorer(fn: Callable, constraints: Callable | None = None) -> Callable:

@@ -57,6 +57,8 @@ def probe_bounds(
     n_norm: int,
     keys: Mapping[str, jax.Array],
     dtype: Any,
+    staged: Any = None,
+    constraints: Callable | None = None,
 ) -> np.ndarray:
     """(len(names), 2) min and max of the indices ``names`` over ``n_norm`` Halton designs
     of the box [lower, upper] (shifted by the ``normalisation`` stream), scored once by
@@ -65,10 +67,20 @@ def probe_bounds(
     studies' functions draw their samples from ``params`` and ignore the key). An index
     that is flat over the sample gets max = min + 1 (no scaling, never a division by 0);
     n/a values (NaN: a ratio over too few items) are left out, and an index n/a at every
-    design gets [0, 1]."""
+    design gets [0, 1]. ``staged`` (``Problem.staged``) and ``constraints``: the
+    problem's two-stage scoring and constraints, which the probe then shares with the
+    run (``problems.evaluate.staged_scores``: the same programs)."""
     Xn = mc.box_samples(keys["normalisation"], lower, upper, n_norm, "halton", dtype)
     shape = _SHAPE.get()
-    if shape is None:
+    if staged is not None:
+        from designopt.problems.base import Problem
+        from designopt.problems.evaluate import staged_scores
+
+        box = Problem(tuple(f"x{i}" for i in range(len(lower))), lower, upper, fn, params,
+                      constraints=constraints, staged=staged)  # fmt: skip
+        sub = staged_scores(box, np.asarray(Xn), dtype=dtype)[1]
+        vals = [sub[k] for k in names]
+    elif shape is None:
         _, sub = jax.jit(fn)(params, Xn, keys["samples"])
         vals = [np.asarray(sub[k]) for k in names]  # on the host: no reduction to compile
     else:

@@ -39,11 +39,24 @@ def quadratic(problem: Problem, weight: float) -> Problem:
         raise ValueError(f"penalty weight must be > 0, got {weight}")
     fn, cons = problem.fn, problem.constraints
 
-    def penalised(params: Any, X: Array, key: Any) -> tuple[Array, dict[str, Array]]:
-        f, aux = fn(params["inner"], X, key)
+    def add(params: Any, X: Array, f: Array, aux: dict[str, Array]):
         pen = params["weight"] * penalty_sum(constraint_values(cons, params["inner"], X, aux))
         return f + pen.astype(f.dtype), aux | {"penalty": pen}
 
+    def penalised(params: Any, X: Array, key: Any) -> tuple[Array, dict[str, Array]]:
+        return add(params, X, *fn(params["inner"], X, key))
+
+    st = problem.staged  # its two stages on the inner params, the penalty in the second
+    if st is not None:
+        values0, reduce0 = st.values, st.reduce
+
+        def values(params: Any, X: Array) -> Any:
+            return values0(params["inner"], X)
+
+        def reduce(params: Any, X: Array, key: Any, vals: Any):
+            return add(params, X, *reduce0(params["inner"], X, key, vals))
+
+        st = st._replace(values=values, reduce=reduce)
     params = {"inner": problem.params, "weight": jnp.asarray(weight)}
     info = problem.info | {"constraint_handling": "quadratic penalty", "penalty_weight": weight}
-    return replace(problem, fn=penalised, params=params, info=info, constraints=None)
+    return replace(problem, fn=penalised, params=params, info=info, constraints=None, staged=st)

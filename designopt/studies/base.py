@@ -108,7 +108,9 @@ class Cost:
     keys a user lowers (printed in the estimate's messages). The memory a design costs:
     ``bytes_per_sample`` per design and sample in flight (float64's; a float32 job counts
     half), ``per_design`` beside them, and ``program``, the resident size of the study's
-    own large compiled program, when it has one (docs/faults.md, "pre-flight")."""
+    own large compiled program, when it has one (docs/faults.md, "pre-flight"); ``designs``
+    caps the designs in flight for a study that scores them in blocks (the task's IK:
+    ``serial.blocks.DESIGNS``), 0 when every design of a call is in flight."""
 
     samples: int = 1
     chunk: int = 1
@@ -119,6 +121,7 @@ class Cost:
     bytes_per_sample: int = 128  # app.preflight.BYTES_PER_DESIGN_SAMPLE
     per_design: int = 0
     program: int = 0
+    designs: int = 0  # designs in flight at most (a study scoring in blocks); 0: all
 
 
 @dataclass(frozen=True)

@@ -48,17 +48,17 @@ def _targets(s: SerialSettings, x: Any, keys: Any, dtype: Any) -> dict[str, Any]
     without ``arms``) and target ``success`` (A, N) 0/1, ``q`` (A, N, n) in the kernel's
     units (rad for a revolute joint, the chain's length unit for a prismatic one),
     ``inv_k`` and, under ``collision``, ``clearance`` (A, N), beside ``target_p`` (N, 3)
-    in the world frame; the run's own targets and IK seeds (``taskindex.solution``, the
+    in the world frame; the run's own targets and IK seeds (``blocks.solution``, the
     program the figures use)."""
     if s.indices.measure != "task":
         return None
     import numpy as np
 
-    from designopt.studies.serial import taskindex
+    from designopt.studies.serial import blocks
     from designopt.studies.serial.drawing import joint_names
     from designopt.studies.serial.settings import length_unit
 
-    sol = taskindex.solution(s, x, keys, dtype)
+    sol = blocks.solution(s, x, keys, dtype)
 
     def per_arm(v: Any) -> Any:  # (N, ...) of one arm → (1, N, ...)
         return v if s.arms is not None else v[None]
@@ -84,8 +84,9 @@ def _aliases(s: SerialSettings) -> dict[str, str]:
 def _cost(s) -> Cost:
     """Monte-Carlo cost per design (pre-flight): the index samples, ``chunk`` in flight,
     and the normalisation probes when the objective normalises. Under ``measure: task``
-    a sample is a target (``front.n_samples`` counts targets too) and a chunk holds
-    ``indices.chunk`` targets (1024 unless given).
+    a sample is a target (``front.n_samples`` counts targets too), a chunk holds
+    ``indices.chunk`` targets (256 unless given) and a block :data:`blocks.DESIGNS`
+    designs (``designs``: the block program, ``blocks``, holds no more in flight).
 
     The memory behind them goes to the pre-flight as ``Cost`` attributes (it has no fields
     for them; ``designopt.app.preflight.extra``), bytes measured with XLA's
@@ -104,7 +105,10 @@ def _cost(s) -> Cost:
       slots: three for a swarm). The terms were measured when the LM step was compiled
       once per slot phase (0.45 GB for the planar 2R, 0.64-0.7 GB with two phases and
       0.83-0.97 GB with three for the PUMA 560 with a tool axis); the step is one copy
-      now (busy chunks of B/8 slots, issue #36), so the estimate errs high, and
+      now (busy chunks of B/8 slots, issue #36), so the estimate errs high. All of it
+      is scaled by the block program's slots over those 4096: a block of 16 designs ×
+      256 targets runs 1024 slots (issue #46; the planar 2R job below peaked at 0.54 GB
+      against 0.8 GB when its 16 designs × 512 targets were one program), and
       ``tests/test_preflight.py`` checks it within 1.5× of a measured peak.
 
     With ``arms`` every arm solves every target: the per-target and per-design bytes are
@@ -116,15 +120,21 @@ def _cost(s) -> Cost:
         from designopt.studies.serial import taskindex
 
         o = s.task.ik
+        from designopt.studies.serial import blocks
+
         n, c = taskindex.n_targets(s), taskindex.chunk(s)
         r = 3 if taskindex.mode(s) == "position" else 6
-        phases = len(ik._phases(o.slots or 4096))  # the measured model's terms (errs high)
+        items = blocks.DESIGNS * c  # the block program's (design, target) pairs
+        slots = min(items, o.slots or max(1024, min(4096, items // 4)))  # ik.solve's
+        phases = len(ik._phases(slots))
         A = 1 if s.arms is None else len(s.arms)  # each arm solves every target
         seg = 0 if s.arms is None else 8 * 6 * n_q  # the arms' kept capsules
         mem = {
             "bytes_per_sample": A * (8 * (o.n_best + 1) * (9 + 2 * rows * n_q) + seg),
             "per_design": A * 8 * (n_q + 6) * o.n_db,
-            "program": int((250 + phases * (40 + 4.6 * n_q * r)) * (1 << 20)),
+            # measured at 4096 slots; the block's 1024 compile in about a quarter
+            "program": int((250 + phases * (40 + 4.6 * n_q * r)) * slots / 4096 * (1 << 20)),
+            "designs": blocks.DESIGNS,
         }
     else:
         n, c = ind.n_samples, min(ind.chunk, ind.n_samples)

@@ -224,11 +224,11 @@ def design_pose(s: SerialSettings, mech: Mechanism, x: Any,
                 keys: Mapping[str, Any]) -> tuple[str, np.ndarray, list[np.ndarray]]:  # fmt: skip
     """Where one design is drawn on its own (a front's designs): under a task, at one
     representative tuple of targets of its IK solution on the run's targets
-    (``taskindex.solution``, :func:`representative`); else at the home pose. (label,
+    (``blocks.solution``, :func:`representative`); else at the home pose. (label,
     joints (A, n), targets)."""
-    from designopt.studies.serial import taskindex
+    from designopt.studies.serial import blocks
 
-    sol = taskindex.solution(s, x, keys) if s.indices.measure == "task" else None
+    sol = blocks.solution(s, x, keys) if s.indices.measure == "task" else None
     return representative(s, mech, sol, keys)
 
 

@@ -25,7 +25,7 @@ import numpy as np
 from designopt.figures import MAP_RESOLUTION, convergence, robot, save, style
 from designopt.numerics import montecarlo as mc
 from designopt.results import RunRecord
-from designopt.studies.serial import drawing, taskindex
+from designopt.studies.serial import blocks, drawing, taskindex
 from designopt.studies.serial.mechanism import Mechanism, build
 from designopt.studies.serial.objective import measures
 from designopt.studies.serial.settings import ROWS, SerialSettings, UrdfChain, length_unit, units
@@ -319,8 +319,8 @@ def _uniform_q(mech: Mechanism, rec: RunRecord, n: int) -> np.ndarray:
 
 def task_solution(rec: RunRecord) -> dict[str, np.ndarray]:
     """The final design's per-target solution on the run's targets
-    (``taskindex.solution``): targets, success, 1/k, joints."""
-    return taskindex.solution(rec.config.study, rec.x, rec.keys())
+    (``blocks.solution``): targets, success, 1/k, joints."""
+    return blocks.solution(rec.config.study, rec.x, rec.keys())
 
 
 def plane(p: np.ndarray, rtol: float = 1e-9) -> tuple[np.ndarray, tuple[str, str]] | None:

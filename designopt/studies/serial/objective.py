@@ -30,10 +30,11 @@ import numpy as np
 from designopt.kinematics.conditioning import inv_cond
 from designopt.numerics import montecarlo as mc
 from designopt.problems import normalise
-from designopt.problems.base import Problem, na_worst, reads_indices
-from designopt.studies.serial import taskindex
+from designopt.problems.base import Problem, Staged, na_worst, reads_indices
+from designopt.studies.serial import blocks, taskindex
 from designopt.studies.serial.mechanism import Mechanism, build
 from designopt.studies.serial.settings import IndexConstraint, SerialSettings
+from designopt.studies.serial.taskindex import design_full
 
 
 def measures(
@@ -62,22 +63,24 @@ def chunk_sums(mech: Mechanism, s: SerialSettings, full: jnp.ndarray, q: jnp.nda
             mc.power_sums(adet, jnp.ones_like(adet)))  # fmt: skip
 
 
-def design_full(params: Mapping[str, Any], X: jax.Array, dtype: Any) -> jax.Array:
-    """(M, P) kernel parameters: the variables X (M, V) then the fixed values, deg → rad."""
-    X = X.astype(dtype)
-    fixed = jnp.broadcast_to(params["fixed"].astype(dtype), (X.shape[0], params["fixed"].shape[0]))
-    return jnp.concatenate([X, fixed], axis=1) * params["scale"].astype(dtype)
-
-
-def build_task_fn(mech: Mechanism, s: SerialSettings, dtype: Any):
-    """The swarm function under ``measure: task``: the task indices with their SEs and
-    f = Σ w·index. f's SE is the spread of the per-target sum of its mean-type terms
-    (exact: they share the targets) plus |w|·SE for ``gci_q05`` (a bound)."""
+def build_task_fn(mech: Mechanism, s: SerialSettings, dtype: Any) -> tuple[Any, Staged]:
+    """(the swarm function under ``measure: task``, the same in two stages): the task
+    indices with their SEs and f = Σ w·index. f's SE is the spread of the per-target sum
+    of its mean-type terms (exact: they share the targets) plus |w|·SE for ``gci_q05``
+    (a bound). The stages (``Problem.staged``): the per-target values in one compiled
+    block program per structure (``blocks``), then their reduction to the indices."""
     weights = s.weights()
     names, w = list(weights), list(weights.values())
 
     def fn(params, X, key):
         per = taskindex.per_target(mech, s, params, design_full(params, X, dtype), dtype)
+        return from_per(params, per)
+
+    def reduce(params, X, key, chunks):
+        return from_per(params, blocks.assembled(s, chunks, X.shape[0],
+                                                 params["target_p"].shape[0]))  # fmt: skip
+
+    def from_per(params, per):
         est = taskindex.estimates_of(s, mech, per, params)
         out = {}
         for k, (v, se) in est.items():
@@ -99,7 +102,7 @@ def build_task_fn(mech: Mechanism, s: SerialSettings, dtype: Any):
                 f_se = f_se + abs(w[i]) * se / jnp.abs(b[i, 1] - b[i, 0])
         return f, out | {"f_se": f_se}
 
-    return fn
+    return fn, Staged(blocks.values(s, dtype), reduce, blocks.DESIGNS)
 
 
 def search_value(name: str, v: jax.Array, minimised: bool) -> jax.Array:
@@ -207,7 +210,11 @@ def problem(s: SerialSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Pro
     task = s.indices.measure == "task"
     if task and dtype != jnp.float64:  # the config refuses it (needs_float64); the API too
         raise ValueError(f"{s.needs_float64()}: set precision: float64")
-    fn = build_task_fn(mech, s, dtype) if task else build_fn(mech, s, dtype)
+    staged = None
+    if task:
+        fn, staged = build_task_fn(mech, s, dtype)
+    else:
+        fn = build_fn(mech, s, dtype)
     params = {
         "fixed": jnp.asarray(mech.fixed, dtype),
         "scale": jnp.asarray(mech.scale, dtype),
@@ -221,11 +228,14 @@ def problem(s: SerialSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Pro
 
         params |= (taskindex.targets(s, keys["samples"], dtype) | bodies.base_params(s, mech, dtype)
                    | taskindex.scene_params(s, dtype, mech))  # fmt: skip
+    # the constraints' arrays join params first: the probe's params are the run's
+    cons, archived = constraints_fn(s, names, params, dtype)
     norm_bounds = None
     b = np.asarray([[0.0, 1.0]] * len(weights))  # params["bounds"]: unit rows unless normalised
     if s.objective.get("normalize", False):
         n_norm = int(s.objective.get("n_norm", 64))
-        b = normalise.probe_bounds(fn, params, tuple(weights), lower, upper, n_norm, keys, dtype)
+        b = normalise.probe_bounds(fn, params, tuple(weights), lower, upper, n_norm, keys, dtype,
+                                   staged=staged, constraints=cons)  # fmt: skip
         params["bounds"] = jnp.asarray(b, dtype)
         norm_bounds = {k: b[i].tolist() for i, k in enumerate(weights)}
     ind = s.indices
@@ -243,7 +253,6 @@ def problem(s: SerialSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Pro
         "norm_bounds": norm_bounds,
         "dtype": dtype.name,
     }
-    cons, archived = constraints_fn(s, names, params, dtype)
     if archived:
         info["constraints"] = archived
     if task:
@@ -251,7 +260,7 @@ def problem(s: SerialSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Pro
     typed = {"n_samples_used": n_used, "norm_bounds": b,
              "na_range": {k: v for k, v in taskindex.NA_WORST.items() if k in s.index_names()}}  # fmt: skip
     if task:  # the targets' indices need every target at once: no sample sharding
-        return Problem(names, lower, upper, fn, params, info, cons, **typed)
+        return Problem(names, lower, upper, fn, params, info, cons, staged=staged, **typed)
 
     def shard_samples(mesh: Any) -> Problem:
         sharded = build_fn(mech, s, dtype, mesh)

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from designopt.figures.robot import Scene
-from designopt.studies.serial import figures, taskindex
+from designopt.studies.serial import blocks, figures
 from designopt.studies.serial.drawing import (
     arms,
     design_pose,
@@ -67,7 +67,7 @@ def run_view(rec: Any):
         from designopt.figures.html.robot import Pose
         from designopt.studies.serial.drawing import arm_tuples, arms_scene
 
-        sol_all = taskindex.solution(s, rec.x, rec.keys())
+        sol_all = blocks.solution(s, rec.x, rec.keys())
         scene.targets = arms_scene(s, mech, x, sol_all, rec.keys(), budget=None).targets
         tup = arm_tuples(s, mech, x, sol_all, rec.keys(), budget=None)
         poses = [Pose(lab, row, [hover(s, a.label, q, None) for a, q in zip(row, qs, strict=True)])
@@ -77,7 +77,7 @@ def run_view(rec: Any):
             poses = [Pose("home pose", row, [hover(s, a.label, q0) for a in row])]
         what = "tuples of targets (one per arm): the tightest, the median and the loosest gap"
     elif s.indices.measure == "task":
-        sol = taskindex.solution(s, rec.x, rec.keys())
+        sol = blocks.solution(s, rec.x, rec.keys())
         p = np.asarray(sol["target_p"], np.float64)
         ts = task_scene(s, mech, x, sol, budget=None)
         scene.cone, scene.targets = ts.cone, ts.targets

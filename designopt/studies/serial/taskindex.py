@@ -20,6 +20,7 @@ the distribution-free ±1-SE band of the sample quantile).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import jax
@@ -119,11 +120,18 @@ def n_targets(s: SerialSettings) -> int:
     return len(reg.xyz()) if isinstance(reg, Points) else s.indices.n_samples
 
 
+CHUNK = 256
+"""Targets per chunk unless ``indices.chunk`` says otherwise: a run's 256 or more targets
+and its front's re-scoring (4 × as many) then go through one compiled program of
+:data:`blocks.DESIGNS` designs × 256 targets (``designopt.studies.serial.blocks``)."""
+
+
 def chunk(s: SerialSettings) -> int:
-    """Targets per chunk: ``indices.chunk`` when given, else 1024 (a target costs seeds ×
-    iterations × rounds configurations; 1024 keeps a 50-design swarm under ~1 GB)."""
+    """Targets per chunk: ``indices.chunk`` when given, else :data:`CHUNK` (at most the
+    task's count). The chunks' seeds are those of one piece (``ik.solve``'s ``t0``), so
+    the chunk changes no value, only the programs' shapes and memory."""
     ind = s.indices
-    return min(ind.chunk if "chunk" in ind.model_fields_set else 1024, n_targets(s))
+    return min(ind.chunk if "chunk" in ind.model_fields_set else CHUNK, n_targets(s))
 
 
 def targets(s: SerialSettings, key: jax.Array, dtype: Any) -> dict[str, jax.Array]:
@@ -137,17 +145,69 @@ def targets(s: SerialSettings, key: jax.Array, dtype: Any) -> dict[str, jax.Arra
     return {"target_p": p} | ({} if R is None else {"target_R": R})
 
 
+def design_full(params: Mapping[str, Any], X: jax.Array, dtype: Any) -> jax.Array:
+    """(M, P) kernel parameters: the variables X (M, V) then the fixed values, deg → rad."""
+    X = X.astype(dtype)
+    fixed = jnp.broadcast_to(params["fixed"].astype(dtype), (X.shape[0], params["fixed"].shape[0]))
+    return jnp.concatenate([X, fixed], axis=1) * params["scale"].astype(dtype)
+
+
 def per_target(mech: Mechanism, s: SerialSettings, params: dict[str, Any], full: jax.Array,
                dtype: Any, opts: ik.IKOptions | None = None) -> dict[str, jax.Array]:  # fmt: skip
     """Per arm, design and target (A, M, N) (A = 1 without ``arms``): success, converged,
     1/k, manipulability, joint margin (all 0 where unreached), clearance (under
     ``collision``: the kept solution's, 0 where unreached) and the joints q
     (A, M, N, n), for designs ``full`` (M, P) in kernel units; with ``arms`` also the
-    kept solutions' capsules in the world (``segments`` (A, M, N, L, 2, 3)). Targets go
-    through the IK in chunks (``lax.map``); the last chunk is padded with copies of the
-    last target and cut off again. ``opts``: the solver's options (default
-    :func:`options`). Under ``collision`` the IK keeps trying seeds until a converged
-    solution is collision-free (``bodies``)."""
+    kept solutions' capsules in the world (``segments`` (A, M, N, L, 2, 3)) and the tool
+    axes (``axis``). The targets go through :func:`chunk_values` in chunks of
+    :func:`chunk` (``lax.map``); the last chunk is padded with copies of the last target
+    and cut off again (:func:`chunked_targets`, :func:`assemble`). ``opts``: the solver's
+    options (default :func:`options`). Under ``collision`` the IK keeps trying seeds
+    until a converged solution is collision-free (``bodies``). (The staged scoring,
+    ``designopt.studies.serial.blocks``, calls :func:`chunk_values` chunk by chunk as a
+    program of its own: the same values.)"""
+    N, M = params["target_p"].shape[0], full.shape[0]
+    pc, Rc, t0 = chunked_targets(params, chunk(s), dtype)
+    out = jax.lax.map(lambda a: chunk_values(mech, s, params, full, a[0], a[1], a[2], dtype, opts),
+                      (pc, Rc, t0))  # each (n_chunks, A·M, C, ...)  # fmt: skip
+    return assemble(out, len(s.arms) if s.arms is not None else 1, M, N)
+
+
+def chunked_targets(params: dict[str, Any], C: int, dtype: Any, xp: Any = jnp
+                    ) -> tuple[Any, Any, Any]:  # fmt: skip
+    """The targets in chunks of C: (positions (n_chunks, C, 3), tool frames
+    (n_chunks, C, 3, 3) or None, each chunk's first target index (n_chunks,) int32), the
+    last chunk padded with copies of the last target (``xp``: jnp, or np on the host)."""
+    dt = np.dtype(dtype)
+    p = xp.asarray(params["target_p"]).astype(dt)
+    R = xp.asarray(params["target_R"]).astype(dt) if "target_R" in params else None
+    N = p.shape[0]
+    n_chunks = -(-N // C)
+    pad = n_chunks * C - N
+
+    def padded(a):
+        return xp.concatenate([a, xp.repeat(a[-1:], pad, 0)]) if pad else a
+
+    pc = padded(p).reshape(n_chunks, C, 3)
+    Rc = None if R is None else padded(R).reshape(n_chunks, C, 3, 3)
+    return pc, Rc, xp.arange(n_chunks, dtype=xp.int32) * C
+
+
+def assemble(out: dict[str, Any], A: int, M: int, N: int, xp: Any = jnp) -> dict[str, Any]:
+    """:func:`chunk_values`' outputs stacked over the chunks (n_chunks, A·M, C, ...) as
+    (A, M, N, ...) (the padded targets cut off; ``xp``: jnp, or np on the host)."""
+    return {k: xp.moveaxis(v, 0, 1).reshape(A, M, v.shape[0] * v.shape[2], *v.shape[3:])[:, :, :N]
+            for k, v in out.items()}  # fmt: skip
+
+
+def chunk_values(mech: Mechanism, s: SerialSettings, params: dict[str, Any], full: jax.Array,
+                 pt: jax.Array, Rt: jax.Array | None, t0: jax.Array, dtype: Any,
+                 opts: ik.IKOptions | None = None) -> dict[str, jax.Array]:  # fmt: skip
+    """:func:`per_target`'s values of designs ``full`` (M, P) at one chunk of C targets
+    (``pt`` (C, 3), ``Rt`` (C, 3, 3) or None; ``t0``: the index of its first target in
+    the task, which the IK's seeds hash): each (A·M, C, ...), arm-major. Reads the scene
+    (:func:`scene_params`), the joint limits, the arms' bases and the IK's key from
+    ``params``, never the targets."""
     from designopt.kinematics.task import port_frames
     from designopt.studies.serial import bodies
 
@@ -155,12 +215,7 @@ def per_target(mech: Mechanism, s: SerialSettings, params: dict[str, Any], full:
     opts = options(s) if opts is None else opts
     rows = ind.rows()
     lo, hi = params["q_lower"].astype(dtype), params["q_upper"].astype(dtype)
-    p = params["target_p"].astype(dtype)
-    R = params["target_R"].astype(dtype) if "target_R" in params else None
-    N, M = p.shape[0], full.shape[0]
-    C = chunk(s)
-    n_chunks = -(-N // C)
-    pad = n_chunks * C - N
+    M, C = full.shape[0], pt.shape[0]
     geo = bodies.geometry(s, mech)
     arms = s.arms is not None
     A = len(s.arms) if arms else 1
@@ -183,12 +238,6 @@ def per_target(mech: Mechanism, s: SerialSettings, params: dict[str, Any], full:
         X = jnp.tile(full, (A, 1))  # (A·M, P), arm-major
     else:
         X = full
-
-    def padded(a):
-        return jnp.concatenate([a, jnp.repeat(a[-1:], pad, 0)]) if pad else a
-
-    pc = padded(p).reshape(n_chunks, C, 3)
-    Rc = None if R is None else padded(R).reshape(n_chunks, C, 3, 3)
     key = jax.random.fold_in(params["sample_key"], 1)  # the IK's seeds: not the targets'
     sc = jnp.asarray([1.0 if r < 3 else ind.length_scale for r in rows], dtype)
     half = (hi - lo) / 2
@@ -205,68 +254,62 @@ def per_target(mech: Mechanism, s: SerialSettings, params: dict[str, Any], full:
         z = z / jnp.maximum(jnp.linalg.norm(z, axis=-1, keepdims=True), 1e-300)
         return bodies.obstacle_and_self(geo, obst, seg, pa, z, inner, gp), seg  # type: ignore[arg-type]
 
-    def one_chunk(args):
-        pt, Rt = args
-        # with a port, the tool axes point from the port to the targets: (A|1, M|1, C, 3, 3)
-        # (a port no design variable moves is every design's: one set of frames)
-        Rw = None if port is None else \
-            port_frames(pt[None, None], (port if moved else port[:, :1])[:, :, None, :])  # fmt: skip
-        if arms:  # each arm's targets in its own base frame, (A·M, C, ...)
-            pl = jnp.einsum("amji,amcj->amci", Rb, pt[None, None] - tb[:, :, None, :])
-            p_ik = pl.reshape(A * M, C, 3)
-            R_ik = None if Rw is None else jnp.einsum(
-                "amji,amcjk->amcik", Rb, jnp.broadcast_to(Rw, (A, M, C, 3, 3))
-            ).reshape(A * M, C, 3, 3)  # fmt: skip
-        elif Rw is None:
-            p_ik, R_ik = pt, Rt
-        elif moved:  # each design's own targets' frames: (M, C, ...)
-            p_ik, R_ik = jnp.broadcast_to(pt, (M, C, 3)), Rw[0]
-        else:
-            p_ik, R_ik = pt, Rw[0, 0]
+    # with a port, the tool axes point from the port to the targets: (A|1, M|1, C, 3, 3)
+    # (a port no design variable moves is every design's: one set of frames)
+    Rw = None if port is None else \
+        port_frames(pt[None, None], (port if moved else port[:, :1])[:, :, None, :])  # fmt: skip
+    if arms:  # each arm's targets in its own base frame, (A·M, C, ...)
+        pl = jnp.einsum("amji,amcj->amci", Rb, pt[None, None] - tb[:, :, None, :])
+        p_ik = pl.reshape(A * M, C, 3)
+        R_ik = None if Rw is None else jnp.einsum(
+            "amji,amcjk->amcik", Rb, jnp.broadcast_to(Rw, (A, M, C, 3, 3))
+        ).reshape(A * M, C, 3, 3)  # fmt: skip
+    elif Rw is None:
+        p_ik, R_ik = pt, Rt
+    elif moved:  # each design's own targets' frames: (M, C, ...)
+        p_ik, R_ik = jnp.broadcast_to(pt, (M, C, 3)), Rw[0]
+    else:
+        p_ik, R_ik = pt, Rw[0, 0]
 
-        def jac(q):  # the study's Jacobian block (A·M, C, rows, n) at joints q (A·M, C, n)
-            return jax.vmap(lambda x, q: mech.model.jacobian(x, q, rows=rows))(X, q)
+    def jac(q):  # the study's Jacobian block (A·M, C, rows, n) at joints q (A·M, C, n)
+        return jax.vmap(lambda x, q: mech.model.jacobian(x, q, rows=rows))(X, q)
 
-        def score(q):  # of several converged seeds, keep the best-conditioned
-            return inv_cond(jac(q) * sc[:, None], ind.norm, ind.normalized)
+    def score(q):  # of several converged seeds, keep the best-conditioned
+        return inv_cond(jac(q) * sc[:, None], ind.norm, ind.normalized)
 
-        accept = None
-        if geo is not None:
+    accept = None
+    if geo is not None:
 
-            def accept(m, t, q):
-                return clearance(m, pt[t], q)[0] >= gp["margin"].astype(dtype)  # type: ignore[index]
+        def accept(m, t, q):
+            return clearance(m, pt[t], q)[0] >= gp["margin"].astype(dtype)  # type: ignore[index]
 
-        res = ik.solve(mech.model, X, p_ik, R_ik, lo, hi, key, md, opts, score, accept)
-        J = jac(res.q)
-        inv_k, man = inv_cond(J * sc[:, None], ind.norm, ind.normalized, with_volume=True)
-        ok, conv = res.success, res.converged
-        if port is not None:  # the insertion depth |target − port| of each arm and design
-            depth = jnp.linalg.norm(pt[None, None] - port[:, :, None, :], axis=-1)  # (A|1, M, C)
-            # each arm's own insertion range
-            inside = ((depth >= d0) & (depth <= d1) & (depth > 0)).reshape(ok.shape)
-            ok, conv = ok & inside, conv & inside
-        margin = jnp.min(jnp.minimum(res.q - lo, hi - res.q) / half, -1)
-        z = jnp.zeros_like(inv_k)
-        out = {"success": ok.astype(dtype), "converged": conv.astype(dtype),
-               "inv_k": jnp.where(ok, inv_k, z), "manipulability": jnp.where(ok, man, z),
-               "joint_margin": jnp.where(ok, jnp.clip(margin, 0.0, 1.0), z),
-               "q": res.q, "pos_err": res.pos_err, "rot_err": res.rot_err}  # fmt: skip
-        if geo is not None:
-            m_all = jnp.repeat(jnp.arange(X.shape[0]), C)
-            t_all = jnp.tile(jnp.arange(C), X.shape[0])
-            c, seg = clearance(m_all, pt[t_all], res.q.reshape(-1, res.q.shape[-1]))
-            out["clearance"] = jnp.where(ok, c.reshape(ok.shape), z)
-            if arms:
-                out["segments"] = seg.reshape(*ok.shape, *seg.shape[1:])
-        if arms:  # each arm's tool axis in the world (the tip frame's z): instrument_angle
-            Rt_ = jax.vmap(lambda x, q: mech.model.fk(x, q)[0])(X, res.q)  # (A·M, C, 3, 3)
-            zt = jnp.einsum("amij,amcj->amci", Rb, Rt_[..., 2].reshape(A, M, C, 3))
-            out["axis"] = zt.reshape(A * M, C, 3)
-        return out
-
-    out = jax.lax.map(one_chunk, (pc, Rc))  # each (n_chunks, A·M, C, ...)
-    return {k: jnp.moveaxis(v, 0, 1).reshape(A, M, n_chunks * C, *v.shape[3:])[:, :, :N]
-            for k, v in out.items()}  # fmt: skip
+    res = ik.solve(mech.model, X, p_ik, R_ik, lo, hi, key, md, opts, score, accept, t0)
+    J = jac(res.q)
+    inv_k, man = inv_cond(J * sc[:, None], ind.norm, ind.normalized, with_volume=True)
+    ok, conv = res.success, res.converged
+    if port is not None:  # the insertion depth |target − port| of each arm and design
+        depth = jnp.linalg.norm(pt[None, None] - port[:, :, None, :], axis=-1)  # (A|1, M, C)
+        # each arm's own insertion range
+        inside = ((depth >= d0) & (depth <= d1) & (depth > 0)).reshape(ok.shape)
+        ok, conv = ok & inside, conv & inside
+    margin = jnp.min(jnp.minimum(res.q - lo, hi - res.q) / half, -1)
+    z = jnp.zeros_like(inv_k)
+    out = {"success": ok.astype(dtype), "converged": conv.astype(dtype),
+           "inv_k": jnp.where(ok, inv_k, z), "manipulability": jnp.where(ok, man, z),
+           "joint_margin": jnp.where(ok, jnp.clip(margin, 0.0, 1.0), z),
+           "q": res.q, "pos_err": res.pos_err, "rot_err": res.rot_err}  # fmt: skip
+    if geo is not None:
+        m_all = jnp.repeat(jnp.arange(X.shape[0]), C)
+        t_all = jnp.tile(jnp.arange(C), X.shape[0])
+        c, seg = clearance(m_all, pt[t_all], res.q.reshape(-1, res.q.shape[-1]))
+        out["clearance"] = jnp.where(ok, c.reshape(ok.shape), z)
+        if arms:
+            out["segments"] = seg.reshape(*ok.shape, *seg.shape[1:])
+    if arms:  # each arm's tool axis in the world (the tip frame's z): instrument_angle
+        Rt_ = jax.vmap(lambda x, q: mech.model.fk(x, q)[0])(X, res.q)  # (A·M, C, 3, 3)
+        zt = jnp.einsum("amij,amcj->amci", Rb, Rt_[..., 2].reshape(A, M, C, 3))
+        out["axis"] = zt.reshape(A * M, C, 3)
+    return out
 
 
 def quantile(v: jax.Array, q: float = Q) -> tuple[jax.Array, jax.Array]:
@@ -486,58 +529,3 @@ def structure_key(s: SerialSettings) -> str:
 def _entry_names(row: Any) -> Any:
     """A port's entries with the numbers left out (False: no port)."""
     return False if row is None else [v if isinstance(v, str) else "#" for v in row]
-
-
-_SOLVERS: dict[tuple[str, str], tuple[Mechanism, Any]] = {}
-"""The compiled per-target programs of :func:`solution`, by settings and dtype (the last
-few kept)."""
-
-
-def solution(s: SerialSettings, x: Any, keys: Any,
-             dtype: Any = jnp.float64) -> dict[str, np.ndarray]:  # fmt: skip
-    """The per-target solution of one design on a run's targets, as NumPy: ``target_p``
-    (N, 3) (``target_R`` (N, 3, 3) with a tool axis), ``success`` (N,) bool, ``inv_k``,
-    ``manipulability``, ``joint_margin`` (0 where unreached), ``q`` (N, n), ``pos_err``,
-    ``rot_err``. ``x`` holds the design variables in the config's units (a record's
-    ``x``: a mapping or a sequence in ``s.variables`` order), ``keys`` the run's named
-    streams (``record.keys()``): the targets and the IK's seeds are those of the run, so
-    the means of these values are the run's final indices (figures and the report's
-    cloud read it). One jitted call (``per_target`` for one design)."""
-    from designopt.studies.serial.mechanism import build
-
-    if jnp.dtype(dtype) == jnp.float64 and not jax.config.jax_enable_x64:
-        raise ValueError("the task's inverse kinematics needs float64: call "
-                         "jax.config.update('jax_enable_x64', True) first")  # fmt: skip
-    ck = (structure_key(s), jnp.dtype(dtype).name)
-    if ck not in _SOLVERS:  # figures and the report's cloud share one compiled program
-        mech = build(s)
-        while len(_SOLVERS) >= 4:
-            _SOLVERS.pop(next(iter(_SOLVERS)))
-
-        # one design: few slots in flight, so one phase of the solver's schedule and about
-        # half its compile time; a target's seeds and steps do not depend on the slots
-        o = options(s)
-        o = o if "slots" in s.task.ik.model_fields_set else o._replace(slots=128)  # type: ignore[union-attr]
-
-        def run(p, X):
-            out = per_target(mech, s, p, X, dtype, o)
-            return {k: v[0, 0] if s.arms is None else v[:, 0] for k, v in out.items()}
-
-        _SOLVERS[ck] = (mech, jax.jit(run))
-    mech, run = _SOLVERS[ck]
-    # the params objective.problem gives per_target, made the same way: targets drawn
-    # outside the jitted program (inside, XLA may fuse their arithmetic differently, and
-    # a target an ulp away can send the IK to another of its solutions)
-    # (the small arrays made on the host: op by op, each compiled a program of its own)
-    dt = np.dtype(jnp.dtype(dtype))
-    p = {"q_lower": jnp.asarray(np.asarray(mech.lower, dt)),
-         "q_upper": jnp.asarray(np.asarray(mech.upper, dt)),
-         "sample_key": keys["samples"]} | targets(s, keys["samples"], dtype)  # fmt: skip
-    from designopt.studies.serial import bodies
-
-    p |= bodies.base_params(s, mech, dtype) | scene_params(s, dtype, mech)
-    xv = np.asarray([x[k] for k in s.variables] if hasattr(x, "keys") else x, np.float64)
-    full = np.concatenate([xv.astype(dt), np.asarray(mech.fixed, dt)]) * np.asarray(mech.scale, dt)
-    out = {k: np.asarray(v) for k, v in run(p, jnp.asarray(full[None])).items()}
-    out["success"] = out["success"] > 0.5
-    return out | {k: np.asarray(p[k]) for k in ("target_p", "target_R") if k in p}

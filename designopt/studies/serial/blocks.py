@@ -1,0 +1,136 @@
+"""The task's per-target values in one compiled program per structure (issue #46).
+
+The costly part of a task index is the batched IK (``taskindex.chunk_values``): every
+design solves every target. Compiled inside each caller's own program, it was compiled
+once per shape: the search's swarm, the front's re-scoring (4 × the targets), the
+figures' and the report's one design, ``eval``'s one design, ``scan``'s batches and the
+normalisation probe, 12-15 s each for a 6-joint arm through a port. Here it is one
+program of a fixed block, :data:`DESIGNS` designs × ``taskindex.chunk`` targets, with
+everything else an input (the designs, the targets, each chunk's first target index,
+the scene's numbers, the joint limits, the arms' bases, the IK's key), and every phase
+calls it block by block from the host (``Problem.staged``: the search's objective, the
+scoring, the probe; :func:`values` for the figures' solution of one design). The
+reduction to indices (means, quantiles, ratio estimators, f, constraints) is a small
+program of its own per target count (``problems.evaluate.staged_scores``).
+
+The block's values equal the one-program path's (``taskindex.per_target``, which the
+fused runner and ``jax.grad`` trace): a target's IK seeds hash its index in the task
+(``t0``), not its place in a chunk, and no item's result depends on the other items of
+its batch. The price: a block holds :data:`DESIGNS` designs, so one design's solution
+(figures, ``eval``) solves as many copies of it.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from designopt.studies.serial import taskindex
+from designopt.studies.serial.mechanism import Mechanism, build
+from designopt.studies.serial.settings import SerialSettings
+
+DESIGNS = 16
+"""Designs per block: a 16-particle swarm's evaluation is one call per chunk of targets.
+Each call pays the solver's tail (its hardest targets' seeds, one after another) once:
+blocks of 8 designs made a 16-particle run on 1024 targets twice as slow as one program
+(11.0 against 5.9 s of arithmetic); one design's solution (figures, ``eval``) costs a
+block."""
+
+NOT_READ = ("target_p", "target_R", "bounds", "lin_A", "lin_b", "idx_b")
+"""``params`` entries the block program does not read (the targets come chunk by chunk;
+the rest is the reduction's): left out, so a run's and its front's params reach one
+program. (The front's re-scoring keeps the run's chunk: ``Cost.designs``.)"""
+
+_PROGRAMS: dict[tuple[str, str], tuple[Mechanism, Callable]] = {}
+
+
+def block_key(s: SerialSettings) -> str:
+    """What shapes the block program, as text: ``taskindex.structure_key`` without the
+    number of targets (they come in chunks, as inputs), with the chunk in effect
+    (``taskindex.chunk``: given or not)."""
+    d = json.loads(taskindex.structure_key(s))
+    d["indices"].pop("n_samples", None)
+    d["indices"]["chunk"] = taskindex.chunk(s)
+    return json.dumps(d, sort_keys=True)
+
+
+def program(s: SerialSettings, dtype: Any) -> tuple[Mechanism, Callable]:
+    """(the chain, the jitted block program ``run(params, X, pt, Rt, t0)``): values of
+    designs X (:data:`DESIGNS`, V) (the variables, config units) at one chunk of targets,
+    each (A·DESIGNS, C, ...) (``taskindex.chunk_values``). One per structure and dtype."""
+    ck = (block_key(s), jnp.dtype(dtype).name)
+    if ck not in _PROGRAMS:
+        mech = build(s)
+        while len(_PROGRAMS) >= 8:
+            _PROGRAMS.pop(next(iter(_PROGRAMS)))
+
+        def run(p, X, pt, Rt, t0):
+            full = taskindex.design_full(p, X, dtype)
+            return taskindex.chunk_values(mech, s, p, full, pt, Rt, t0, dtype)
+
+        _PROGRAMS[ck] = (mech, jax.jit(run))
+    return _PROGRAMS[ck]
+
+
+def values(s: SerialSettings, dtype: Any) -> Callable[[dict[str, Any], Any], list[dict]]:
+    """``Staged.values`` of the task: ``fn(params, X)`` for X (:data:`DESIGNS`, V) gives
+    the block program's values of every chunk of the targets in ``params`` (a list, one
+    dict per chunk; :func:`assembled` puts them together)."""
+
+    def fn(params: dict[str, Any], X: Any) -> list[dict]:
+        _, run = program(s, dtype)
+        p = {k: v for k, v in params.items() if k not in NOT_READ}
+        pc, Rc, t0 = taskindex.chunked_targets(params, taskindex.chunk(s), dtype, np)
+        X = jnp.asarray(X)
+        return [run(p, X, pc[i], None if Rc is None else Rc[i], t0[i]) for i in range(len(t0))]
+
+    return fn
+
+
+def assembled(s: SerialSettings, chunks: list[dict[str, Any]], M: int, N: int, xp: Any = jnp
+              ) -> dict[str, Any]:  # fmt: skip
+    """:func:`values`' chunks as ``taskindex.per_target`` gives them: (A, M, N, ...)
+    (``xp``: jnp in a trace, np on the host)."""
+    stacked = {k: xp.stack([c[k] for c in chunks]) for k in chunks[0]}
+    return taskindex.assemble(stacked, len(s.arms) if s.arms is not None else 1, M, N, xp)
+
+
+def solution(s: SerialSettings, x: Any, keys: Any,
+             dtype: Any = jnp.float64) -> dict[str, np.ndarray]:  # fmt: skip
+    """The per-target solution of one design on a run's targets, as NumPy: ``target_p``
+    (N, 3) (``target_R`` (N, 3, 3) with a tool axis), ``success`` (N,) bool, ``inv_k``,
+    ``manipulability``, ``joint_margin`` (0 where unreached), ``q`` (N, n), ``pos_err``,
+    ``rot_err`` (with ``arms`` each (A, N, ...)). ``x`` holds the design variables in
+    the config's units (a record's ``x``: a mapping or a sequence in ``s.variables``
+    order), ``keys`` the run's named streams (``record.keys()``): the targets and the
+    IK's seeds are those of the run, so the means of these values are the run's final
+    indices (figures and the report's cloud read it). It runs the run's own compiled
+    block program (:func:`program`), the design in every row of the block."""
+    from designopt.studies.serial import bodies
+
+    if jnp.dtype(dtype) == jnp.float64 and not jax.config.jax_enable_x64:
+        raise ValueError("the task's inverse kinematics needs float64: call "
+                         "jax.config.update('jax_enable_x64', True) first")  # fmt: skip
+    mech, _ = program(s, dtype)
+    # the params objective.problem gives the program, made the same way: targets drawn
+    # outside it (inside, XLA may fuse their arithmetic differently, and a target an ulp
+    # away can send the IK to another of its solutions)
+    dt = np.dtype(jnp.dtype(dtype))
+    p = {"fixed": jnp.asarray(np.asarray(mech.fixed, dt)),
+         "scale": jnp.asarray(np.asarray(mech.scale, dt)),
+         "q_lower": jnp.asarray(np.asarray(mech.lower, dt)),
+         "q_upper": jnp.asarray(np.asarray(mech.upper, dt)),
+         "sample_key": keys["samples"]} | taskindex.targets(s, keys["samples"], dtype)  # fmt: skip
+    p |= bodies.base_params(s, mech, dtype) | taskindex.scene_params(s, dtype, mech)
+    xv = np.asarray([x[k] for k in s.variables] if hasattr(x, "keys") else x, dt)
+    X = np.repeat(xv[None], DESIGNS, 0)
+    chunks = [{k: np.asarray(v) for k, v in c.items()} for c in values(s, dtype)(p, X)]
+    per = assembled(s, chunks, DESIGNS, p["target_p"].shape[0], np)
+    out = {k: np.asarray(v[0, 0] if s.arms is None else v[:, 0]) for k, v in per.items()}
+    out["success"] = out["success"] > 0.5
+    return out | {k: np.asarray(p[k]) for k in ("target_p", "target_R") if k in p}

@@ -1,0 +1,103 @@
+"""One IK program per structure (issue #46, part 2): the task's per-target values run in
+one compiled block program (``designopt.studies.serial.blocks``) that the search, the
+front's re-scoring, ``eval``, the normalisation probe and the figures all call, and its
+scores equal the one-program path's (``Problem.fn``, which the fused runner and
+``jax.grad`` trace), whatever the chunk of targets or the block of designs: the IK's
+solutions bit for bit, the values at them to 1e-12 (XLA vectorises batches of other
+sizes differently: the last bits of a Jacobian, which its condition number amplifies)."""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import yaml
+
+from designopt.app.config import validate
+from designopt.core.keys import streams
+from designopt.problems.evaluate import score
+from designopt.studies.serial import blocks, objective, taskindex
+
+jax.config.update("jax_enable_x64", True)
+
+
+def _cfg(name: str, n: int, chunk: int | None = None) -> dict:
+    path = Path("configs", name).resolve()
+    with open(path) as f:
+        cfg = yaml.safe_load(f)
+    s = cfg["study"]
+    s["indices"]["n_samples"] = n
+    if chunk is not None:
+        s["indices"]["chunk"] = chunk
+    if isinstance(s["chain"].get("urdf"), str):
+        s["chain"]["urdf"] = str(path.parent / s["chain"]["urdf"])
+    return cfg
+
+
+def _problem(cfg: dict):
+    c = validate(copy.deepcopy(cfg), "test")
+    return c, objective.problem(c.study, streams(c.seed), jnp.float64)
+
+
+CASES = [  # (config, designs): a port and a wall, two arms with collisions
+    ("urdf_puma560_port.yaml", [[0.43, 0.43, 0.4], [0.5, 0.35, 0.3], [0.38, 0.45, 0.35]]),
+    ("two_arms_front.yaml", [[0.6, 0.45, 0.45], [0.5, 0.3, 0.55], [0.55, 0.4, 0.5]]),
+]
+
+
+@pytest.mark.parametrize("name, X", CASES)
+def test_the_staged_scores_equal_the_one_program_path(name, X):
+    """f, every index, SE and count through the block program (3 designs: one block,
+    padded; 50 targets in chunks of 16: four chunks, the last padded) equal ``fn``'s in
+    one traced program (targets in one chunk of 50): the same IK solutions (joints,
+    success) bit for bit, every value to 1e-12 relative."""
+    X = np.asarray(X)
+    _, staged = _problem(_cfg(name, 50, chunk=16))
+    _, whole = _problem(_cfg(name, 50))
+    assert taskindex.chunk(validate(_cfg(name, 50, 16), "t").study) == 16
+    assert taskindex.chunk(validate(_cfg(name, 50), "t").study) == 50
+    c = validate(_cfg(name, 50, 16), "t")
+    Xb = np.concatenate([X, np.repeat(X[-1:], blocks.DESIGNS - len(X), 0)])
+    per = blocks.assembled(c.study, [{k: np.asarray(v) for k, v in ch.items()}
+                                     for ch in staged.staged.values(staged.params, Xb)],
+                           blocks.DESIGNS, 50, np)  # fmt: skip
+    mech = blocks.program(c.study, jnp.float64)[0]
+    ref_per = jax.jit(lambda p, X: taskindex.per_target(
+        mech, c.study, whole.params, taskindex.design_full(p, X, jnp.float64), jnp.float64)
+    )(whole.params, jnp.asarray(X))  # fmt: skip
+    for k, v in ref_per.items():  # the IK's outcome bit for bit, the rest to its last bits
+        if k in ("success", "converged", "q"):
+            np.testing.assert_array_equal(per[k][:, : len(X)], np.asarray(v), err_msg=k)
+        else:  # XLA vectorises a (16·C)-row and a (3·N)-row batch differently, and 1/k
+            # amplifies J's last bits by the condition number (3.5e-14 relative at 1/k 0.066)
+            np.testing.assert_allclose(per[k][:, : len(X)], np.asarray(v), rtol=1e-12,
+                                       atol=1e-16, err_msg=k)  # fmt: skip
+    got = score(staged, X)
+    f, aux = jax.jit(whole.fn)(whole.params, jnp.asarray(X), jax.random.key(0))
+    ref = {"f": np.asarray(f)} | {k: np.asarray(v) for k, v in aux.items()}
+    assert set(ref) <= set(got)
+    for k in ref:  # the per-target values' last bits and the reductions' order
+        np.testing.assert_allclose(got[k], ref[k], rtol=1e-12, atol=0, err_msg=k)
+
+
+def test_one_block_program_serves_every_phase(tmp_path):
+    """A front run of two arms (the search on 32 targets, the front's re-scoring on 96,
+    then a figure's solution of a front design) compiles the IK once: one block program
+    (32 targets a chunk, as ``indices.chunk`` says), one shape."""
+    from designopt import api
+
+    cfg = _cfg("two_arms_front.yaml", 32, chunk=32)
+    cfg["optimizer"] |= {"n_particles": 8, "n_iters": 2}
+    cfg["front"] = {"n_samples": 96}
+    blocks._PROGRAMS.clear()
+    rec = api.run(cfg, tmp_path / "a.h5")
+    (_, run), = blocks._PROGRAMS.values()
+    assert run._cache_size() == 1
+    x = np.asarray(rec["front"]["x"])[0]
+    sol = blocks.solution(rec.config.study, x, rec.keys())  # a figure's
+    assert run._cache_size() == 1 and len(blocks._PROGRAMS) == 1
+    assert sol["success"].shape == (2, 32)
