@@ -35,11 +35,13 @@ def _release_compiled_programs():
     crashed XLA mid-suite."""
     yield
     from designopt.app import job
+    from designopt.core import exported
     from designopt.problems import evaluate
     from designopt.studies.serial import blocks
 
     job._PROBLEMS.clear()
     evaluate._SCORERS.clear()
     blocks._PROGRAMS.clear()
+    exported._CALLS.clear()
     jax.clear_caches()
     gc.collect()

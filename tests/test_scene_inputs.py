@@ -107,18 +107,22 @@ def test_the_figures_solution_of_an_edited_scene_reuses_its_program():
     """blocks.solution (the figures', the report's and the archive's per-target
     solve) runs the structure's block program (``blocks``): an edited scene runs in the
     program already compiled and gives what a fresh program gives."""
+    from designopt.core import exported
     from designopt.studies.serial import blocks, taskindex
 
     a, b = (validate(copy.deepcopy(_puma(e)), "test") for e in (False, True))
     assert taskindex.structure_key(a.study) == taskindex.structure_key(b.study)
     x = [0.43, 0.43, 0.4]
     blocks._PROGRAMS.clear()
+    exported._CALLS.clear()
     sa = blocks.solution(a.study, x, streams(a.seed))
-    (_, run), = blocks._PROGRAMS.values()
-    n = run._cache_size()
+    (call,) = exported._CALLS.values()  # the block program (exported or not)
+    assert call._cache_size() == 1
     sb = blocks.solution(b.study, x, streams(b.seed))
-    assert len(blocks._PROGRAMS) == 1 and run._cache_size() == n
+    assert len(blocks._PROGRAMS) == 1 and len(exported._CALLS) == 1
+    assert call._cache_size() == 1
     blocks._PROGRAMS.clear()
+    exported._CALLS.clear()
     fresh = blocks.solution(b.study, x, streams(b.seed))
     for k in fresh:
         np.testing.assert_array_equal(sb[k], fresh[k], err_msg=k)

@@ -93,11 +93,41 @@ def test_one_block_program_serves_every_phase(tmp_path):
     cfg = _cfg("two_arms_front.yaml", 32, chunk=32)
     cfg["optimizer"] |= {"n_particles": 8, "n_iters": 2}
     cfg["front"] = {"n_samples": 96}
+    from designopt.core import exported
+
     blocks._PROGRAMS.clear()
+    exported._CALLS.clear()
     rec = api.run(cfg, tmp_path / "a.h5")
-    (_, run), = blocks._PROGRAMS.values()
-    assert run._cache_size() == 1
+    assert len(blocks._PROGRAMS) == 1
+    (call,) = exported._CALLS.values()  # one block signature (exported or not)
+    assert call._cache_size() == 1
     x = np.asarray(rec["front"]["x"])[0]
     sol = blocks.solution(rec.config.study, x, rec.keys())  # a figure's
-    assert run._cache_size() == 1 and len(blocks._PROGRAMS) == 1
+    assert len(exported._CALLS) == 1 and call._cache_size() == 1
     assert sol["success"].shape == (2, 32)
+
+
+def test_a_warm_run_loads_the_exported_block_program(tmp_path, monkeypatch):
+    """With a compilation cache folder the block program is kept as exported StableHLO
+    (``core.exported``): a second process (here: the in-memory table cleared) loads it
+    instead of tracing the IK again, and gives the same values bit for bit."""
+    from designopt.core import exported
+
+    monkeypatch.setattr(exported, "folder", lambda: tmp_path)  # the cache folder
+    c, pr = _problem(_cfg("urdf_puma560_port.yaml", 20))
+    X = np.asarray([[0.43, 0.43, 0.4]] * blocks.DESIGNS)
+    exported._CALLS.clear()
+    first = pr.staged.values(pr.params, X)
+    files = list(tmp_path.glob("designopt-export-*.bin"))
+    assert len(files) == 1
+    exported._CALLS.clear()
+    blocks._PROGRAMS.clear()
+
+    def no_trace(*a, **k):
+        raise AssertionError("traced again")
+
+    monkeypatch.setattr(jax.export, "export", no_trace)
+    again = pr.staged.values(pr.params, X)
+    for a, b in zip(first, again, strict=True):
+        for k in a:
+            np.testing.assert_array_equal(np.asarray(a[k]), np.asarray(b[k]), err_msg=k)

@@ -338,7 +338,7 @@ def test_run_page_of_a_port_task_draws_the_patient_and_the_port(monkeypatch):
     P, _, _ = drawing.joint_frames(mech, drawing.full(mech, [x]), q)
     ok = np.arange(16) > 2
     sol = {"target_p": P[0, :, -1], "success": ok, "q": q, "inv_k": np.where(ok, 0.3, 0.0)}
-    monkeypatch.setattr(report.taskindex, "solution", lambda *a, **k: sol)
+    monkeypatch.setattr(report.blocks, "solution", lambda *a, **k: sol)
     rec = SimpleNamespace(config=SimpleNamespace(study=s), x=dict(zip(s.variables, x, strict=True)),
                           keys=dict)  # fmt: skip
     view = report.run_view(rec)

@@ -1,0 +1,92 @@
+"""Compiled programs kept as exported StableHLO next to the compilation cache (issue #46,
+part 3): a warm run loads a large program's module instead of tracing and lowering it
+again (3.7 s for the UR5-through-a-port block program on the 2-core box), and XLA's
+compile of that module is the persistent cache's hit as before.
+
+The file is keyed by a hash of everything that shapes the program: the caller's
+structure key, the arguments' shapes and dtypes (their pytree too), the backend, JAX's
+version and designopt's own source (any edit of the code invalidates every file).
+Nothing is kept without a compilation cache folder (``jax_compilation_cache_dir``: the
+CLI's ``compile_cache``); a file that cannot be read is exported again, and files are
+written whole (a temporary file renamed), so parallel processes never read half of one.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+
+import jax
+
+_CALLS: dict[str, Callable] = {}
+_SOURCE: list[str] = []
+
+
+def source_hash() -> str:
+    """A hash of designopt's Python source (every file under the package)."""
+    if not _SOURCE:
+        h = hashlib.sha256()
+        root = Path(__file__).resolve().parents[1]
+        for p in sorted(root.rglob("*.py")):
+            h.update(str(p.relative_to(root)).encode())
+            h.update(p.read_bytes())
+        _SOURCE.append(h.hexdigest())
+    return _SOURCE[0]
+
+
+def signature(key: str, args: tuple) -> str:
+    """The text that identifies a program: ``key`` and the arguments' pytree, shapes and
+    dtypes, the backend and the versions."""
+    leaves, tree = jax.tree_util.tree_flatten(args)
+    avals = [(tuple(getattr(a, "shape", ())), str(getattr(a, "dtype", type(a).__name__)))
+             for a in leaves]  # fmt: skip
+    return "\n".join([key, str(tree), str(avals), jax.default_backend(), jax.__version__,
+                      source_hash()])  # fmt: skip
+
+
+def folder() -> Path | None:
+    d = jax.config.jax_compilation_cache_dir
+    return None if not d else Path(d)
+
+
+def compiled(key: str, fn: Callable, args: tuple) -> Callable:
+    """``fn`` (jitted) for arguments shaped like ``args``: from its exported module in the
+    cache folder when one is there, else exported now and kept there; ``fn`` itself
+    without a cache folder or where exporting fails."""
+    sig = signature(key, args)
+    if sig in _CALLS:
+        return _CALLS[sig]
+    d = folder()
+    call = fn
+    if d is not None:
+        from jax import export
+
+        path = d / f"designopt-export-{hashlib.sha256(sig.encode()).hexdigest()[:40]}.bin"
+        exp = None
+        if path.is_file():
+            try:
+                exp = export.deserialize(bytearray(path.read_bytes()))
+            except Exception:  # noqa: BLE001  (a damaged or foreign file: export again)
+                exp = None
+        if exp is None:
+            try:
+                exp = export.export(fn)(*args)
+                data = exp.serialize()
+            except Exception:  # noqa: BLE001  (no flatbuffers, an unsupported op: plain jit)
+                exp = None
+            else:
+                try:
+                    d.mkdir(parents=True, exist_ok=True)
+                    fd, tmp = tempfile.mkstemp(dir=d, prefix=".export-")
+                    with os.fdopen(fd, "wb") as f:
+                        f.write(data)
+                    os.replace(tmp, path)
+                except OSError:
+                    pass
+        if exp is not None:
+            call = jax.jit(exp.call)
+    _CALLS[sig] = call
+    return call
