@@ -85,7 +85,7 @@ def _cost(s) -> Cost:
     """Monte-Carlo cost per design (pre-flight): the index samples, ``chunk`` in flight,
     and the normalisation probes when the objective normalises. Under ``measure: task``
     a sample is a target (``front.n_samples`` counts targets too), a chunk holds
-    ``indices.chunk`` targets (256 unless given) and a block :data:`blocks.DESIGNS`
+    ``indices.chunk`` targets (1024 unless given) and a block :data:`blocks.DESIGNS`
     designs (``designs``: the block program, ``blocks``, holds no more in flight).
 
     The memory behind them goes to the pre-flight as ``Cost`` attributes (it has no fields
@@ -107,8 +107,7 @@ def _cost(s) -> Cost:
       0.83-0.97 GB with three for the PUMA 560 with a tool axis); the step is one copy
       now (busy chunks of B/8 slots, issue #36), so the estimate errs high. All of it
       is scaled by the block program's slots over those 4096: a block of 16 designs ×
-      256 targets runs 1024 slots (issue #46; the planar 2R job below peaked at 0.54 GB
-      against 0.8 GB when its 16 designs × 512 targets were one program), and
+      256 targets runs 1024 slots, of 16 × 1024 targets 4096 (issue #46), and
       ``tests/test_preflight.py`` checks it within 1.5× of a measured peak.
 
     With ``arms`` every arm solves every target: the per-target and per-design bytes are

@@ -209,7 +209,7 @@ class SerialIndices(Section):
     measure: Literal["joint", "cartesian", "task"] = "joint"
     sampler: Literal["uniform", "halton", "rqmc"] = "uniform"
     n_samples: int = Field(20_000, gt=1)
-    chunk: int = Field(16_384, gt=0)  # samples per chunk (task: targets, 256 unless given)
+    chunk: int = Field(16_384, gt=0)  # samples per chunk (task: targets, 1024 unless given)
     length_scale: float = Field(1.0, gt=0)  # multiplies the angular rows (full Jacobian)
     replicates: int | None = Field(None, ge=1, le=1024)  # rqmc: 16 unless given (docs/indices.md)
 
