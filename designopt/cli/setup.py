@@ -40,6 +40,8 @@ def load_args(args: argparse.Namespace):
         over["parallel"] = dict(section)  # the flags make a parallel section
         if devices:
             over["parallel.devices"] = devices
+    if not getattr(args, "no_cache", False) and _cache_asked(args.config, over):
+        use_cache()  # before validating: the study's checks compile programs too
     cfg, text = load(args.config, overrides=over)
     ses = writer.current()
     if ses is not None and cfg.max_minutes is not None:
@@ -52,6 +54,20 @@ def load_args(args: argparse.Namespace):
     if cfg.compile_cache and not getattr(args, "no_cache", False):
         use_cache()
     return cfg, text
+
+
+def _cache_asked(path: str, over: dict[str, object]) -> bool:
+    """Whether the config (not yet validated) keeps the compilation cache: its
+    ``compile_cache`` (or a ``--set`` of it) is true or not given. A file that cannot be
+    read says no here; its validation then reports it."""
+    from designopt.app.config import parse
+
+    try:
+        raw, _ = parse(path)
+    except Exception:  # noqa: BLE001  (the validation names the problem)
+        return False
+    value = over.get("compile_cache", raw.get("compile_cache", True) if isinstance(raw, dict) else True)
+    return value is True
 
 
 def _multi(args: argparse.Namespace) -> bool:
