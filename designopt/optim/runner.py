@@ -38,6 +38,7 @@ from designopt.numerics.pareto import hypervolume_jax
 from designopt.optim import registry
 from designopt.optim.protocol import Front, Optimizer, Task, clean
 from designopt.problems.base import Problem, evaluate_batch, scored
+from designopt.problems.evaluate import staged_scores
 
 CONVERGENCE_TOL = 1e-6
 
@@ -394,8 +395,6 @@ def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress
 
     def objective(Xf, ek):  # the separate objective program: (f, v) of every group
         if problem.staged is not None and plan is None:  # the study's fixed-shape programs
-            from designopt.problems.evaluate import staged_scores
-
             R, N, D = Xf.shape
             f, _, v = staged_scores(problem, np.asarray(Xf).reshape(R * N, D), pparams)
             return (jnp.asarray(f.reshape((R, N) + f.shape[1:])),
