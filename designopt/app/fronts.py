@@ -122,8 +122,17 @@ def ambiguous(F: np.ndarray, se: np.ndarray, z: float = Z) -> np.ndarray:
 def rescoring_problem(job: Any) -> tuple[Problem, int]:
     """The study's problem on the fresh ``front`` sample stream with ``front.n_samples``
     (default 4 × the study's own) samples per design; (problem, samples)."""
-    from designopt.app import sweeps
     from designopt.app.job import build_problem
+
+    c, fresh, n = rescoring(job)
+    return build_problem(c, fresh, job.where, job.dtype), n
+
+
+def rescoring(job: Any) -> tuple[Any, dict[str, Any], int]:
+    """(config, keys, samples) of the front's re-scoring: the config with
+    ``front.n_samples`` samples per design (the study's ``Cost.samples_key``) and the
+    named streams with ``samples`` the fresh ``front`` stream."""
+    from designopt.app import sweeps
 
     cfg = job.cfg
     cost = job.study.cost(cfg.study)
@@ -139,14 +148,14 @@ def rescoring_problem(job: Any) -> tuple[Problem, int]:
             why = str(e).removeprefix(job.where + ": ")
             raise ConfigError(f"{job.where}: key 'front.n_samples': {why}") from None
     fresh = dict(job.keys) | {"samples": jax.random.fold_in(jax.random.key(cfg.seed), FRONT_STREAM)}
-    return build_problem(c, fresh, job.where, job.dtype), n
+    return c, fresh, n
 
 
 def groups(job: Any, problem: Problem, res: Any) -> dict[str, Any]:
     """The groups of a front's record: optimizer (hypervolume history of the best front
     found so far, the populations' hypervolume, final populations and archives), front
     (re-scored designs, objectives ± SE, every index ± SE, ambiguous pairs) and problem."""
-    from designopt.app.scoring import check_finite, problem_group
+    from designopt.app.scoring import check_finite, placement, problem_group, with_placement
     from designopt.numerics import pareto
     from designopt.problems.evaluate import score
 
@@ -198,4 +207,11 @@ def groups(job: Any, problem: Problem, res: Any) -> dict[str, Any]:
                     "reference": (ref * sg).tolist(), "hypervolume": hv,
                     "n_samples": n_samples, "n_candidates": int(len(keep)), "z": Z,
                     "units": linear_units(front, job.study.units(cfg.study))}}  # fmt: skip
-    return {"optimizer": opt, "front": fr, "problem": problem_group(problem)}
+    with_placement(fr, placement(job.study, cfg.study, X), None)  # ports, bases: (n, ...)
+    out = {"optimizer": opt, "front": fr, "problem": problem_group(problem)}
+    if job.study.targets is not None and len(X):  # every front design at every target
+        c, fresh, _ = rescoring(job)  # the re-scoring's targets: their means are the front's
+        tg = job.study.targets(c.study, X, fresh, job.dtype)
+        if tg is not None:
+            out["targets"] = tg
+    return out

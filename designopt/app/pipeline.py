@@ -33,7 +33,7 @@ from designopt.app.optimise import optimise
 from designopt.app.preflight import Estimate
 from designopt.app.records import bind
 from designopt.app.reporting import draw_figures, write_html
-from designopt.app.scoring import check_finite, problem_group, run_groups
+from designopt.app.scoring import check_finite, placement, problem_group, run_groups, with_placement
 from designopt.core import devices
 from designopt.core.errors import ConfigError, WriteError
 from designopt.core.keys import streams
@@ -112,6 +112,9 @@ class Single:
 
     def groups(self, job: Job, problem: Any, res: Any) -> dict[str, Any]:
         groups = run_groups(job.cfg, problem, res, job.dtype)
+        # where the final design puts the robot in the world (the study's placement)
+        with_placement(groups["final"], placement(job.study, job.cfg.study,
+                                                  groups["final"]["x"]), 0)  # fmt: skip
         if job.study.targets is not None:  # the final design at every target (a task's)
             tg = job.study.targets(job.cfg.study, np.asarray(groups["final"]["x"]), job.keys,
                                    job.dtype)  # fmt: skip
@@ -153,7 +156,7 @@ class Front(Single):
         pass  # the re-scored front is checked by fronts.groups
 
     def lines(self, rec: Any) -> list[str]:
-        return [*rec.summary()[1:], rec.stages_line(rec.groups["front"]["attrs"]["n_samples"])]
+        return [*rec.summary()[1:], rec.run_line()]
 
     def scoring(self, job: Job) -> str:
         n = job.cfg.front.n_samples or 4 * int(job.study.cost(job.cfg.study).samples)
@@ -259,7 +262,8 @@ def _replay(job: Job, out: Path | None, dry_run: bool = False) -> Report:
         if out is not None:
             archive.save(out, rec)
     lines = [*lines, f"wall {total.wall:.1f} s = compile {total.compile:.1f} s + run "
-             f"{total.run:.1f} s; {total.compilations} XLA compilations"]  # fmt: skip
+             f"{total.run:.1f} s; {total.compilations} XLA programs compiled or loaded from the "
+             "compilation cache"]  # fmt: skip
     return Report(out, lines, rec)
 
 
@@ -336,13 +340,92 @@ def evaluate_one(cfg: Any, design: Mapping[str, float], where: str = "config"
     them, the lines ``run`` prints for its final design (``Study.warnings``), and the
     study's units of its variables and indices (``Study.units``). A front's config has
     no weighted f: f and its SE are left out."""
-    job = Job.build(cfg, where, n_designs=1)
-    X = matrix(job.problem, design, where)
-    res = {k: float(v[0]) for k, v in score(job.problem, X, batch=1).items()}
-    if getattr(cfg.study, "pareto", None) is not None:
-        res = {k: v for k, v in res.items() if k not in ("f", "f_se")}
-    warns = list(job.study.warnings(cfg.study, res | {"x": np.asarray(X[0])}))
-    return res, warns, dict(job.study.units(cfg.study))
+    one = compare(cfg, [design], where, replicas=0)["designs"][0]
+    return one["values"], one["warnings"], one["units"]
+
+
+PAIRED_REPLICAS = 8
+"""Further independent sample sets (each the config's size) on which :func:`compare`
+scores every design again, for the standard error of the paired differences."""
+PAIRED_STREAM = 0x50414952  # "PAIR"
+
+
+def check_box(problem: Any, design: Mapping[str, float], where: str) -> None:
+    """ConfigError naming the first variable of ``design`` outside the study's box."""
+    for n, lo, hi in zip(problem.names, problem.lower, problem.upper, strict=True):
+        v = design.get(n)
+        if v is not None and not float(lo) <= float(v) <= float(hi):
+            raise ConfigError(f"{where}: --design {n}={v:g}: outside the design box "
+                              f"[{float(lo):g}, {float(hi):g}] of variable '{n}'")  # fmt: skip
+
+
+def compare(cfg: Any, designs: list[Mapping[str, float]], where: str = "config",
+            replicas: int = PAIRED_REPLICAS) -> dict[str, Any]:
+    """Designs scored together, and the paired differences of every design from the
+    first (``designopt eval --design … --design …``).
+
+    All designs are scored in one call on the run's samples (common random numbers:
+    the same targets, joint samples and IK seeds), so design k − design 1 is the
+    difference of two estimates on the same samples. Its standard error is that of the
+    paired difference: every design is scored again on ``replicas`` further independent
+    sample sets of the same size (the ``samples`` stream folded with
+    :data:`PAIRED_STREAM` and r), each giving one independent realisation of the paired
+    difference, and the SE is the standard deviation of the ``replicas + 1``
+    differences (far below √(SE₁² + SE₂²) when the samples affect both designs alike).
+
+    Returns {"designs": [{"design": {variable: value}, "filled": [variables that took
+    the middle of their box], "values": {index: value, index_se: SE, ...}, "warnings",
+    "units", "placement": {name: array}, "lines": the study's lines of them}], "differences": [{"of": (k, 0), "values":
+    {index: value, index_se: paired SE}}], "replicas": replicas}. A variable outside the
+    box: ConfigError naming it."""
+    import jax
+
+    job = Job.build(cfg, where, n_designs=len(designs))
+    problem = job.problem
+    for d in designs:
+        bad = [k for k in d if k not in problem.names]
+        if bad:
+            raise ConfigError(f"{where}: design variable(s) {bad} not in this study's "
+                              f"variables {list(problem.names)}")  # fmt: skip
+        check_box(problem, d, where)
+    X = matrix(problem, list(designs), where)
+    front = getattr(cfg.study, "pareto", None) is not None
+
+    def scored(prob: Any) -> dict[str, np.ndarray]:
+        res = {k: np.asarray(v, np.float64) for k, v in score(prob, X, batch=len(X)).items()}
+        return {k: v for k, v in res.items() if not (front and k in ("f", "f_se"))}
+
+    res = scored(problem)
+    units = dict(job.study.units(cfg.study))
+    placed = placement(job.study, cfg.study, X)
+    out: dict[str, Any] = {"designs": [], "differences": [], "replicas": int(replicas)}
+    for i, d in enumerate(designs):
+        vals = {k: float(v[i]) for k, v in res.items()}
+        x = dict(zip(problem.names, X[i].tolist(), strict=True))
+        pl = {k: placed[k][i] for k in placed.get("attrs", {}).get("placement", [])}
+        warns = list(job.study.warnings(cfg.study, vals | {"x": X[i]}))
+        lines = list(job.study.extra_lines(cfg.study, pl)) if pl else []
+        out["designs"].append({"design": x, "filled": [n for n in problem.names if n not in d],
+                               "values": vals, "warnings": warns, "units": units,
+                               "placement": pl, "lines": lines})  # fmt: skip
+    if len(designs) < 2:
+        return out
+    names = [k for k in res if k + "_se" in res]
+    diffs = [{k: res[k][1:] - res[k][0] for k in names}]
+    root = jax.random.fold_in(job.keys["samples"], PAIRED_STREAM)
+    for r in range(replicas):  # the same designs on independent sample sets
+        keys = dict(job.keys) | {"samples": jax.random.fold_in(root, r)}
+        rep = scored(build_problem(cfg, keys, where, job.dtype))
+        diffs.append({k: rep[k][1:] - rep[k][0] for k in names})
+    for j in range(len(designs) - 1):
+        vals: dict[str, float] = {}
+        for k in names:
+            d = np.array([dd[k][j] for dd in diffs])
+            vals[k] = float(d[0])
+            ok = d[np.isfinite(d)]
+            vals[k + "_se"] = float(np.std(ok, ddof=1)) if len(ok) > 1 else float("nan")
+        out["differences"].append({"of": (j + 1, 0), "values": vals})
+    return out
 
 
 def scan(cfg: Any, text: str | None = None, where: str = "config", out: Path | None = None,
@@ -386,5 +469,5 @@ def scan(cfg: Any, text: str | None = None, where: str = "config", out: Path | N
     return Report(out, lines, rec)
 
 
-__all__ = ["Report", "build_problem", "draw_figures", "evaluate", "optimise", "run", "scan",
+__all__ = ["Report", "build_problem", "compare", "draw_figures", "evaluate", "optimise", "run", "scan",
            "score", "sweep", "write_html"]  # fmt: skip

@@ -29,12 +29,14 @@ def binder(rec: Record) -> tuple[Any, dict[str, Any]]:
     if cfg is None:
         folder = rec.attrs.get("config_dir") or None
         cfg = validate(rec.raw_config(), f"archive ({rec.kind})", folder=folder)
-    return cfg, study_hints(cfg, rec.groups.get("final"))
+    return cfg, study_hints(cfg, rec.groups.get("final"), rec.groups.get("front"))
 
 
-def study_hints(cfg: Any, final: Any = None) -> dict[str, Any]:
+def study_hints(cfg: Any, final: Any = None, front: Any = None) -> dict[str, Any]:
     """The study's units and summary indices for ``cfg``, and its own summary lines of a
-    final design (``final``: the record's ``final`` group)."""
+    final design (``final``: the record's ``final`` group) or, as ``design_lines``, of
+    each design of a front (``front``: its ``front`` group) that archives the study's
+    placement (its attr ``placement``)."""
     from designopt.studies import get
 
     st = get(cfg.study.name)
@@ -42,6 +44,11 @@ def study_hints(cfg: Any, final: Any = None) -> dict[str, Any]:
                            "summary": tuple(st.summary(cfg.study))}  # fmt: skip
     if final is not None:
         out["extra_lines"] = list(st.extra_lines(cfg.study, final))
+    placed = [] if front is None else list(front.get("attrs", {}).get("placement", []) or [])
+    if placed:
+        n = len(front[placed[0]])
+        out["design_lines"] = [list(st.extra_lines(cfg.study, {k: front[k][i] for k in placed}))
+                               for i in range(n)]  # fmt: skip
     return out
 
 

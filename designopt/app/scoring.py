@@ -97,3 +97,28 @@ def run_groups(cfg: Any, problem: Problem, res: Any, dtype: Any) -> dict[str, An
     tree["final"] = fin | {"x": x_final[0], "attrs": {"stage": stage,
                            "n_samples_used": int(problem.n_samples_used)}}  # fmt: skip
     return tree
+
+
+def placement(study: Any, settings: Any, X: np.ndarray) -> dict[str, Any]:
+    """What ``study.placement`` says designs ``X`` (n, D) put in the world (arrays (n,
+    ...), e.g. the serial study's ports and bases), with their names in ``attrs``
+    (``placement``) beside the study's own attrs; {} when the study has none."""
+    if study.placement is None:
+        return {}
+    out = study.placement(settings, np.atleast_2d(np.asarray(X, np.float64)))
+    if not out:
+        return {}
+    at = dict(out.pop("attrs", {}))
+    return {k: np.asarray(v) for k, v in out.items()} | {"attrs": at | {"placement": list(out)}}
+
+
+def with_placement(group: dict[str, Any], placed: dict[str, Any], row: int | None) -> None:
+    """Add ``placed`` (:func:`placement`) to an archive group in place: design ``row``'s
+    values (a final group), or every design's (``row`` None: a front's); the names go to
+    the group's attr ``placement``."""
+    if not placed:
+        return
+    at = placed["attrs"]
+    for k in at["placement"]:
+        group[k] = placed[k] if row is None else placed[k][row]
+    group.setdefault("attrs", {})["placement"] = list(at["placement"])

@@ -14,6 +14,7 @@ import math
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 from designopt.cli.setup import DESIGN_FLAG, design_argument, set_argument, use_cache
 from designopt.cli.setup import load_args as _load
@@ -63,23 +64,29 @@ def _finish(rep, args: argparse.Namespace, clock=None) -> int:
         print(f"figures: {len(figs) // 2} (PNG + PDF) in {figs[0].parent}")
     if clock is not None and rep.record is not None:
         clock.__exit__(None, None, None)
-        print(wall_line(rep.record.attrs, clock, figures_s))
+        print(wall_line(rep.record.attrs, clock, figures_s, getattr(args, "config_s", 0.0)))
     return 0
 
 
-def wall_line(attrs: dict, clock, figures_s: float) -> str:
-    """The wall time from the process's start to this line, split into start-up (Python,
-    imports, the config), setup, optimizer, scoring, figures and the rest (archive,
-    printing), with the compile time of it all and the XLA programs compiled. The exit
-    after it skips interpreter teardown (``console``)."""
-    startup = max(process_age() - clock.wall, 0.0)
+def wall_line(attrs: dict, clock, figures_s: float, config_s: float = 0.0) -> str:
+    """The wall time from the process's start to this line, split into parts that add up
+    to it: start-up (Python, imports, and the config's ``config_s`` seconds: reading and
+    validating it, the study's checks), setup, optimizer, scoring, figures and the rest
+    (archive, printing). Then the compile time within it (tracing, lowering, XLA
+    compiling or loading from the compilation cache) and the one count of XLA programs:
+    every program compiled or loaded from the cache from the config on, the figures'
+    included (``clock``: a Stopwatch started before the config was read). The exit after
+    it skips interpreter teardown (``console``)."""
     a = {k: float(attrs.get(k + "_time_s", 0.0)) for k in ("setup", "optimizer", "post")}
-    total = startup + clock.wall
-    other = max(clock.wall - sum(a.values()) - figures_s, 0.0)
+    before = max(process_age() - clock.wall, 0.0)  # Python and imports, before the clock
+    startup = before + config_s
+    total = before + clock.wall
+    other = total - startup - sum(a.values()) - figures_s  # archive, printing: the rest
     return (f"wall {total:.1f} s end to end = start-up {startup:.1f} s + setup "
             f"{a['setup']:.1f} s + optimizer {a['optimizer']:.1f} s + scoring {a['post']:.1f} s"
             f" + figures {figures_s:.1f} s + archive and the rest {other:.1f} s; compile "
-            f"{clock.compile:.1f} s of it ({clock.compilations} XLA programs)")
+            f"{clock.compile:.1f} s of it ({clock.compilations} XLA programs) = tracing, "
+            "lowering and compiling each program or loading it from the compilation cache")
 
 
 EXEC_GAP_S = 1.0
@@ -110,8 +117,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     from designopt.app import pipeline
     from designopt.core.timing import Stopwatch
 
-    cfg, text = _load(args)
     clock = Stopwatch().__enter__()  # closed by _finish, after the figures
+    cfg, text = _load(args)  # its compilations (the study's checks) are counted too
+    args.config_s = clock.elapsed()
     rep = pipeline.run(cfg, text, args.config, _out(args, cfg), resume=args.resume,
                        progress=_progress(args.quiet), resume_hint=_resume_command(args, cfg),
                        dry_run=args.dry_run)  # fmt: skip
@@ -138,45 +146,164 @@ def cmd_scan(args: argparse.Namespace) -> int:
     return _finish(rep, args)
 
 
+def design_groups(groups: list[list[str]]) -> list[dict[str, float]]:
+    """The designs of ``eval``'s ``--design`` flags (``groups``: each flag's NAME=VALUE
+    words, in order). A flag with several of them (``--design b=0.6,by=0,px=0.03`` or
+    ``--design b=0.6 by=0``) is one design of its own. A flag with one joins the design
+    before it when that design was built of such single flags and lacks the variable;
+    else (a variable given again, or after a whole design) it starts a new design, so
+    ``--design b=0.6 --design px=0.03`` stays one design and ``--design b=0.6 --design
+    b=0.7`` are two."""
+    designs: list[dict[str, float]] = []
+    open_ = False  # the last design was built of single-variable flags
+    for words in groups:
+        items = [w for word in words for w in word.split(",") if w.strip()]
+        d = _parse_design(items)
+        if len(items) == 1 and open_ and not set(d) & set(designs[-1]):
+            designs[-1] |= d
+            continue
+        designs.append(d)
+        open_ = len(items) == 1
+    return designs or [{}]
+
+
 def cmd_eval(args: argparse.Namespace) -> int:
     from designopt.app import pipeline
-    from designopt.results.base import value_text
 
     cfg, _ = _load(args)
-    design = _parse_design(args.design)
-    res, warns, units = pipeline.evaluate_one(cfg, design, where=args.config)
-    feasible = None if "violation" not in res else bool(res["violation"] <= 0)
-    if args.json:  # valid JSON always: a value that is n/a (NaN) is null
-        out = {k: (v if math.isfinite(v) else None) for k, v in res.items()}
-        out |= ({} if feasible is None else {"feasible": feasible}) | {"warnings": warns}
-        print(json.dumps(out, allow_nan=False))
+    groups = getattr(args, "design_groups", None) or [[w] for w in args.design]
+    designs = design_groups(groups)
+    out = pipeline.compare(cfg, designs, where=args.config)
+    if args.json:
+        print(json.dumps(_eval_json(out, len(designs) == 1), allow_nan=False))
         return 0
-    box = cfg.study.variables
-    design = {k: design.get(k, 0.5 * (lo + hi)) for k, (lo, hi) in box.items()}
-    counts = ("_se", "_n", "_of")  # an index's SE and a ratio's counts: printed with it
-    shown = [k for k in res if not (k.endswith(counts) and k.rsplit("_", 1)[0] in res)]
-    w = max([15, *(len(k) for k in shown)])  # the names right-aligned on their "="
-    for k, v in res.items():
-        if k not in shown:
-            continue
-        txt = value_text(v, res.get(k + "_se"), ".6g", ".2g", res.get(k + "_n"),
-                         res.get(k + "_of"))  # fmt: skip
-        u = units.get(k, "")
-        print(f"{k:>{w}} = {txt}" + (f" {u}" if u not in ("", "-") and "n/a" not in txt else ""))
-    print("design: " + ", ".join(f"{k} = {v:g}" + (f" {units[k]}" if units.get(k, "-") != "-" else "")
-                                 for k, v in design.items()))  # fmt: skip
-    front = getattr(cfg.study, "pareto", None)
+    st = cfg.study
+    box = st.variables
+    units = out["designs"][0]["units"]
+    if len(designs) == 1:
+        _print_one(out["designs"][0], box, units)
+    else:
+        _print_many(out, box, units)
+    front = getattr(st, "pareto", None)
     if front is not None:
         from designopt.app.config import senses
 
         print("a front's config: its objectives are " + ", ".join(
             f"{k} ({s})" for k, s in senses(front).items()) + " (no weighted f)")  # fmt: skip
-    if feasible is not None:
-        print("constraints: " + ("feasible" if feasible else
-                                 f"violated by {res['violation']:.3g} (an infeasible design)"))  # fmt: skip
-    for w in warns:
-        print(f"warning: {w}")
     return 0
+
+
+def _finite(v: Any) -> Any:
+    """JSON-safe: NaN (n/a) and inf as null; arrays as nested lists."""
+    import numpy as np
+
+    if isinstance(v, dict):
+        return {k: _finite(x) for k, x in v.items()}
+    if isinstance(v, list | tuple):
+        return [_finite(x) for x in v]
+    if isinstance(v, np.ndarray):
+        return _finite(v.tolist())
+    if isinstance(v, float | np.floating):
+        return float(v) if math.isfinite(v) else None
+    return v
+
+
+def _eval_json(out: dict[str, Any], one: bool) -> Any:
+    """``eval --json``: one design as one object (its indices, ``feasible``, the study's
+    placement, e.g. ``ports`` and ``bases``, ``warnings``); several as {"designs": [...],
+    "differences": [{"of": [k, 1], index: value, index_se: paired SE}], ...}."""
+    rows = []
+    for d in out["designs"]:
+        r = dict(d["values"])
+        if "violation" in r:
+            r["feasible"] = bool(r["violation"] <= 0)
+        r |= dict(d["placement"]) | {"warnings": d["warnings"]}
+        rows.append(r if one else {"design": d["design"], "middle_of_box": d["filled"]} | r)
+    if one:
+        return _finite(rows[0])
+    diffs = [{"of": [a + 1, b + 1]} | x["values"] for x in out["differences"]
+             for a, b in [x["of"]]]  # fmt: skip
+    return _finite({"designs": rows, "differences": diffs,
+                    "paired_se": f"the standard deviation of each difference over the run's "
+                                 f"samples and {out['replicas']} further independent sample "
+                                 "sets, the designs scored together on each"})  # fmt: skip
+
+
+def _shown(res: dict[str, float]) -> list[str]:
+    counts = ("_se", "_n", "_of")  # an index's SE and a ratio's counts: printed with it
+    return [k for k in res if not (k.endswith(counts) and k.rsplit("_", 1)[0] in res)]
+
+
+def _unit(u: str | None) -> str:
+    return "" if u in (None, "", "-") else f" {u}"
+
+
+def _design_line(d: dict[str, Any], units: dict[str, str]) -> str:
+    txt = ", ".join(f"{k} = {v:g}{_unit(units.get(k))}" for k, v in d["design"].items())
+    if d["filled"]:
+        txt += f" ({', '.join(d['filled'])}: the middle of the box, not given)"
+    return txt
+
+
+def _print_one(d: dict[str, Any], box: Any, units: dict[str, str]) -> None:
+    from designopt.results.base import value_text
+
+    res = d["values"]
+    shown = _shown(res)
+    w = max([15, *(len(k) for k in shown)])  # the names right-aligned on their "="
+    for k in shown:
+        txt = value_text(res[k], res.get(k + "_se"), ".6g", ".2g", res.get(k + "_n"),
+                         res.get(k + "_of"))  # fmt: skip
+        print(f"{k:>{w}} = {txt}" + (_unit(units.get(k)) if "n/a" not in txt else ""))
+    print("design: " + _design_line(d, units))
+    _tail(d)
+
+
+def _tail(d: dict[str, Any], label: str = "") -> None:
+    """A design's placement lines, constraints and warnings."""
+    res = d["values"]
+    for line in d.get("lines", []):
+        print(line)
+    if "violation" in res:
+        v = res["violation"]
+        print(f"{label}constraints: " + ("feasible" if v <= 0 else
+                                         f"violated by {v:.3g} (an infeasible design)"))  # fmt: skip
+    for w in d["warnings"]:
+        print(f"{label}warning: {w}")
+
+
+def _print_many(out: dict[str, Any], box: Any, units: dict[str, str]) -> None:
+    """One column per design, then one per difference (design k − design 1) ± its
+    paired SE."""
+    from designopt.results.base import value_text
+
+    ds, diffs = out["designs"], out["differences"]
+    for i, d in enumerate(ds):
+        print(f"design {i + 1}: " + _design_line(d, units))
+    shown = _shown(ds[0]["values"])
+    heads = [f"design {i + 1}" for i in range(len(ds))]
+    heads += [f"design {a + 1} − design {b + 1}" for a, b in (x["of"] for x in diffs)]
+    cells = []
+    for k in shown:
+        row = [value_text(d["values"][k], d["values"].get(k + "_se"), ".6g", ".2g",
+                          d["values"].get(k + "_n"), d["values"].get(k + "_of"))
+               for d in ds]  # fmt: skip
+        for x in diffs:
+            v, se = x["values"].get(k), x["values"].get(k + "_se")
+            row.append("-" if v is None else value_text(v, se, "+.6g", ".2g"))
+        cells.append((k + ("" if units.get(k, "-") in ("", "-") else f" [{units[k]}]"), row))
+    w0 = max(len(h) for h, _ in cells)
+    ws = [max(len(heads[c]), *(len(r[c]) for _, r in cells)) for c in range(len(heads))]
+    print(" " * w0 + "  " + "  ".join(h.rjust(w) for h, w in zip(heads, ws, strict=True)))
+    for h, r in cells:
+        print(h.rjust(w0) + "  " + "  ".join(c.rjust(w) for c, w in zip(r, ws, strict=True)))
+    print(f"each difference ± its paired SE: the designs scored together on the same samples "
+          f"(and on {out['replicas']} further independent sample sets: the SE is the spread "
+          "of the difference over them)")  # fmt: skip
+    for i, d in enumerate(ds):
+        if d.get("lines") or "violation" in d["values"] or d["warnings"]:
+            print(f"design {i + 1}:")
+            _tail(d, "  ")
 
 
 def cmd_studies(args: argparse.Namespace) -> int:
@@ -229,8 +356,10 @@ def cmd_show(args: argparse.Namespace) -> int:
     out = None
     if args.csv is not None:  # checked before anything is printed
         if "targets" not in rec:
-            raise ConfigError(f"{p}: --csv writes the final design at every target of a task "
-                              "run (the archive's targets group); this archive has none")  # fmt: skip
+            raise ConfigError(f"{p}: --csv writes per-target values (a task study's run or "
+                              "front: the archive's targets group); this archive has none, "
+                              f"so there is nothing to export ({rec.kind}, study "
+                              f"{rec.attrs.get('study', '-')})")  # fmt: skip
         out = Path(args.csv) if args.csv else p.with_name(f"{p.stem}_targets.csv")
         if out.suffix.lower() != ".csv" or out.is_dir():
             raise ConfigError(f"--csv {args.csv}: give a .csv file name")
@@ -305,9 +434,14 @@ class Parser(argparse.ArgumentParser):
         return ns
 
     def parse_known_args(self, args=None, namespace=None):  # type: ignore[override]
+        groups = None
         if args is not None and DESIGN_FLAG in self._option_string_actions:
+            groups = _design_groups(list(args))
             args = _design_items(list(args))
-        return super().parse_known_args(args, namespace)
+        ns, extra = super().parse_known_args(args, namespace)
+        if groups is not None:  # each --design flag's words: eval's designs (design_groups)
+            ns.design_groups = groups
+        return ns, extra
 
 
 def _design_items(args: list[str]) -> list[str]:
@@ -328,6 +462,27 @@ def _design_items(args: list[str]) -> list[str]:
         out.append(word)
         i += 1
     return out
+
+
+def _design_groups(args: list[str]) -> list[list[str]]:
+    """The NAME=VALUE words of each ``--design`` flag (``--design a=1 b=2`` or
+    ``--design=a=1``), in order."""
+    out: list[list[str]] = []
+    i = 0
+    while i < len(args):
+        word = args[i]
+        if word == "--":
+            break
+        if word.startswith(DESIGN_FLAG + "="):
+            out.append([word[len(DESIGN_FLAG) + 1 :]])
+        elif word == DESIGN_FLAG:
+            group = []
+            while i + 1 < len(args) and _item(args[i + 1]):
+                i += 1
+                group.append(args[i])
+            out.append(group)
+        i += 1
+    return [g for g in out if g]
 
 
 def _item(word: str) -> bool:
@@ -387,8 +542,10 @@ def build_parser() -> argparse.ArgumentParser:
     common(e, out=False, quiet=False, figures=False, dry=False)
     design_argument(
         e,
-        "design variables' values, one or several after one flag or the flag "
-        "repeated (others: middle of their box)",
+        "a design's variables (others: the middle of their box): several after one flag "
+        "(b=0.6,by=0 or b=0.6 by=0) are one design, and each such flag one more design; "
+        "single NAME=VALUE flags add to the design before them until a variable repeats. "
+        "Two or more designs: one column each and design k − design 1 with its paired SE",
     )
     e.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     e.set_defaults(func=cmd_eval)
@@ -421,9 +578,11 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("show", help="print the summary of an archive")
     s.add_argument("archive")
     s.add_argument("--csv", nargs="?", const="", default=None, metavar="PATH.csv",
-                   help="also write the final design at every target of a task run (joints "
-                        "in degrees, reached, 1/k, clearance; per arm) to PATH.csv, default "
-                        "<archive stem>_targets.csv beside the archive")  # fmt: skip
+                   help="also write the per-target values of a task run's final design, "
+                        "or of every design of a task front (a design column): per arm and "
+                        "target the joints in degrees, reached, 1/k, clearance and the arm's "
+                        "port and base, to PATH.csv, default <archive stem>_targets.csv "
+                        "beside the archive")  # fmt: skip
     s.set_defaults(func=cmd_show)
     return ap
 

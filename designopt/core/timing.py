@@ -31,7 +31,9 @@ def _listener(name: str, secs: float, **_: Any) -> None:
 
 class Stopwatch:
     """``with Stopwatch() as sw: ...`` then ``sw.wall``, ``sw.compile``, ``sw.run`` and
-    ``sw.compilations`` (XLA programs compiled or loaded from the persistent cache)."""
+    ``sw.compilations``: the XLA programs of the interval, each counted once per backend
+    compilation, which is also the event of loading it from the persistent compilation
+    cache (so a warm run counts the programs it loads)."""
 
     def __init__(self) -> None:
         if not _registered[0]:
@@ -48,6 +50,10 @@ class Stopwatch:
         self.wall = time.perf_counter() - self._t
         self.compile = _total[0] - self._c
         self.compilations = _count[0] - self._n
+
+    def elapsed(self) -> float:
+        """Seconds since the stopwatch started (it keeps running)."""
+        return time.perf_counter() - self._t
 
     @property
     def run(self) -> float:

@@ -55,8 +55,18 @@ class FrontRecord(Record):
     @property
     def values(self) -> dict[str, np.ndarray]:
         """Every index and ``_se`` of the front's designs (n,)."""
-        skip = {"x", "f", "f_se", "rank", "ambiguous", "attrs"}
+        skip = {"x", "f", "f_se", "rank", "ambiguous", "attrs", *self.placement}
         return {k: np.asarray(v) for k, v in self.groups["front"].items() if k not in skip}
+
+    @property
+    def placement(self) -> list[str]:
+        """The names of what the study places in the world per design (``front/<name>``
+        (n, ...), e.g. the serial study's ``ports`` and ``bases``; attr ``placement``)."""
+        return [str(k) for k in self.groups["front"].get("attrs", {}).get("placement", []) or []]
+
+    def run_line(self) -> str:
+        """The samples behind each re-scored value (printed after a run)."""
+        return f"samples per design (the re-scoring): {self.n_samples}"
 
     @property
     def indices(self) -> list[str]:
@@ -190,6 +200,12 @@ class FrontRecord(Record):
         lines += self._table(rows)
         if len(rows) < n:
             lines.append(f"  ({len(rows)} of {n} designs shown, evenly along the front)")
+        per = self.hint("design_lines")  # the study's placement of each design, in numbers
+        if per:
+            lines.append("where the shown designs put the robot:")
+            for i in rows:
+                lines.append(f"  #{i}: {per[i][0].strip()}")
+                lines += [f"      {ln.strip()}" for ln in per[i][1:]]
         return lines
 
     @property

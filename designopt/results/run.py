@@ -15,24 +15,33 @@ import numpy as np
 from designopt.results.base import Record, value_text
 
 
-def _pm(name: str, v: float, se: float | None, fin: Any = None) -> str:
+def _unit(u: str | None) -> str:
+    """`` u`` for a unit worth printing ("" for none or dimensionless "-")."""
+    return "" if u in (None, "", "-") else f" {u}"
+
+
+def _pm(name: str, v: float, se: float | None, fin: Any = None, unit: str | None = None) -> str:
     if np.isnan(v):  # n/a: a ratio over too few items
         fin = {} if fin is None else fin
         return f"  {name:<5} = " + value_text(v, se, n=fin.get(name + "_n"),
                                                of=fin.get(name + "_of"))  # fmt: skip
     v = v + 0.0  # no "-0"
     if se is None:
-        return f"  {name:<5} = {v:.5g}"
-    rel = f"({100 * se / abs(v):.2f} %)" if abs(v) > se else ""  # no ratio on a tiny value
-    return f"  {name:<5} = {v:.5f} ± {se:.1e} {rel}"
+        return f"  {name:<5} = {v:.5g}{_unit(unit)}"
+    rel = f" ({100 * se / abs(v):.2f} %)" if abs(v) > se else ""  # no ratio on a tiny value
+    return f"  {name:<5} = {v:.5f} ± {se:.1e}{_unit(unit)}{rel}"
 
 
 def targets_csv_text(g: Mapping[str, Any]) -> str:
-    """The ``targets`` group (the final design at every target) as CSV: one row per arm
-    and target, each column headed with its unit: arm (from 0, as ``reach_<k>``), target
+    """The ``targets`` group (a design at every target) as CSV: one row per arm and
+    target, each column headed with its unit: arm (from 0, as ``reach_<k>``), target
     (from 1, as ``designopt ik``'s rows), x, y, z, reached (0/1), the joints (degrees for
     a revolute joint; the archive keeps radians), inv_k, clearance, the last three empty
-    where the target is not reached; full float precision (``repr``)."""
+    where the target is not reached, then the arm's own values on every row (the study's
+    ``arm_values`` with their ``arm_columns`` headings: the serial study's port on the
+    body wall and base pose); full float precision (``repr``). A front's group (every
+    array with a leading design axis) gives every design's rows, a first column
+    ``design`` (its row in the archive's ``front/x``, from 0)."""
     at = g.get("attrs", {})
     u = str(at.get("length_unit", ""))
     names = [str(n) for n in at.get("joints", [])]
@@ -40,24 +49,38 @@ def targets_csv_text(g: Mapping[str, Any]) -> str:
     p = np.asarray(g["target_p"], np.float64)
     ok = np.asarray(g["success"])
     q = np.asarray(g["q"], np.float64)
-    A, N = ok.shape
+    front = ok.ndim == 3
+    if not front:  # one design: a design axis of one, not written
+        ok, q = ok[None], q[None]
+    P, A, N = ok.shape
     names = names or [f"q{i + 1}" for i in range(q.shape[-1])]
     q_units = q_units or ["rad"] * q.shape[-1]
-    head = ["arm", "target", f"x [{u}]", f"y [{u}]", f"z [{u}]", "reached"]
+    head = ["design"] if front else []
+    head += ["arm", "target", f"x [{u}]", f"y [{u}]", f"z [{u}]", "reached"]
     head += [f"{n} [{'deg' if qu == 'rad' else qu}]" for n, qu in zip(names, q_units, strict=True)]
     q = np.where(np.asarray(q_units) == "rad", np.rad2deg(q), q)
     extra = [(k, f"{k} [{u}]" if k == "clearance" else k) for k in ("inv_k", "clearance") if k in g]
     head += [h for _, h in extra]
+    ev = {k: np.asarray(g[k], np.float64) if front else np.asarray(g[k], np.float64)[None]
+          for k, _ in extra}  # fmt: skip
+    av = None
+    if "arm_values" in g:
+        av = np.asarray(g["arm_values"], np.float64)
+        av = av if front else av[None]
+        head += [str(c) for c in at.get("arm_columns", [])] or \
+            [f"arm_value_{j}" for j in range(av.shape[-1])]  # fmt: skip
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(head)
-    for a in range(A):
-        for i in range(N):
-            hit = bool(ok[a, i])  # an unreached target has no solution: empty cells
-            w.writerow([a, i + 1, *(repr(float(c)) for c in p[i]), int(hit),
-                        *(repr(float(c)) if hit else "" for c in q[a, i]),
-                        *(repr(float(np.asarray(g[k])[a, i])) if hit else ""
-                          for k, _ in extra)])  # fmt: skip
+    for d in range(P):
+        for a in range(A):
+            own = [] if av is None else [repr(float(c)) for c in av[d, a]]
+            for i in range(N):
+                hit = bool(ok[d, a, i])  # an unreached target has no solution: empty cells
+                w.writerow([*([d] if front else []), a, i + 1, *(repr(float(c)) for c in p[i]),
+                            int(hit), *(repr(float(c)) if hit else "" for c in q[d, a, i]),
+                            *(repr(float(ev[k][d, a, i])) if hit else "" for k, _ in extra),
+                            *own])  # fmt: skip
     return buf.getvalue()
 
 
@@ -87,8 +110,8 @@ class RunRecord(Record):
         fin = self.groups["final"]
         out = {}
         for k, v in fin.items():
-            if k in ("x", "attrs") or k.endswith("_se"):
-                continue
+            if k in ("x", "attrs") or k.endswith("_se") or np.ndim(v):
+                continue  # the design, and what the study places in the world (placement)
             se = fin.get(k + "_se")
             out[k] = (float(np.asarray(v)), None if se is None else float(np.asarray(se)))
         return out
@@ -148,7 +171,8 @@ class RunRecord(Record):
                          f"gained Δf = {np.max(r['gain']):.2e}")  # fmt: skip
         for k in self.hint("summary", ()):
             se = fin.get(k + "_se")
-            lines.append(_pm(k, float(fin[k]), None if se is None else float(se), fin))
+            lines.append(_pm(k, float(fin[k]), None if se is None else float(se), fin,
+                             units.get(k)))  # fmt: skip
         if "violation" in fin:
             v = float(fin["violation"])
             ok = "feasible" if v <= 0 else f"violated by {v:.3g} (no feasible design found)"
@@ -158,8 +182,10 @@ class RunRecord(Record):
         return lines
 
     def run_line(self) -> str:
-        """Samples and the wall time split by stage (printed after a run)."""
-        return self.stages_line(self.n_samples_used)
+        """The Monte-Carlo samples behind each index (printed after a run; the command
+        line's last line splits the wall time, ``designopt.cli.commands.wall_line``)."""
+        n = self.n_samples_used
+        return f"samples per design: {n or '-'}"
 
     def summary(self) -> list[str]:
         """What ``designopt show`` prints: the final design, f and the study's indices."""
@@ -170,10 +196,14 @@ class RunRecord(Record):
         summary = self.hint("summary")  # None: a study unknown to this process
         if summary is not None:
             subs = [k for k in summary if k + "_se" in fin]
+        units = self.hint("units", {})
         lines.append(f"f = {self.f:.5f} (stage {self.stage}); "
                      + "; ".join(f"{k} = " + value_text(fin[k], fin[k + "_se"], n=fin.get(k + "_n"),
                                                         of=fin.get(k + "_of"))
+                                 + ("" if np.isnan(float(fin[k])) else _unit(units.get(k)))
                                  for k in subs))  # fmt: skip
+        lines += [ln[2:] if ln.startswith("  ") else ln
+                  for ln in self.hint("extra_lines", [])]  # the study's own (placement)
         lines += [f"warning: {w}" for w in self.warnings]
         return lines
 

@@ -247,9 +247,23 @@ class Study:
     ``designopt.figures.front.extremes_and_knee``) beside the generic front figures;
     None: the generic ones only."""
     targets: Callable[[Any, Any, Mapping[str, jax.Array], Any], dict[str, Any] | None] | None = None
-    """``targets(settings, x, keys, dtype)``: the final design ``x`` (variables in order)
-    at every target of a task run, for the archive's ``targets`` group (per arm and
-    target: the joints, reached, 1/k, clearance; docs/archive.md); None: no such group."""
+    """``targets(settings, x, keys, dtype)``: the final design ``x`` (D,) (variables in
+    order) at every target of a task run, for the archive's ``targets`` group (per arm and
+    target: the joints, reached, 1/k, clearance; docs/archive.md); None: no such group.
+    Given designs ``x`` (P, D) (a front's), every array but ``target_p`` gains a leading
+    design axis. A 2-D array ``arm_values`` (A, K) (one row per arm; (P, A, K) for P
+    designs) with attr ``arm_columns`` (K column headings) is written on every row of the
+    arm in ``designopt show --csv``."""
+    placement: Callable[[Any, np.ndarray], dict[str, Any] | None] | None = None
+    """``placement(settings, X)``: where designs ``X`` (n, D) (variables in order, config
+    units) put the robot in the world, as {name: (n, ...) array} plus ``"attrs"`` (e.g. a
+    ``"units"`` mapping and ``"columns"``); None: nothing to say for these settings. The
+    pipeline archives each array beside the indices (``final/<name>`` without the design
+    axis, ``front/<name>`` with it; their names in the group's attr ``placement``),
+    ``eval --json`` returns them, and the study's ``extra_lines`` (given the final group,
+    or one front design's values) prints them. The serial study: each arm's port on the
+    body wall (``ports`` (A, 3)), how far the projection moved it (``port_shift`` (A,))
+    and each arm's base (``bases`` (A, 6): x, y, z, roll, pitch, yaw in degrees)."""
     replay: (
         Callable[[Any, Mapping[str, jax.Array], Any, str], tuple[dict[str, Any], list[str]]] | None
     ) = None

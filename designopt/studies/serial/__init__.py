@@ -43,35 +43,184 @@ def _front_figures(record: Any, picks: Any, folder: Path) -> list[Path]:
     return figures.draw_front_robots(record, picks, folder)
 
 
+def _solutions(s: SerialSettings, X: Any, keys: Any, dtype: Any) -> dict[str, Any]:
+    """The per-target solutions of designs ``X`` (P, D) on a run's targets: each array
+    (A, P, N, ...) (``target_p`` (N, 3)), from the run's own block program in blocks of
+    ``blocks.DESIGNS`` designs (the last padded with its last design), as
+    ``blocks.solution`` gives them for one design."""
+    import jax.numpy as jnp
+    import numpy as np
+
+    from designopt.studies.serial import blocks, bodies, taskindex
+
+    if len(X) == 1:  # one design: the figures' own call, bit for bit
+        one = blocks.solution(s, X[0], keys, dtype)
+        return {k: (v if k in ("target_p", "target_R") else
+                    (v[None, None] if s.arms is None else v[:, None]))
+                for k, v in one.items()}  # fmt: skip
+    mech, _ = blocks.program(s, dtype)
+    dt = np.dtype(jnp.dtype(dtype))
+    p = {"fixed": jnp.asarray(np.asarray(mech.fixed, dt)),
+         "scale": jnp.asarray(np.asarray(mech.scale, dt)),
+         "q_lower": jnp.asarray(np.asarray(mech.lower, dt)),
+         "q_upper": jnp.asarray(np.asarray(mech.upper, dt)),
+         "sample_key": keys["samples"]} | taskindex.targets(s, keys["samples"], dtype)  # fmt: skip
+    p |= bodies.base_params(s, mech, dtype) | taskindex.scene_params(s, dtype, mech)
+    B, P, N = blocks.DESIGNS, len(X), p["target_p"].shape[0]
+    pad = np.concatenate([X, np.repeat(X[-1:], -P % B, 0)]).astype(dt)
+    run = blocks.values(s, dtype)
+    parts = []
+    for b in range(0, len(pad), B):  # one block program call per 16 designs
+        chunks = [{k: np.asarray(v) for k, v in c.items()} for c in run(p, pad[b : b + B])]
+        parts.append(blocks.assembled(s, chunks, B, N, np))
+    out = {k: np.concatenate([q[k] for q in parts], 1)[:, :P] for k in parts[0]}
+    out["success"] = out["success"] > 0.5
+    return out | {k: np.asarray(p[k]) for k in ("target_p", "target_R") if k in p}
+
+
 def _targets(s: SerialSettings, x: Any, keys: Any, dtype: Any) -> dict[str, Any] | None:
     """The final design at every target of a task run (``Study.targets``): per arm (A = 1
     without ``arms``) and target ``success`` (A, N) 0/1, ``q`` (A, N, n) in the kernel's
     units (rad for a revolute joint, the chain's length unit for a prismatic one),
     ``inv_k`` and, under ``collision``, ``clearance`` (A, N), beside ``target_p`` (N, 3)
     in the world frame; the run's own targets and IK seeds (``blocks.solution``, the
-    program the figures use)."""
+    program the figures use). ``arm_values`` (A, K): each arm's port and base
+    (:func:`_placement`), written on every row of ``show --csv``. Designs ``x`` (P, D)
+    (a front's): every array but ``target_p`` with a leading design axis P."""
     if s.indices.measure != "task":
         return None
     import numpy as np
 
-    from designopt.studies.serial import blocks
     from designopt.studies.serial.drawing import joint_names
     from designopt.studies.serial.settings import length_unit
 
-    sol = blocks.solution(s, x, keys, dtype)
+    xa = np.asarray([x[k] for k in s.variables] if hasattr(x, "keys") else x, np.float64)
+    many = xa.ndim == 2
+    X = np.atleast_2d(xa)
+    sol = _solutions(s, X, keys, dtype)  # (A, P, N, ...)
 
-    def per_arm(v: Any) -> Any:  # (N, ...) of one arm → (1, N, ...)
-        return v if s.arms is not None else v[None]
+    def per_design(v: Any) -> Any:  # (A, P, N, ...) → (P, A, N, ...), or (A, N, ...)
+        v = np.moveaxis(np.asarray(v), 1, 0)
+        return v if many else v[0]
 
-    out = {"target_p": sol["target_p"], "success": per_arm(sol["success"]).astype(np.int8),
-           "q": per_arm(sol["q"]), "inv_k": per_arm(sol["inv_k"])}  # fmt: skip
+    out = {"target_p": sol["target_p"], "success": per_design(sol["success"]).astype(np.int8),
+           "q": per_design(sol["q"]), "inv_k": per_design(sol["inv_k"])}  # fmt: skip
     if "clearance" in sol:
-        out["clearance"] = per_arm(sol["clearance"])
+        out["clearance"] = per_design(sol["clearance"])
+    u = length_unit(s)
     types = [j.type for j in s.chain.joints]
-    out["attrs"] = {"joints": list(joint_names(s)), "types": types,
-                    "length_unit": length_unit(s),
-                    "q_units": ["rad" if t == "R" else length_unit(s) for t in types]}  # fmt: skip
+    out["attrs"] = {"joints": list(joint_names(s)), "types": types, "length_unit": u,
+                    "q_units": ["rad" if t == "R" else u for t in types]}  # fmt: skip
+    pl = _placement(s, X)
+    if pl is not None:
+        cols, vals = [], []
+        if "ports" in pl:
+            cols += [f"port_{c} [{u}]" for c in "xyz"]
+            vals.append(pl["ports"])
+        if "bases" in pl:
+            cols += [f"base_{c} [{u}]" for c in "xyz"]
+            cols += [f"base_{c} [deg]" for c in ("roll", "pitch", "yaw")]
+            vals.append(pl["bases"])
+        av = np.concatenate(vals, -1)  # (P, A, K)
+        out["arm_values"] = av if many else av[0]
+        out["attrs"]["arm_columns"] = cols
     return out
+
+
+def _entries(s: SerialSettings, row: Any, X: Any) -> Any:
+    """Base or port entries (numbers, fixed values, design variables, "-name") as numbers
+    (n, len(row)) for designs ``X`` (n, D) (config units; ``settings.entry_value``'s rule,
+    vectorised over the designs)."""
+    import numpy as np
+
+    names = list(s.variables)
+    cols = []
+    for v in row:
+        if not isinstance(v, str):
+            cols.append(np.full(len(X), float(v)))
+            continue
+        name = v.removeprefix("-")
+        col = np.full(len(X), float(s.fixed[name])) if name in s.fixed else X[:, names.index(name)]
+        cols.append(-col if v.startswith("-") else col)
+    return np.stack(cols, -1)
+
+
+def _placement(s: SerialSettings, X: Any) -> dict[str, Any] | None:
+    """``Study.placement``: for designs ``X`` (n, D), in the world frame and the chain's
+    length unit, each arm's port on the body wall ``ports`` (n, A, 3) (the design's
+    point ``port_points`` projected onto ``task.body_wall`` by ``kinematics.wall.project``,
+    as the objective places it), ``port_points`` (n, A, 3), the projection's distance
+    ``port_shift`` (n, A), and with ``arms`` each base ``bases`` (n, A, 6): x, y, z,
+    roll, pitch, yaw (degrees, the config's rpy). None: no port and no arms."""
+    import numpy as np
+
+    from designopt.studies.serial.settings import length_unit
+
+    X = np.atleast_2d(np.asarray(X, np.float64))
+    ports = s.ports() if s.task is not None else [None]
+    out: dict[str, Any] = {}
+    if all(p is not None for p in ports):
+        raw = np.stack([_entries(s, p, X) for p in ports], 1)  # (n, A, 3)
+        wall = s.task.body_wall  # type: ignore[union-attr]
+        on = raw
+        if wall is not None:
+            import jax
+            import jax.numpy as jnp
+
+            from designopt.kinematics import wall as kw
+
+            dt = jnp.float64 if jax.config.jax_enable_x64 else jnp.float32
+            on = np.asarray(kw.project(wall.shape, kw.wall_params(wall, dt), jnp.asarray(raw, dt)),
+                            np.float64)  # fmt: skip
+        out |= {"ports": on, "port_points": raw, "port_shift": np.linalg.norm(on - raw, axis=-1)}
+    if s.arms is not None:
+        out["bases"] = np.stack([np.concatenate([_entries(s, a.base.xyz, X),
+                                                 _entries(s, a.base.rpy, X)], -1)
+                                 for a in s.arms], 1)  # fmt: skip
+    if not out:
+        return None
+    u = length_unit(s)
+    return out | {"attrs": {"length_unit": u, "wall": None if s.task is None or s.task.body_wall
+                            is None else s.task.body_wall.shape}}  # fmt: skip
+
+
+def _vec(v: Any, fmt: str = ".4f") -> str:
+    return "(" + ", ".join(f"{float(c) + 0.0:{fmt}}" for c in v) + ")"
+
+
+def _extra_lines(s: SerialSettings, fin: Any) -> list[str]:
+    """``Study.extra_lines``: each arm's incision point and base in numbers (world frame),
+    from the values ``_placement`` archived (a final group, or one front design's)."""
+    import numpy as np
+
+    from designopt.studies.serial.settings import length_unit
+
+    if "ports" not in fin and "bases" not in fin:
+        return []
+    u = length_unit(s)
+    wall = None if s.task is None or s.task.body_wall is None else s.task.body_wall.shape
+    ports = None if "ports" not in fin else np.asarray(fin["ports"], np.float64).reshape(-1, 3)
+    bases = None if "bases" not in fin else np.asarray(fin["bases"], np.float64).reshape(-1, 6)
+    A = len(ports) if ports is not None else len(bases)  # type: ignore[arg-type]
+    what = " and ".join(w for w, v in (("ports", ports), ("bases", bases)) if v is not None)
+    head = f"  {what} in the world frame ({u}; angles in deg)" + (
+        f"; a port is the incision point, the design's point projected onto the {wall} "
+        "body wall" if ports is not None and wall is not None else "")  # fmt: skip
+    lines = [head + ":"]
+    for k in range(A):
+        arm = "  arm" if A == 1 and s.arms is None else f"  arm {k}"
+        parts = []
+        if ports is not None:
+            txt = f"port {_vec(ports[k])} {u}"
+            if wall is not None and "port_shift" in fin:
+                sh = float(np.asarray(fin["port_shift"], np.float64).reshape(-1)[k])
+                pt = np.asarray(fin.get("port_points", ports), np.float64).reshape(-1, 3)[k]
+                txt += f", {sh:.4f} {u} from the design's point {_vec(pt)}"
+            parts.append(txt)
+        if bases is not None:
+            parts.append(f"base xyz {_vec(bases[k][:3])} {u}, rpy {_vec(bases[k][3:], '.2f')} deg")
+        lines.append(f"{arm}: " + "; ".join(parts))
+    return lines
 
 
 def _aliases(s: SerialSettings) -> dict[str, str]:
@@ -159,6 +308,8 @@ STUDY = Study(
     cloud=_cloud,
     robot=_robot,
     targets=_targets,
+    placement=_placement,
+    extra_lines=_extra_lines,
     front_figures=_front_figures,
     check=reach.check,
     warnings=reach.warnings,

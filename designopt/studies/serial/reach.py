@@ -392,14 +392,14 @@ def warnings(s: SerialSettings, final: Mapping[str, Any]) -> list[str]:
             continue  # n/a: said below
         if c.ge is not None and v < c.ge - Z * se:
             out.append(f"{c.index} = {v:.4g} ± {se:.2g}, asked ≥ {c.ge:g}: the constraint is "
-                       "missed by the best design found")  # fmt: skip
+                       "missed by this design")  # fmt: skip
         elif c.le is not None and v > c.le + Z * se:
             out.append(f"{c.index} = {v:.4g} ± {se:.2g}, asked ≤ {c.le:g}: the constraint is "
-                       "missed by the best design found")  # fmt: skip
+                       "missed by this design")  # fmt: skip
     if s.indices.measure == "task" and "reach" in final and asked_reach is None:
         v, se = val("reach")
         if math.isfinite(v) and v < REACH_WARNING:
-            out.append(f"reach = {v:.3g} ± {se:.2g}: the best design reaches "
+            out.append(f"reach = {v:.3g} ± {se:.2g}: this design reaches "
                        f"{100 * v:.0f} % of the task region's targets (gci and the other "
                        "task indices count an unreached target as 0)")  # fmt: skip
     if s.arms is not None:
