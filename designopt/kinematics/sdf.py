@@ -61,8 +61,10 @@ how many cells per axis each uses), ``origin`` and ``cell`` (nm, 3), ``R`` (nm, 
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
+import warnings
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -107,6 +109,14 @@ def load_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
 
 @lru_cache(maxsize=32)
 def _load(path: str, mtime_ns: int, size: int) -> tuple[np.ndarray, np.ndarray]:
+    # trimesh's checks divide by a flat mesh's zero volume (NumPy's RuntimeWarnings) and
+    # warn on odd files: silenced here only, so a refusal is the one line of its error
+    with warnings.catch_warnings(), np.errstate(all="ignore"):
+        warnings.simplefilter("ignore")
+        return _checked(path)
+
+
+def _checked(path: str) -> tuple[np.ndarray, np.ndarray]:
     import trimesh
 
     if Path(path).is_dir():
@@ -124,6 +134,10 @@ def _load(path: str, mtime_ns: int, size: int) -> tuple[np.ndarray, np.ndarray]:
         raise ValueError(f"{path}: the mesh is not watertight (some edge does not join "
                          "exactly two faces), so it has no inside; close it (e.g. fill its "
                          "holes in MeshLab or Blender) and export it again")  # fmt: skip
+    size = float(np.linalg.norm(np.ptp(v, axis=0)))
+    if not abs(float(m.volume)) > 1e-9 * size**3:
+        raise ValueError(f"{path}: the mesh is closed but encloses no volume (a flat or "
+                         "collapsed surface), so it has no inside")  # fmt: skip
     if not m.is_volume:
         trimesh.repair.fix_normals(m)  # consistent winding, outward normals
         if not m.is_volume:
@@ -330,24 +344,132 @@ def build_grid(vertices: ArrayLike, faces: ArrayLike, resolution: int = DEFAULT_
     return MeshGrid(vals, origin, cell, time.perf_counter() - t0)
 
 
-@lru_cache(maxsize=16)
-def _mesh_grid(path: str, mtime_ns: int, size: int, scale: float, resolution: int,
-               padding: float | None) -> MeshGrid:  # fmt: skip
-    v, f = _load(path, mtime_ns, size)
-    g = build_grid(v * scale, f, resolution, padding)
-    g.values.flags.writeable = False
-    return g
+GRID_VERSION = "exact-sdf-1"
+"""The grid algorithm's version, part of every cached grid's key: change it whenever
+:func:`build_grid` or :func:`exact_sdf` would give other values, and every cached file
+is rebuilt."""
+KEEP_GRIDS = 16
+"""Grids kept in memory (the most recently used)."""
+
+_GRIDS: dict[str, MeshGrid] = {}
+BUILDS: dict[str, int] = {}
+"""How many times each grid (by its key, :func:`grid_key`) was built in this process:
+read by the tests (a grid is built at most once per process)."""
+
+
+def cache_folder() -> Path | None:
+    """Where mesh grids are kept between runs: the compilation cache's folder
+    (``jax_compilation_cache_dir``, set by the CLI's ``compile_cache``, ``cli.setup.use_cache``);
+    None (memory only) when none is configured."""
+    d = jax.config.jax_compilation_cache_dir
+    return None if not d else Path(d)
+
+
+@lru_cache(maxsize=64)
+def _content_hash(path: str, mtime_ns: int, size: int) -> str:
+    import hashlib
+
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def grid_key(path: str | os.PathLike, scale: float = 1.0, resolution: int = DEFAULT_RESOLUTION,
+             padding: float | None = None) -> str:  # fmt: skip
+    """The text that identifies a mesh file's grid: :data:`GRID_VERSION`, the SHA-256 of
+    the file's bytes, the scale, the resolution and the padding (exact float reprs). The
+    pose is not part of it: the grid lies in the mesh's own frame (after the scale), and
+    a pose moves it at lookup (:func:`mesh_sdf`), so a moved mesh reuses its grid."""
+    import json
+
+    p = Path(path).resolve()
+    st = p.stat()
+    return json.dumps({"version": GRID_VERSION,
+                       "sha256": _content_hash(str(p), st.st_mtime_ns, st.st_size),
+                       "scale": repr(float(scale)), "resolution": int(resolution),
+                       "padding": None if padding is None else repr(float(padding))},
+                      sort_keys=True)  # fmt: skip
+
+
+def grid_file(folder: Path, key: str) -> Path:
+    """The cached grid's file for ``key`` in ``folder``."""
+    import hashlib
+
+    return folder / f"designopt-grid-{hashlib.sha256(key.encode()).hexdigest()[:40]}.npz"
+
+
+def _read_grid(path: Path, key: str, resolution: int) -> MeshGrid | None:
+    """The grid in ``path`` when it is whole and made for ``key``; None otherwise (no
+    file, a damaged or foreign one, another key, wrong shapes or non-finite numbers)."""
+    import time
+
+    t0 = time.perf_counter()
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            if str(z["key"]) != key:
+                return None
+            vals = np.array(z["values"], np.float64)
+            origin = np.array(z["origin"], np.float64)
+            cell = np.array(z["cell"], np.float64)
+    except Exception:  # noqa: BLE001  (missing, truncated, not an npz: rebuild)
+        return None
+    n = int(resolution)
+    if vals.shape != (n, n, n) or origin.shape != (3,) or cell.shape != (3,):
+        return None
+    if not (np.all(np.isfinite(vals)) and np.all(np.isfinite(origin))
+            and np.all(np.isfinite(cell)) and np.all(cell > 0)):  # fmt: skip
+        return None
+    return MeshGrid(vals, origin, cell, time.perf_counter() - t0)
+
+
+def _write_grid(path: Path, key: str, g: MeshGrid) -> None:
+    """``g`` into ``path`` whole (a temporary file renamed over it), or nothing when the
+    folder cannot be written (the cache only saves time)."""
+    import io
+    import tempfile
+
+    buf = io.BytesIO()
+    np.savez(buf, key=np.array(key), values=g.values, origin=g.origin, cell=g.cell)
+    tmp = None
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".grid-", suffix=".tmp")
+        with os.fdopen(fd, "wb") as f:
+            f.write(buf.getvalue())
+        os.replace(tmp, path)
+    except OSError:
+        if tmp is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
 
 
 def mesh_grid(path: str | os.PathLike, scale: float = 1.0, resolution: int = DEFAULT_RESOLUTION,
               padding: float | None = None) -> MeshGrid:  # fmt: skip
-    """:func:`build_grid` of the mesh file (:func:`load_mesh`) scaled by ``scale``; built
-    once per file version and settings (kept in memory, not on disk)."""
-    load_mesh(path)  # the errors, named
-    p = Path(path).resolve()
-    st = p.stat()
-    return _mesh_grid(str(p), st.st_mtime_ns, st.st_size, float(scale), int(resolution),
-                      None if padding is None else float(padding))  # fmt: skip
+    """:func:`build_grid` of the mesh file (:func:`load_mesh`) scaled by ``scale``: built
+    at most once per process for one :func:`grid_key` (kept in memory, the
+    :data:`KEEP_GRIDS` last used), and kept on disk in :func:`cache_folder` when one is
+    configured: a later process loads it (a file that is damaged or made for another key
+    is rebuilt and replaced, never trusted)."""
+    v, f = load_mesh(path)  # the errors, named
+    key = grid_key(path, scale, resolution, padding)
+    g = _GRIDS.pop(key, None)
+    if g is None:
+        folder = cache_folder()
+        file = None if folder is None else grid_file(folder, key)
+        g = None if file is None else _read_grid(file, key, resolution)
+        if g is None:
+            pad = None if padding is None else float(padding)
+            g = build_grid(v * float(scale), f, int(resolution), pad)
+            BUILDS[key] = BUILDS.get(key, 0) + 1
+            if file is not None:
+                _write_grid(file, key, g)
+        g.values.flags.writeable = False
+    _GRIDS[key] = g  # the most recently used last
+    while len(_GRIDS) > KEEP_GRIDS:
+        _GRIDS.pop(next(iter(_GRIDS)))
+    return g
 
 
 def stack(grids: list[MeshGrid], R: ArrayLike, t: ArrayLike, dtype=jnp.float64) -> dict[str, Array]:
