@@ -101,7 +101,8 @@ def parallel_flags(args: argparse.Namespace, cfg=None):
 
 def use_cache() -> None:
     """Keep XLA's compiled programs in :func:`cache_dir` (an unwritable folder only costs
-    compile time)."""
+    compile time); the mesh obstacles' distance grids are kept there too
+    (``kinematics.sdf.cache_folder`` reads the same setting), so a warm command loads them."""
     import jax
 
     folder = cache_dir()
@@ -115,8 +116,9 @@ def use_cache() -> None:
 
 
 def cache_dir() -> Path:
-    """Where compiled programs are kept between runs: ``$DESIGNOPT_CACHE_DIR``, else
-    ``$XDG_CACHE_HOME/designopt/jax``, else ``~/.cache/designopt/jax``."""
+    """Where compiled programs (and mesh distance grids, ``designopt-grid-*.npz``) are kept
+    between runs: ``$DESIGNOPT_CACHE_DIR``, else ``$XDG_CACHE_HOME/designopt/jax``, else
+    ``~/.cache/designopt/jax``."""
     import os
 
     if os.environ.get("DESIGNOPT_CACHE_DIR"):

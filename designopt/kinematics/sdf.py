@@ -22,6 +22,12 @@ Host side (NumPy, float64)
   grown by ``padding`` on every side (default :data:`PAD_CELLS` cells), in the mesh's own
   frame after its scale. Cells may differ per axis (h_x, h_y, h_z); the padding is the
   same length on every side.
+* :func:`mesh_grid` builds a file's grid at most once per process (kept in memory by
+  :func:`grid_key`: the file's SHA-256, scale, resolution, padding and
+  :data:`GRID_VERSION`) and keeps it on disk in the compilation cache's folder when one
+  is configured (:func:`cache_folder`; the CLI's ``compile_cache``): written whole (a
+  temporary file renamed), and loaded only when it holds the same key, the right shape
+  and finite numbers; anything else is rebuilt and replaced.
 
 JAX side (pure jnp, float32 or float64 from the caller, jit/vmap/grad)
 ----------------------------------------------------------------------
