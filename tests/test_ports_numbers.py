@@ -169,3 +169,25 @@ def test_csv_of_an_archive_without_targets_is_one_line(tmp_path, capsys):
     out, err = capsys.readouterr()
     assert err.count("\n") == 1 and "nothing to export" in err and "Traceback" not in err
     assert not list(tmp_path.glob("*.csv"))
+
+
+def test_the_html_report_tables_the_ports_and_bases(front):
+    """The report's table (figures.html.run.placement_table) of an archive read back:
+    one row per design and arm, the study's headings, the archived numbers."""
+    import html
+
+    from designopt.app import records
+    from designopt.figures.html.run import placement_table
+
+    rec = records.load(front)
+    fr = rec.groups["front"]
+    page = html.unescape(placement_table(fr, front=True))
+    ports, bases = np.asarray(fr["ports"]), np.asarray(fr["bases"])
+    rows = page.split("<tr>")[2:]  # after the heading row
+    assert len(rows) == ports.shape[0] * ports.shape[1]
+    assert "port: the incision point on the body wall: x [m]" in page
+    assert "base pose: yaw [deg]" in page
+    cells = [c.split("</td>")[0] for c in rows[1].split("<td>")[1:]]
+    assert cells[:2] == ["0", "1"]  # design 0, arm 1
+    assert [float(c) for c in cells[2:5]] == pytest.approx(ports[0, 1], abs=1e-6)
+    assert [float(c) for c in cells[-6:]] == pytest.approx(bases[0, 1], abs=1e-6)

@@ -115,10 +115,15 @@ def placement(study: Any, settings: Any, X: np.ndarray) -> dict[str, Any]:
 def with_placement(group: dict[str, Any], placed: dict[str, Any], row: int | None) -> None:
     """Add ``placed`` (:func:`placement`) to an archive group in place: design ``row``'s
     values (a final group), or every design's (``row`` None: a front's); the names go to
-    the group's attr ``placement``."""
+    the group's attr ``placement``, the study's column headings and titles of each (its
+    attrs ``columns`` and ``titles``) to ``placement_columns`` and ``placement_titles``."""
     if not placed:
         return
     at = placed["attrs"]
     for k in at["placement"]:
         group[k] = placed[k] if row is None else placed[k][row]
-    group.setdefault("attrs", {})["placement"] = list(at["placement"])
+    ga = group.setdefault("attrs", {})
+    ga["placement"] = list(at["placement"])
+    for k in ("columns", "titles"):  # the study's headings of each array's last axis
+        if k in at:
+            ga[f"placement_{k}"] = dict(at[k])

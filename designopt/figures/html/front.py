@@ -28,6 +28,7 @@ from designopt.figures.html.model import (
     esc,
 )
 from designopt.figures.html.plots import _convergence, _index_names, _lab, _layout, _rgba
+from designopt.figures.html.run import placement_table
 
 
 def _pairs(amb: Any, n: int) -> np.ndarray:
@@ -205,6 +206,12 @@ def _front(tree: Mapping[str, Any], ids: _Ids, units: dict[str, str]) -> list[Pa
                      "there.</p>" + _table(["index", "sense"], rows))  # fmt: skip
     if X.shape[1]:
         sec.items.append(_designs(fr, prob, X, vnames, axl, vals, others, keep, ids, units))
+    placed = placement_table(fr, front=True)
+    if placed:  # each design's placement in numbers (e.g. the serial study's ports, bases)
+        sec.items.append("<p class='note'>Where each design (its row in the archive's "
+                         "front/x, from 0) puts each arm in the world frame, as the study "
+                         "gives it (lengths in the chain's unit, angles in degrees):</p>"
+                         + placed)  # fmt: skip
     opt = tree.get("optimizer", {})
     hv_tree = fr if "hypervolume" in fr else opt
     if "hypervolume" in hv_tree:

@@ -113,6 +113,44 @@ def _best_run(br: Mapping[str, Any], ids: _Ids, units: dict[str, str], rates: se
     return out
 
 
+def _attr_obj(v: Any) -> Any:
+    """An attr as archived: a JSON text (read back from a file) or the value itself."""
+    if isinstance(v, str | bytes):
+        try:
+            return json.loads(v)
+        except ValueError:
+            return v
+    return v
+
+
+def placement_table(g: Mapping[str, Any], front: bool = False) -> str:
+    """The study's placement of a design in the world (the group's attr ``placement``:
+    e.g. the serial study's ports and bases), one row per arm (a front's group: per
+    design and arm), its columns headed by the study (``placement_columns``) under each
+    array's title (``placement_titles``); "" when the group has none."""
+    at = g.get("attrs", {})
+    names = [_s(k) for k in (_attr_obj(at.get("placement")) or [])]
+    names = [k for k in names if k in g]
+    if not names:
+        return ""
+    cols = _attr_obj(at.get("placement_columns")) or {}
+    titles = _attr_obj(at.get("placement_titles")) or {}
+    arrays = {}
+    for k in names:
+        a = _f(g[k])
+        a = a if front else a[None]  # (P, A, ...)
+        arrays[k] = a.reshape(a.shape[0], a.shape[1], -1)
+    P, A = arrays[names[0]].shape[:2]
+    head = (["design"] if front else []) + ["arm"]
+    for k in names:
+        c = [_s(x) for x in cols.get(k, [])] or [str(j) for j in range(arrays[k].shape[-1])]
+        head += [f"{_s(titles.get(k, k))}: {h}" for h in c]
+    rows = [([str(d)] if front else []) + [str(a)]
+            + [f"{v:.6g}" for k in names for v in arrays[k][d, a]]
+            for d in range(P) for a in range(A)]  # fmt: skip
+    return _table(head, rows)
+
+
 def _final_tables(tree: Mapping[str, Any], units: dict[str, str]) -> str:
     fin, prob = tree["final"], tree.get("problem", {})
     parts = []
@@ -136,6 +174,11 @@ def _final_tables(tree: Mapping[str, Any], units: dict[str, str]) -> str:
             rows.append((k, value_text(float(v), n=n, of=of), style.unit_of(k, units)))
             continue
         rows.append((k, _num(float(v), se), style.unit_of(k, units)))
+    placed = placement_table(fin)
+    if placed:  # where the design puts the robot, in numbers (e.g. the ports and bases)
+        parts.append("<h3>In the world frame</h3><p class='note'>each arm's placement as the "
+                     "study gives it (lengths in the chain's unit, angles in degrees)</p>"
+                     + placed)  # fmt: skip
     at = fin.get("attrs", {})
     warns = at.get("warnings", [])
     warns = json.loads(warns) if isinstance(warns, str | bytes) else list(warns)

@@ -180,8 +180,18 @@ def _placement(s: SerialSettings, X: Any) -> dict[str, Any] | None:
     if not out:
         return None
     u = length_unit(s)
-    return out | {"attrs": {"length_unit": u, "wall": None if s.task is None or s.task.body_wall
-                            is None else s.task.body_wall.shape}}  # fmt: skip
+    xyz = [f"{c} [{u}]" for c in "xyz"]
+    cols = {"ports": xyz, "port_points": xyz, "port_shift": [f"moved [{u}]"],
+            "bases": xyz + [f"{c} [deg]" for c in ("roll", "pitch", "yaw")]}  # fmt: skip
+    titles = {"ports": "port: the incision point on the body wall", "port_points":
+              "the design's port point (before projection)", "port_shift":
+              "port moved by the projection", "bases": "base pose"}  # fmt: skip
+    wall = None if s.task is None or s.task.body_wall is None else s.task.body_wall.shape
+    if wall is None:  # no projection: the design's point is the port
+        titles["ports"] = "port: the incision point"
+    return out | {"attrs": {"length_unit": u, "wall": wall,
+                            "columns": {k: cols[k] for k in out},
+                            "titles": {k: titles[k] for k in out}}}  # fmt: skip
 
 
 def _vec(v: Any, fmt: str = ".4f") -> str:
