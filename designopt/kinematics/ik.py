@@ -516,7 +516,7 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
           opts: IKOptions = DEFAULTS,
           score: Callable[[jax.Array], jax.Array] | None = None,
           accept: Callable[[jax.Array, jax.Array, jax.Array], jax.Array] | None = None,
-          t0: jax.Array | int = 0) -> IKResult:  # fmt: skip
+          t0: jax.Array | int = 0, rep: jax.Array | None = None) -> IKResult:  # fmt: skip
     """IK of the same T targets (p_t (T, 3), R_t (T, 3, 3) or None) for M designs
     X (M, D), or of each design's own T targets (p_t (M, T, 3), R_t (M, T, 3, 3)): every
     field has leading axes (M, T). The database draws and the seeds' hashes are shared
@@ -530,7 +530,13 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
     accepted solutions count as successes (and towards ``n_best``). ``t0`` (an array
     input): the index of the first target in the task's whole list; a target's random
     seeds hash its index there, so a task solved in chunks of any size gets the seeds it
-    gets in one piece."""
+    gets in one piece. ``rep`` (M,) int (an array input): each design's representative,
+    a design whose targets and chain are the same (``rep[m] ≤ m``, ``rep[rep[m]] ==
+    rep[m]``, e.g. :func:`representatives`): only representatives' items enter the
+    queue, and every other design's fields are copied from its representative's. Items
+    are independent and their seeds hash (target, attempt), not the design, so the copy
+    is what solving it again would give; a block of copies (a padded block, a swarm
+    that met at one point) costs one design's work."""
     _check(mode, R_t, opts)
     X = jnp.asarray(X)
     per_design = p_t.ndim == 3
@@ -702,11 +708,19 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         q = jnp.where(take[None], seed(i, a), q)
         return i, a, it, Eb, q, head, tail, qi, qa, q_out, a_out, E_out, nc
 
-    i = jnp.where(jnp.arange(Bp) < B, jnp.arange(Bp, dtype=jnp.int32), I)
+    # the queue: the representatives' items, in order (all of them without ``rep``)
+    if rep is None:
+        order, n_items = jnp.arange(I, dtype=jnp.int32), jnp.asarray(I, jnp.int32)
+    else:
+        solved = jnp.repeat(jnp.asarray(rep, jnp.int32) == jnp.arange(M, dtype=jnp.int32), T)
+        order = jnp.argsort(~solved, stable=True).astype(jnp.int32)
+        n_items = jnp.sum(solved, dtype=jnp.int32)
+    k0 = jnp.arange(Bp, dtype=jnp.int32)
+    i = jnp.where(k0 < jnp.minimum(B, n_items), order[jnp.minimum(k0, I - 1)], I)
     a = jnp.zeros_like(i)
     s = (i, a, a, jnp.full(i.shape, jnp.inf, dtype), seed(i, a),
-         jnp.asarray(B, jnp.int32), jnp.asarray(I, jnp.int32),
-         jnp.arange(I, dtype=jnp.int32), jnp.zeros((I,), jnp.int32),
+         jnp.minimum(jnp.asarray(B, jnp.int32), n_items), n_items,
+         order, jnp.zeros((I,), jnp.int32),
          jnp.zeros((n, nb * I), dtype), jnp.zeros((nb * I,), jnp.int32),
          jnp.full((I,), jnp.inf, dtype), jnp.zeros((I,), jnp.int32))  # fmt: skip
 
@@ -741,8 +755,11 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         a_c = jax.lax.dynamic_slice_in_dim(a_out, c * I, I).reshape(M, T)
         return IKResult(q, ok, pe, re, ik_, a_c, conv)
 
+    def copied(r: IKResult) -> IKResult:  # every design's fields from its representative's
+        return r if rep is None else IKResult(*(x[jnp.asarray(rep, jnp.int32)] for x in r))
+
     if nb == 1:
-        return _materialised(result(0))
+        return _materialised(copied(result(0)))
 
     def pick(c, carry):
         """Slot c's solutions replace the best so far where they score higher (slot 0's
@@ -761,7 +778,17 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
     best0 = IKResult(jnp.zeros((M, T, n), dtype), z > 0, z, z, z, jnp.zeros((M, T), jnp.int32),
                      z > 0)
     best, _ = jax.lax.fori_loop(0, nb, pick, (best0, jnp.full((M, T), -jnp.inf, dtype)))
-    return _materialised(best)
+    return _materialised(copied(best))
+
+
+def representatives(X: jax.Array) -> jax.Array:
+    """(M,) int32: for each row of X (M, D), the first row equal to it (a row holding a
+    NaN is its own): :func:`solve`'s ``rep`` for designs that share their targets."""
+    X = jnp.asarray(X)
+    same = jnp.all(X[:, None, :] == X[None, :, :], -1)  # (M, M); NaN ≠ NaN
+    M = X.shape[0]
+    first = jnp.argmax(same, axis=1).astype(jnp.int32)
+    return jnp.where(jnp.any(same, axis=1), first, jnp.arange(M, dtype=jnp.int32))
 
 
 def solve_design(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | None,

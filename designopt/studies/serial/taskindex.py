@@ -286,7 +286,12 @@ def chunk_values(mech: Mechanism, s: SerialSettings, params: dict[str, Any], ful
         def accept(m, t, q):
             return clearance(m, pt[t], q)[0] >= gp["margin"].astype(dtype)  # type: ignore[index]
 
-    res = ik.solve(mech.model, X, p_ik, R_ik, lo, hi, key, md, opts, score, accept, t0)
+    # a design equal to an earlier one of the block (a padded block's copies, particles
+    # that met) is solved once: its representative's solutions are copied (ik.solve)
+    rep = ik.representatives(full)
+    if arms:
+        rep = (jnp.arange(A, dtype=jnp.int32)[:, None] * M + rep[None]).reshape(-1)
+    res = ik.solve(mech.model, X, p_ik, R_ik, lo, hi, key, md, opts, score, accept, t0, rep)
     J = jac(res.q)
     inv_k, man = inv_cond(J * sc[:, None], ind.norm, ind.normalized, with_volume=True)
     ok, conv = res.success, res.converged
