@@ -10,19 +10,27 @@ import numpy as np
 from designopt.figures import style
 from designopt.figures.canvas import save
 
+COLUMNS = 4
+"""At most this many panels a row: a study with many indices gets a grid, not a strip."""
+
 
 def convergence(best_run: dict, indices: list[str], folder: Path, title: str,
                 units: Mapping[str, str] | None = None, rates: Mapping[str, float | None] | None = None
                 ) -> list[Path]:  # fmt: skip
-    """One panel per index along the best run (``best_run/<index>`` of a run archive), with
+    """One panel per index along the best run, in a grid of at most :data:`COLUMNS`
+    columns (``best_run/<index>`` of a run archive), with
     a ± 2 SE band where ``<index>_se`` exists; ``units`` labels the axes; ``rates`` names
     the success rates (clipped to [0, 1], Wilson band; value: the number of trials, or None
     to infer it from the SE). Saved as ``convergence``."""
     units, rates = units or {}, rates or {}
     n = len(indices)
-    fig, axes = style.subplots(1, n, figsize=(3.4 * n, 3), squeeze=False)
+    cols = max(1, min(n, COLUMNS))
+    rows = -(-n // cols)
+    fig, axes = style.subplots(rows, cols, figsize=(3.4 * cols, 0.4 + 2.7 * rows), squeeze=False)
+    for ax in axes.ravel()[n:]:  # the grid's last row, where it is not full
+        fig.delaxes(ax)
     it = best_run["iteration"]
-    for ax, k in zip(axes[0], indices, strict=True):
+    for ax, k in zip(axes.ravel()[:n], indices, strict=True):
         y = np.asarray(best_run[k], np.float64)
         se = best_run.get(k + "_se")
         if k in rates:

@@ -241,7 +241,8 @@ def _frame(axis: Sequence[float]) -> np.ndarray:
 
 
 OBSTACLE = "#7f7f7f"
-ANATOMY = "#d6604d"  # obstacles inside the patient (``inside: true``)
+ANATOMY = "#c51b7d"  # obstacles inside the patient (``inside: true``): apart from the skin
+ANATOMY_EDGE = "#4d0026"  # their outline
 WALL = "#f4a582"  # the body wall the ports lie on
 PORT = "#000000"
 
@@ -264,6 +265,14 @@ def obstacle_name(k: int, ob: Any) -> str:
         return f"body wall: {ob.shape}"
     what = ob.shape + (f" {Path(ob.file).name}" if ob.shape == "mesh" else "")
     return f"{'anatomy' if getattr(ob, 'inside', False) else 'obstacle'} {k}: {what}"
+
+
+def anatomy_lines(ob: Any) -> list[np.ndarray]:
+    """Lines that outline a thin piece of anatomy at any scale: a capsule ``inside`` the
+    patient (a vessel) as its axis a → b; nothing for other shapes (their faces show)."""
+    if getattr(ob, "inside", False) and ob.shape == "capsule":
+        return [np.stack([np.asarray(ob.a, np.float64), np.asarray(ob.b, np.float64)])]
+    return []
 
 
 def obstacle_mesh(ob: Any, center: np.ndarray, ext: float):
@@ -579,7 +588,9 @@ def legend_handles(scene: Scene) -> list:
     for colour, label in ((OBSTACLE, "obstacles"), (ANATOMY, "anatomy (inside the patient)"),
                           (WALL, "body wall")):  # fmt: skip
         if colour in kinds:
-            hs.append(Patch(facecolor=colour, alpha=0.35, label=label))
+            hs.append(Patch(facecolor=colour, alpha=0.7 if colour == ANATOMY else 0.35,
+                            edgecolor=ANATOMY_EDGE if colour == ANATOMY else "none",
+                            label=label))  # fmt: skip
     if scene.ports:
         hs.append(Line2D([], [], color=PORT, marker="o", mfc="white", ls="none", label="port"))
     return hs
@@ -608,10 +619,16 @@ def draw_3d(ax: Any, scene: Scene, unit: str, legend: bool = True,
         for k, line in enumerate(cone_rays(scene.cone)):
             ax.plot(*line.T, color="#8c564b", lw=1.2 if k == 0 else 0.7, ls="--", zorder=1.5)
     for _, ob, Vo, Fo in clipped_obstacles(scene.obstacles, lo, hi)[0]:
-        wall = is_wall(ob)
+        if getattr(ob, "inside", False):  # the anatomy: opaque, outlined, on top of the wall
+            ax.add_collection3d(Poly3DCollection(Vo[Fo], facecolors=ANATOMY, alpha=0.7,
+                                                 edgecolors=ANATOMY_EDGE, linewidths=0.15,
+                                                 shade=True, zorder=1.8))  # fmt: skip
+            for line in anatomy_lines(ob):  # a thin vessel stays visible at any scale
+                ax.plot(*np.clip(line, lo, hi).T, color=ANATOMY_EDGE, lw=2.2, zorder=1.9,
+                        solid_capstyle="round")  # fmt: skip
+            continue
         ax.add_collection3d(Poly3DCollection(Vo[Fo], facecolor=obstacle_colour(ob),
-                                             alpha=0.10 if wall else 0.18 if not
-                                             getattr(ob, "inside", False) else 0.45,
+                                             alpha=0.10 if is_wall(ob) else 0.18,
                                              edgecolor="none", zorder=1))  # fmt: skip
     for pt in scene.ports:
         ax.scatter(*np.asarray(pt, np.float64)[:, None], marker="o", s=60, c="white",
@@ -748,9 +765,16 @@ def draw_obstacles_2d(ax: Any, scene: Scene, E: np.ndarray) -> None:
                               autolim=False)  # fmt: skip
             continue
         H = hull_2d(V @ E)  # clipped to the view: a far-away obstacle does not widen it
-        if len(H) >= 3:
-            ax.add_patch(Polygon(H, closed=True, fc=obstacle_colour(ob), alpha=0.3, ec="0.35",
-                                 lw=0.8, zorder=1.2))  # fmt: skip
+        inside = getattr(ob, "inside", False)
+        if len(H) >= 3:  # the anatomy opaque and outlined over the wall
+            ax.add_patch(Polygon(H, closed=True, fc=obstacle_colour(ob),
+                                 alpha=0.65 if inside else 0.3,
+                                 ec=ANATOMY_EDGE if inside else "0.35", lw=1.2 if inside else 0.8,
+                                 zorder=1.3 if inside else 1.2))  # fmt: skip
+        for line in anatomy_lines(ob):
+            p2 = np.clip(line, lo, hi) @ E
+            ax.plot(p2[:, 0], p2[:, 1], color=ANATOMY_EDGE, lw=2.0, zorder=1.35,
+                    solid_capstyle="round")  # fmt: skip
     for pt in scene.ports:
         uv = np.asarray(pt, np.float64) @ E
         ax.plot(uv[0], uv[1], marker="o", ms=8, mfc="white", mec=PORT, mew=1.5, ls="none",
@@ -770,7 +794,8 @@ def figure(scenes: Sequence[Scene], unit: str, title: str = "", size: float = 5.
     W = size * len(scenes) + 0.5
     note = clipped_note(scenes, unit)
     title = "\n".join(x for x in (title, note) if x)
-    lines = [ln for par in title.split("\n") for ln in textwrap.wrap(par, int(W * 12.5))]
+    lines = [ln for par in title.split("\n")
+             for ln in textwrap.wrap(par, int(W * 12.5), break_on_hyphens=False)]
     handles = list({h.get_label(): h for sc in scenes for h in legend_handles(sc)}.values())
     ncol = max(1, min(len(handles), int(W // 2.6)))
     rows = -(-len(handles) // ncol)

@@ -23,10 +23,12 @@ from designopt.figures import style
 from designopt.figures.html.model import PageSection, Plot, _Ids, esc
 from designopt.figures.html.plots import _layout
 from designopt.figures.robot import (
+    ANATOMY_EDGE,
     COLLIDING,
     FRAME_COLOURS,
     Arm,
     Scene,
+    anatomy_lines,
     axis_arrows,
     capsules,
     clip_note,
@@ -177,9 +179,20 @@ def _static(scene: Scene, unit: str, box: tuple[np.ndarray, np.ndarray]) -> list
                     "name": "task region", "hoverinfo": "skip",
                     "line": {"color": "#3182bd", "width": 2}})  # fmt: skip
     for k, ob, Vo, Fo in clipped_obstacles(scene.obstacles, *box)[0]:  # clipped to the view
+        inside = getattr(ob, "inside", False)  # the anatomy: opaque, lit, outlined
         out.append({"type": "mesh3d", **_xyz(Vo), "i": Fo[:, 0], "j": Fo[:, 1], "k": Fo[:, 2],
-                    "color": obstacle_colour(ob), "opacity": 0.12 if is_wall(ob) else 0.2,
-                    "name": obstacle_name(k, ob), "hoverinfo": "name", "showlegend": True})  # fmt: skip
+                    "color": obstacle_colour(ob),
+                    "opacity": 0.85 if inside else 0.12 if is_wall(ob) else 0.2,
+                    "name": obstacle_name(k, ob), "hoverinfo": "name", "showlegend": True,
+                    "legendgroup": f"obstacle{k}"}
+                   | ({"flatshading": True, "lighting": {"ambient": 0.45, "diffuse": 0.9,
+                                                         "specular": 0.3}} if inside else {}))  # fmt: skip
+        for line in anatomy_lines(ob):  # a thin vessel stays visible at any scale
+            P = np.clip(line, *box)
+            out.append({"type": "scatter3d", "mode": "lines", **_xyz(P),
+                        "name": obstacle_name(k, ob), "legendgroup": f"obstacle{k}",
+                        "showlegend": False, "hoverinfo": "name",
+                        "line": {"color": ANATOMY_EDGE, "width": 9}})  # fmt: skip
     if scene.ports:
         out.append({"type": "scatter3d", "mode": "markers",
                     **_xyz(np.asarray(scene.ports, np.float64)), "name": "port",
@@ -208,6 +221,18 @@ def _static(scene: Scene, unit: str, box: tuple[np.ndarray, np.ndarray]) -> list
                         "name": "unreached", "marker": {"size": 2.5, "symbol": "cross",
                                                         "color": "#6b6b6b"},
                         "hovertemplate": f"{where}<br>unreached<extra></extra>"})  # fmt: skip
+    if scene.marks:  # the targets a solved pose reaches
+        out.append({"type": "scatter3d", "mode": "markers",
+                    **_xyz(np.asarray([p for p, _ in scene.marks], np.float64)),
+                    "name": "the arms' targets", "hoverinfo": "skip",
+                    "marker": {"size": 7, "symbol": "diamond-open",
+                               "color": [c for _, c in scene.marks], "line": {"width": 2}}})  # fmt: skip
+    if scene.collisions:  # colliding pairs: their closest points joined
+        out.append({"type": "scatter3d", "mode": "lines+markers",
+                    **_xyz(_segments([np.stack(ab) for ab in scene.collisions])),
+                    "name": "colliding pair", "hoverinfo": "name",
+                    "line": {"color": COLLIDING, "width": 6},
+                    "marker": {"size": 5, "symbol": "x", "color": COLLIDING}})  # fmt: skip
     rs = radii(scene.arms)
     for arm, r in zip(scene.arms, rs, strict=True):
         out += arm_traces(arm, r, f"<b>{esc(arm.label)}</b><extra></extra>", opacity=0.25)

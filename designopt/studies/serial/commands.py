@@ -290,32 +290,80 @@ def _outputs(args: argparse.Namespace, cfg: Any) -> tuple[Path, Path | None]:
     return png, html
 
 
-def _view_title(s: Any, design: dict[str, float], q: np.ndarray, at_home: bool) -> str:
-    """The view's title: the chain, the design, the pose, the changed URDF numbers,
-    the meshes, the arms' bases."""
-    import textwrap
-
+def _view_title(s: Any, design: dict[str, float], q: np.ndarray, at_home: bool,
+                solved: str = "") -> list[str]:  # fmt: skip
+    """The view's title as its lines, unwrapped (the figure wraps them to its width; the
+    HTML page joins them with "; "): the chain, the design, the pose (``solved``: what
+    the arms were solved for, in place of ``q``), the changed URDF numbers, the meshes,
+    the arms' bases."""
     from designopt.studies.serial import drawing
     from designopt.studies.serial.settings import UrdfChain, length_unit
 
     u = length_unit(s)
     units = {k: ("deg" if k in s.angle_names() else u) for k in design}
-    dtext = ", ".join(f"{k} = {v:.6g} {units[k]}" for k, v in design.items())
+    dtext = ", ".join(f"{k}\u00a0=\u00a0{v:.6g}\u00a0{units[k]}" for k, v in design.items())  # no break
     urdf_chain = isinstance(s.chain, UrdfChain)
     what = (f"{Path(s.chain.urdf).name} ({s.chain.imported.base} -> {s.chain.imported.tip})" if urdf_chain
             else f"DH chain ({s.chain.convention}, {len(s.chain.joints)} joints)")  # fmt: skip
     pose = drawing.joint_values(s, q) + (" (home pose: each joint at 0 where its limits allow, "
                                          "else mid-range)" if at_home else "")  # fmt: skip
-    lines = [f"{what}: design {dtext}", f"at {pose}"]
+    lines = [f"{what}: design {dtext}", solved or f"at {pose}"]
     if s.arms is not None:
-        lines.append(f"{len(s.arms)} arms, each at its base in the world (study.arms), every "
-                     "arm at this pose")  # fmt: skip
+        lines.append(f"{len(s.arms)} arms, each at its base in the world (study.arms)"
+                     + ("" if solved else ", every arm at this pose"))  # fmt: skip
     if urdf_chain:
         lines.append("set numbers: " + drawing.changes_text(s, design).replace("\n", "; "))
     note = drawing.meshes_note(s, design, q)
     if note:
         lines.append(note)
-    return "\n".join(ln for line in lines for ln in textwrap.wrap(line, 110))
+    return lines
+
+
+def _wrapped(lines: list[str], width: int = 110) -> str:
+    """Title lines wrapped to ``width`` for a figure."""
+    import textwrap
+
+    return "\n".join(ln for line in lines for ln in textwrap.wrap(line, width))
+
+
+def _solved_pose(s: Any, mech: Any, x: np.ndarray, seed: int) -> dict[str, Any] | None:
+    """The arms of a config whose instruments pass ports, solved for its task's targets
+    (``blocks.solution`` on the config's targets, from the ``samples`` stream of its
+    seed, as a run draws them): several arms at the tuple of targets of median gap
+    between the arms (``drawing.arm_tuples``; colliding arms red, their closest points
+    marked), one arm at its reached target of median 1/k. A dict (``text``: what was
+    solved, ``Q`` (A, n), ``pairs``, ``colliding`` per arm, ``marks``), or None with no
+    port. Where nothing is reached, ``Q`` is None and ``text`` says so."""
+    import jax
+
+    from designopt.core.keys import streams
+    from designopt.studies.serial import blocks, drawing
+
+    if s.task is None or s.ports()[0] is None or s.indices.measure != "task":
+        return None
+    keys = streams(seed)
+    design = dict(zip(s.variables, x.tolist(), strict=True))
+    jax.config.update("jax_enable_x64", True)  # the task's IK runs in float64
+    sol = blocks.solution(s, design, keys)
+    N = int(np.asarray(sol["target_p"]).shape[0])
+    if s.arms is None:
+        label, Q, tg = drawing.representative(s, mech, sol)
+        if not tg:
+            return {"text": f"the IK reached none of the task's {N} targets: the arm at the "
+                            "home pose", "Q": None}  # fmt: skip
+        return {"text": f"solved for the task's {N} targets (IK): the arm at {label}", "Q": Q,
+                "pairs": [], "colliding": [False], "marks": tg}  # fmt: skip
+    tup = drawing.arm_tuples(s, mech, x, sol, keys, counted=False)
+    if not tup:
+        return {"text": f"the IK found no tuple of the task's {N} targets every arm reaches: "
+                        "the arms at the home pose", "Q": None}  # fmt: skip
+    st = drawing.tuple_stats(s, mech, sol, keys)
+    label, arms_, pairs, qs = tup[0]
+    perm = drawing._tuples(s, mech, sol, keys)[0]
+    marks = [np.asarray(sol["target_p"])[perm[k][st.median]] for k in range(len(s.arms))]
+    return {"text": f"solved for the task's {N} targets (IK, one target per arm): every arm "
+                    f"at the {label}; {st.text()}", "Q": np.stack(qs), "pairs": pairs,
+            "colliding": [a.colliding for a in arms_], "marks": marks}  # fmt: skip
 
 
 def _changed(s: Any, design: dict[str, float]) -> bool:
@@ -347,7 +395,10 @@ def cmd_view(args: argparse.Namespace, ctx: Any) -> int:
     at ``--design`` (else the middle of the box) and ``--q`` (else the home pose), every
     arm at its base in the world where the study has several, the URDF's original robot
     beside it where the design changes the file's numbers, the task region, tool-axis
-    cone, obstacles and ports where the config has them; ``--html``: a 3-D page too."""
+    cone, obstacles and ports where the config has them; ``--html``: a 3-D page too. A
+    config whose instruments pass ports is drawn, without ``--q``, at its task: the arms
+    solved for its targets (:func:`_solved_pose`: the tuple of median gap between the
+    arms, collisions marked), not at the home pose through the patient."""
     loaded = ctx.load(args)
     import jax
 
@@ -374,20 +425,26 @@ def cmd_view(args: argparse.Namespace, ctx: Any) -> int:
             writer.check(p, overwrite=True)
     x = np.asarray([design[k] for k in s.variables], np.float64)
     around = _task_around(s, design)
-    mine = drawing.study_arms(s, mech, x, q, label="this design", color="#ff7f0e")
-    scenes = [robot.Scene(arms=mine, title="this design", **around)]
+    solved = _solved_pose(s, mech, x, cfg.seed) if at_home else None  # ports: at the task
+    Q = q if solved is None or solved["Q"] is None else solved["Q"]
+    mine = _marked(drawing.study_arms(s, mech, x, Q, label="this design", color="#ff7f0e"),
+                   solved)  # fmt: skip
+    extra = {} if solved is None or solved["Q"] is None else {
+        "collisions": solved["pairs"], "marks": [(p, "#d62728") for p in solved["marks"]]}
+    scenes = [robot.Scene(arms=mine, title="this design", **around, **extra)]
     if _changed(s, design):
-        scenes.insert(0, robot.Scene(arms=drawing.original_arms(s, mech, x, q), **around,
+        scenes.insert(0, robot.Scene(arms=drawing.original_arms(s, mech, x, Q), **around,
                                      title="original: the URDF's own numbers"))  # fmt: skip
-    title = _view_title(s, design, q, at_home)
-    fig = robot.figure(scenes, length_unit(s), title)
+    lines = _view_title(s, design, q, at_home and solved is None,
+                        "" if solved is None else solved["text"])  # fmt: skip
+    fig = robot.figure(scenes, length_unit(s), _wrapped(lines))
     written = [png.parent / p.name for p in  # printed as given (a bare name: its folder is ".")
                writer.publish_figures(lambda d: save(fig, d, png.stem), png.absolute().parent,
                                       swap=False)]  # fmt: skip
     if html is not None:
         from designopt.figures import html as page
 
-        view = view_of(s, mech, x, q, title, len(scenes) > 1, around)
+        view = view_of(s, mech, x, Q, "; ".join(lines), len(scenes) > 1, around, solved)
         doc = page.document([page.robot_section(view)], f"designopt view: {Path(where).name}")
         writer.write_file(html, doc.encode("utf-8"), "HTML view")
         written.append(html)
@@ -396,11 +453,21 @@ def cmd_view(args: argparse.Namespace, ctx: Any) -> int:
     return 0
 
 
+def _marked(arms: list[Any], solved: dict[str, Any] | None) -> list[Any]:
+    """The arms with their ``colliding`` flags from a solved pose (red where they collide)."""
+    from dataclasses import replace
+
+    if solved is None or solved["Q"] is None:
+        return arms
+    return [replace(a, colliding=bool(c)) for a, c in zip(arms, solved["colliding"], strict=True)]
+
+
 def view_of(s: Any, mech: Any, x: np.ndarray, q: np.ndarray, title: str, original: bool,
-            around: dict[str, Any]) -> Any:  # fmt: skip
+            around: dict[str, Any], solved: dict[str, Any] | None = None) -> Any:  # fmt: skip
     """The view's 3-D robot (``designopt.figures.html.View``): every arm of this design
-    at ``q``, at its base, the original robot as a reference, with ``around`` (region,
-    cone, obstacles, ports)."""
+    at ``q`` ((n,) or one row per arm), at its base, the original robot as a reference,
+    with ``around`` (region, cone, obstacles, ports); a solved pose (``solved``) marks
+    its targets and colliding arms. ``title``: one line (its parts joined by "; ")."""
     from designopt.figures import html as page
     from designopt.figures import robot
     from designopt.studies.serial import drawing
@@ -409,11 +476,16 @@ def view_of(s: Any, mech: Any, x: np.ndarray, q: np.ndarray, title: str, origina
 
     A = 1 if s.arms is None else len(s.arms)
     ref = drawing.original_arms(s, mech, x, q, budget=_budget(2 * A)) if original else []
-    mine = drawing.study_arms(s, mech, x, q, label="this design", color="#ff7f0e",
-                              budget=_budget(A + len(ref)))  # fmt: skip
-    return page.View(title=title.replace("\n", "; ") + "; drag to rotate", unit=length_unit(s),
-                     scene=robot.Scene(arms=ref, **around),
-                     poses=[page.Pose("this pose", mine, [drawing.hover(s, a.label, q) for a in mine])],
+    mine = _marked(drawing.study_arms(s, mech, x, q, label="this design", color="#ff7f0e",
+                                      budget=_budget(A + len(ref))), solved)  # fmt: skip
+    Q = np.broadcast_to(np.asarray(q, np.float64), (len(mine), mech.n))
+    scene = robot.Scene(arms=ref, **around)
+    if solved is not None and solved["Q"] is not None:
+        scene.collisions = solved["pairs"]
+        scene.marks = [(p, "#d62728") for p in solved["marks"]]
+    return page.View(title=title + "; drag to rotate", unit=length_unit(s), scene=scene,
+                     poses=[page.Pose("this pose", mine,
+                                      [drawing.hover(s, a.label, qa) for a, qa in zip(mine, Q, strict=True)])],
                      note=("faint: the original robot (the URDF's numbers); " if ref else "")
                      + "hover the joints for their values")  # fmt: skip
 

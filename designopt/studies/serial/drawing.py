@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import jax
@@ -151,14 +152,78 @@ def _ordered(both: np.ndarray, gap: np.ndarray) -> np.ndarray:
     return idx[np.argsort(gap[idx], kind="stable")]
 
 
+def length_text(v: float, unit: str) -> str:
+    """A length for a label: ``7.9 mm`` under 0.1 m (unit ``m``), else ``0.123 m``."""
+    if unit == "m" and abs(v) < 0.1:
+        return f"{v * 1000:.3g} mm"
+    return f"{v:.3g} {unit}"
+
+
+@dataclass
+class TupleStats:
+    """The tuples of targets of a multi-arm solution (one target per arm, as
+    ``arms_free`` draws them): ``n`` tuples, ``reached`` of them every arm reaches,
+    ``colliding`` (bool (n,)) those reached whose arms come closer than the margin,
+    the least gap between two arms per tuple (``gap``, inf where not reached by every
+    arm), and the reached tuples' numbers by gap (``order``, the tightest first)."""
+
+    n: int
+    reached: int
+    colliding: np.ndarray
+    gap: np.ndarray
+    order: np.ndarray
+
+    @property
+    def median(self) -> int:
+        """The reached tuple of median gap (the lower middle of their gap order)."""
+        return int(self.order[(len(self.order) - 1) // 2])
+
+    @property
+    def tightest(self) -> int:
+        return int(self.order[0])
+
+    @property
+    def loosest(self) -> int:
+        return int(self.order[-1])
+
+    def count(self) -> str:
+        """``7 of 128 tuples collide``."""
+        k = int(self.colliding.sum())
+        return f"{k} of {self.n} tuples collide{'s' * (k == 1)}"
+
+    def text(self) -> str:
+        """``7 of 128 tuples collide (of the 120 every arm reaches); the tightest: tuple
+        101``."""
+        head = self.count()
+        head += f" (of the {self.reached} every arm reaches)" if self.reached < self.n else ""
+        return head + f"; the tightest: tuple {self.tightest}" if len(self.order) else head
+
+
+def tuple_stats(s: SerialSettings, mech: Mechanism, sol: Mapping[str, np.ndarray],
+                keys: Mapping[str, Any]) -> TupleStats:  # fmt: skip
+    """:class:`TupleStats` of a multi-arm solution ``sol`` (``blocks.solution``)."""
+    _, both, gap, _, g = _tuples(s, mech, sol, keys)
+    return _stats(both, gap, g)
+
+
+def _stats(both: np.ndarray, gap: np.ndarray, g: Any) -> TupleStats:
+    margin = g.margin if g is not None else 0.0
+    gap = np.where(both, gap, np.inf)
+    return TupleStats(len(both), int(both.sum()), both & (gap < margin), gap,
+                      _ordered(both, gap))  # fmt: skip
+
+
 def arm_tuples(s: SerialSettings, mech: Mechanism, x: Any, sol: Mapping[str, np.ndarray],
                keys: Mapping[str, Any], budget: int | None = FIGURE_TRIANGLES,
+               counted: bool = True,
                ) -> list[tuple[str, list[Arm], list[tuple[np.ndarray, np.ndarray]], list]]:  # fmt: skip
     """Tuples of targets of a multi-arm run (one per arm, drawn as ``arms_free`` draws
-    them: arm k's tuple j is target π_k(j)) where every arm reaches its own: the tightest
-    (smallest gap between two arms: colliding if any collides), the median and the
-    loosest. Each: (label, the arms at their solutions with their bases and colours,
-    colliding pairs (their closest points), the arms' joints)."""
+    them: arm k's tuple j is target π_k(j)) where every arm reaches its own, in this
+    order: the **median** (median gap between the arms: what a surgeon sees first), the
+    **tightest** (smallest gap: colliding if any collides) and the loosest; repeats
+    dropped. Each: (label, the arms at their solutions with their bases and colours,
+    colliding pairs (their closest points), the arms' joints). With ``counted``, the
+    median's label says how many tuples collide (:meth:`TupleStats.count`)."""
     import jax.numpy as jnp
 
     from designopt.kinematics.collision import arms_clearance
@@ -167,11 +232,13 @@ def arm_tuples(s: SerialSettings, mech: Mechanism, x: Any, sol: Mapping[str, np.
     perm, both, gap, seg, g = _tuples(s, mech, sol, keys)
     if not both.any():
         return []
-    order = _ordered(both, gap)
-    picks = dict.fromkeys([int(order[0]), int(order[(len(order) - 1) // 2]), int(order[-1])])
+    st = _stats(both, gap, g)
+    picks = dict.fromkeys([st.median, st.tightest, st.loosest])
+    names = {st.loosest: "loosest", st.tightest: "tightest", st.median: "median"}
     r = jnp.asarray(g.radii)  # type: ignore[union-attr]
+    u = length_unit(s)
     out = []
-    for j, name in zip(picks, ("tightest", "median", "loosest"), strict=False):
+    for j in picks:
         qs = [np.asarray(sol["q"])[k][perm[k][j]] for k in range(A)]
         arms_j = study_arms(s, mech, x, np.stack(qs), budget=budget)
         pairs, coll = [], set()
@@ -183,8 +250,11 @@ def arm_tuples(s: SerialSettings, mech: Mechanism, x: Any, sol: Mapping[str, np.
                     pairs.append((pa, pb))
                     coll |= {a, b}
         arms_j = [_with_base(a, a.base, colliding=k in coll) for k, a in enumerate(arms_j)]
-        what = f"arms {sorted(coll)} collide" if coll else f"gap {gap[j]:.3g} {length_unit(s)}"
-        out.append((f"{name} tuple {j}: {what}", arms_j, pairs, qs))
+        what = f"arms {sorted(coll)} collide" if coll else f"gap {length_text(gap[j], u)}"
+        label = f"{names[j]} tuple {j}: {what}"
+        if names[j] == "median" and counted:
+            label += f" ({st.count()})"
+        out.append((label, arms_j, pairs, qs))
     return out
 
 
@@ -483,12 +553,15 @@ def task_scene(s: SerialSettings, mech: Mechanism, x: Any, sol: Mapping[str, np.
 def arms_scene(s: SerialSettings, mech: Mechanism, x: Any, sol: Mapping[str, np.ndarray],
                keys: Mapping[str, Any], budget: int | None = FIGURE_TRIANGLES) -> Scene:  # fmt: skip
     """A multi-arm task drawn: region, obstacles, ports, the targets by the arms' mean 1/k
-    where every arm reaches them, and every arm at the tightest tuple of targets
-    (:func:`arm_tuples`), colliding pairs marked."""
+    where every arm reaches them, and every arm at the median tuple of targets (median
+    gap between the arms, :func:`arm_tuples`), colliding pairs marked; the title names
+    the tuple and how many tuples collide, and which is the tightest."""
     c = combined(sol)
     p = c["target_p"]
-    tup = arm_tuples(s, mech, x, sol, keys, budget)
+    tup = arm_tuples(s, mech, x, sol, keys, budget, counted=False)
     arms_, pairs, title = ([], [], "") if not tup else (tup[0][1], tup[0][2], tup[0][0])
+    if tup:
+        title += "\n" + tuple_stats(s, mech, sol, keys).text()
     return Scene(arms=arms_, title=title, region=s.task.region if s.task is not None else None,
                  targets=Targets(p, c["inv_k"], c["success"], "1/k"), collisions=pairs,
                  **obstacles_and_ports(s, x))  # fmt: skip

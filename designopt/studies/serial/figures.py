@@ -123,10 +123,14 @@ def draw_run(rec: RunRecord, folder: Path, resolution: int = MAP_RESOLUTION) -> 
     out += convergence(br, ["f", *s.index_names()], folder, "Best run: objective and indices",
                        units=STUDY_UNITS(s), rates=rates)  # fmt: skip
     if task:  # 1/k over a joint slice says little about a task
-        X = _full(mech, designs["final"])
-        z, P = _kernel(mech, s)(X, _uniform_q(mech, rec, 4000).astype(X.dtype))
-        return out + draw_task(rec, folder) + _workspace(np.asarray(P[0]), np.asarray(z[0]),
-                                                         s, folder, rec) + draw_robot(rec, folder)  # fmt: skip
+        sol = task_solution(rec)  # one solution for the task, workspace and robot figures
+        if has_ports(s):  # an instrument held in a port: the targets, not random joints
+            ws = draw_targets(rec, folder, sol)
+        else:
+            X = _full(mech, designs["final"])
+            z, P = _kernel(mech, s)(X, _uniform_q(mech, rec, 4000).astype(X.dtype))
+            ws = _workspace(np.asarray(P[0]), np.asarray(z[0]), s, folder, rec)
+        return out + draw_task(rec, folder, sol) + ws + draw_robot(rec, folder, sol)
 
     rows_txt = ", ".join(ROWS[r] for r in s.indices.rows())
     lo, hi = mech.lower, mech.upper
@@ -226,10 +230,109 @@ def _in_world(p: np.ndarray, c: np.ndarray, bases: list) -> tuple[np.ndarray, np
     return np.vstack(P), np.tile(c, len(bases))
 
 
-def draw_robot(rec: RunRecord, folder: Path) -> list[Path]:
+def has_ports(s: SerialSettings) -> bool:
+    """Whether the study's instruments pass ports (``arms[k].port`` or ``task.port``)."""
+    return s.task is not None and s.ports()[0] is not None
+
+
+def _inside(scene: robot.Scene) -> list[np.ndarray]:
+    """The vertices of the scene's anatomy (obstacles ``inside`` the patient)."""
+    return [robot.obstacle_mesh(ob, np.zeros(3), 1.0)[0] for ob in scene.obstacles
+            if getattr(ob, "inside", False)]  # fmt: skip
+
+
+def draw_targets(rec: RunRecord, folder: Path,
+                 sol_all: dict[str, np.ndarray] | None = None) -> list[Path]:  # fmt: skip
+    """``workspace`` of a task whose instruments pass ports: the task's targets in the
+    patient's frame (the world, where the region, ports and anatomy are given), coloured
+    by 1/k at the final design's IK solution (several arms: the arms' mean where every
+    arm reaches the target), the others as grey crosses, with the region, the ports and
+    the anatomy (the view holds them all). A cloud of random joint draws would say
+    nothing of an instrument held in a port."""
+    import textwrap
+
+    s: SerialSettings = rec.config.study
+    sol_all = task_solution(rec) if sol_all is None else sol_all
+    many = s.arms is not None
+    sol = drawing.combined(sol_all) if many else sol_all
+    p = np.asarray(sol["target_p"], np.float64)
+    ok = np.asarray(sol["success"], bool)
+    L = STUDY_UNITS(s).get("__length__", "L")
+    around = drawing.obstacles_and_ports(s, dict(rec.x))
+    outer = [ob for ob in around["obstacles"] if not getattr(ob, "inside", False)]
+    around["obstacles"] = [ob for ob in around["obstacles"] if getattr(ob, "inside", False)]
+    scene = robot.Scene(arms=[], region=s.task.region if s.task is not None else None,
+                        targets=robot.Targets(p, np.asarray(sol["inv_k"], np.float64), ok,
+                                              "1/k", size=14.0, alpha=0.9), **around)  # fmt: skip
+    limits = np.vstack([robot.scene_points(scene), *_inside(scene)])
+    fig = style.figure(figsize=(7.4, 6.6))
+    ax = fig.add_subplot(1, 1, 1, projection="3d")
+    sc = robot.draw_3d(ax, scene, L, legend=False, limits=limits)
+    if sc is not None:
+        fig.colorbar(sc, ax=ax, label=style.label("1/k", style.DIMENSIONLESS), shrink=0.6,
+                     pad=0.12)  # fmt: skip
+    rows_txt = ", ".join(ROWS[r] for r in s.indices.rows())
+    who = f"the mean of the {len(s.arms)} arms where every arm reaches it" if many else ""
+    bad = int((~ok).sum())
+    head = (f"the task's {len(p)} targets in the patient's frame, coloured by 1/k "
+            f"({s.indices.norm}-norm; rows {rows_txt}) at the final design's IK solution"
+            + (f" ({who})" if who else "") + f"; {'not reached by every arm' if many else 'unreached'}"
+            f" (grey crosses): {bad} of {len(p)}; with the ports and the anatomy"
+            + (f"; not drawn, so as not to hide them: the body wall and the obstacles outside "
+               f"the patient ({len(outer)})" if outer else ""))  # fmt: skip
+    clip = robot.clipped_note([scene], L, limits)
+    ax.set_title("\n".join(textwrap.wrap(head, 80) + textwrap.wrap(clip, 80)), fontsize=8.5,
+                 y=1.0)  # fmt: skip
+    handles = robot.legend_handles(scene)
+    if bad:
+        from matplotlib.lines import Line2D
+
+        handles.insert(0, Line2D([], [], marker="x", color="0.45", ls="none",
+                                 label="not reached by every arm" if many else "unreached"))  # fmt: skip
+    if handles:
+        fig.legend(handles=handles, loc="outside lower center", ncol=3, fontsize=7.5)
+    return save(fig, folder, "workspace")
+
+
+def _one_robot(rec: RunRecord, sol: dict[str, np.ndarray] | None) -> robot.Scene:
+    """The final design in one panel where no link geometry is a design variable: every
+    arm at the median tuple of targets (several arms, colliding pairs marked), one arm at
+    its reached target of median 1/k, the home pose without a task; with the region,
+    obstacles and ports; the panel's title says where."""
+    s: SerialSettings = rec.config.study
+    mech = build(s)
+    x = np.asarray(list(rec.x.values()), np.float64)
+    region = s.task.region if s.task is not None else None
+    around = {"region": region, **drawing.obstacles_and_ports(s, dict(rec.x))}
+    if sol is not None and s.arms is not None:
+        tup = drawing.arm_tuples(s, mech, x, sol, rec.keys(), counted=False)
+        if tup:
+            st = drawing.tuple_stats(s, mech, sol, rec.keys())
+            label, arms, pairs, _ = tup[0]
+            perm = drawing._tuples(s, mech, sol, rec.keys())[0]
+            tg = [np.asarray(sol["target_p"])[perm[k][st.median]] for k in range(len(s.arms))]
+            return robot.Scene(arms=arms, collisions=pairs, marks=[(t, "#d62728") for t in tg],
+                               title=f"the final design at the {label}\n{st.text()}", **around)  # fmt: skip
+    if sol is not None:
+        label, Q, tg = drawing.representative(s, mech, sol)
+        arms = drawing.study_arms(s, mech, x, Q if s.arms is not None else Q[0],
+                                  label="final design", color="#ff7f0e")  # fmt: skip
+        return robot.Scene(arms=arms, marks=[(t, "#d62728") for t in tg],
+                           title=f"the final design at {label}", **around)  # fmt: skip
+    q = drawing.home(mech)
+    arms = drawing.study_arms(s, mech, x, q, label="final design", color="#ff7f0e")
+    return robot.Scene(arms=arms, title="the final design at the home pose (each joint at 0 "
+                       "where its limits allow, else mid-range)", **around)  # fmt: skip
+
+
+def draw_robot(rec: RunRecord, folder: Path,
+               sol: dict[str, np.ndarray] | None = None) -> list[Path]:  # fmt: skip
     """A URDF chain's original robot (the file's numbers in every ``set`` field) beside
     the final design at the same pose (the home pose), the changed numbers in m / deg;
-    nothing for a DH chain (it has no original)."""
+    nothing for a DH chain (it has no original). Where no link geometry is a design
+    variable (no ``set`` field: only bases or ports are), the two would be the same
+    robot: one panel instead, the final design at the median tuple of targets
+    (:func:`_one_robot`; ``sol``: the run's task solution, computed when None)."""
     s: SerialSettings = rec.config.study
     if not isinstance(s.chain, UrdfChain):
         return []
@@ -238,6 +341,19 @@ def draw_robot(rec: RunRecord, folder: Path) -> list[Path]:
     design = dict(rec.x)
     x = np.asarray(list(design.values()), np.float64)
     region = s.task.region if s.task is not None else None
+    import textwrap
+
+    if not drawing.changes(s, design):  # no link length is a variable: one robot
+        task = s.indices.measure == "task"
+        sol = (task_solution(rec) if sol is None else sol) if task else None
+        scene = _one_robot(rec, sol)
+        note = drawing.meshes_note(s, design, q)
+        head = (f"{Path(s.chain.urdf).name}: the final design ({_design(s, design)}); no link "
+                "geometry is a design variable (only the bases and ports are), so the robot is "
+                "the URDF's own")  # fmt: skip
+        fig = robot.figure([scene], length_unit(s), "\n".join([head] + ([note] if note else [])),
+                           size=7.0)  # fmt: skip
+        return save(fig, folder, "robot")
     orig = drawing.original_arms(s, mech, x, q)  # every arm at its base in the world
     final = drawing.study_arms(s, mech, x, q, label="final design", color="#ff7f0e")
     note = drawing.meshes_note(s, design, q)
@@ -247,8 +363,6 @@ def draw_robot(rec: RunRecord, folder: Path) -> list[Path]:
               robot.Scene(arms=final, region=region, title="final design", **around)]  # fmt: skip
     title = (f"{Path(s.chain.urdf).name} at the home pose ({drawing.joint_values(s, q)}; each joint at 0 "
              "where its limits allow, else mid-range)")  # fmt: skip
-    import textwrap
-
     changed = "final design: " + drawing.changes_text(s, design).replace("\n", "; ")
     title = "\n".join(textwrap.wrap(title, 110) + textwrap.wrap(changed, 110)
                       + ([note] if note else []))  # fmt: skip
@@ -307,7 +421,8 @@ def front_columns(rec: Any) -> tuple[list[tuple[str, str]], list[np.ndarray], li
 def _design(s: SerialSettings, x: dict[str, float]) -> str:
     u = length_unit(s)
     ang = s.angle_names()
-    return ", ".join(f"{k} = {v:.4g} {'deg' if k in ang else u}" for k, v in x.items())
+    return ", ".join(f"{k}\u00a0=\u00a0{v:.4g}\u00a0{'deg' if k in ang else u}"
+                     for k, v in x.items())  # no break inside a value
 
 
 def _uniform_q(mech: Mechanism, rec: RunRecord, n: int) -> np.ndarray:
@@ -374,7 +489,8 @@ def _task_caption(rec: RunRecord, sol_all: dict[str, np.ndarray], sol: dict[str,
         what = (f"{len(s.arms)} arms: the mean 1/k of the arms ({s.indices.norm}-norm; rows "
                 f"{rows_txt}) where every arm reaches the target, of {N}; not reached by "
                 f"every arm (grey crosses): {bad}; the arms drawn at one tuple of targets "
-                "(one per arm, as arms_ok draws them): the tightest, colliding pairs in red")  # fmt: skip
+                "(one per arm, as arms_ok draws them): the median by the arms' clearance, "
+                "colliding pairs in red")  # fmt: skip
     ta = s.task.tool_axis  # type: ignore[union-attr]
     if ta is not None:
         what += f"; tool axis within {ta.cone:g}° of {_vec(np.asarray(ta.direction))}"
@@ -402,7 +518,8 @@ def _in_plane(pts: np.ndarray, p: np.ndarray, E: np.ndarray) -> bool:
     return bool(np.all(np.abs((pts - p.mean(0)) @ n) <= 1e-9 * ext))
 
 
-def draw_task(rec: RunRecord, folder: Path) -> list[Path]:
+def draw_task(rec: RunRecord, folder: Path,
+              sol_all: dict[str, np.ndarray] | None = None) -> list[Path]:  # fmt: skip
     """The task figure: every target of the run coloured by 1/k at the final design's IK
     solution, unreached targets as grey crosses; a planar task in its plane, a 3-D one as
     a top view (x, y) and a side view (x or y, whichever spreads more, against z), the
@@ -412,7 +529,7 @@ def draw_task(rec: RunRecord, folder: Path) -> list[Path]:
     the arms lie in it, else in a third, 3-D panel with the region, the tool-axis cone
     and the targets."""
     s: SerialSettings = rec.config.study
-    sol_all = task_solution(rec)
+    sol_all = task_solution(rec) if sol_all is None else sol_all
     mech = build(s)
     x = np.asarray(list(rec.x.values()), np.float64)
     if s.arms is not None:  # every arm at one tuple of targets; targets where all reach
