@@ -207,7 +207,7 @@ def _front(tree: Mapping[str, Any], ids: _Ids, units: dict[str, str]) -> list[Pa
     if X.shape[1]:
         sec.items.append(_designs(fr, prob, X, vnames, axl, vals, others, keep, ids, units))
     placed = placement_table(fr, front=True)
-    if placed:  # each design's placement in numbers (e.g. the serial study's ports, bases)
+    if placed:  # each design's placement in numbers (e.g. a planning case's ports, bases)
         sec.items.append("<p class='note'>Where each design (its row in the archive's "
                          "front/x, from 0) puts each arm in the world frame, as the study "
                          "gives it (lengths in the chain's unit, angles in degrees):</p>"
