@@ -8,14 +8,16 @@ from __future__ import annotations
 
 import functools
 import re
+import types
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Annotated, Any, ClassVar, Literal, Union
+from typing import Annotated, Any, ClassVar, Literal, Union, get_args, get_origin
 
 import yaml
 from pydantic import (
     BaseModel,
     Field,
+    Tag,
     ValidationError,
     create_model,
     field_validator,
@@ -214,7 +216,7 @@ def set_key(raw: dict[str, Any], key: str, value: Any, where: str = "config") ->
             nxt = node[int(part)] if part.isdigit() and int(part) < len(node) else None
             if nxt is None:
                 raise ConfigError(f"{where}: override '{key}': '{'.'.join(head[: i + 1])}': "
-                                  f"the list has {len(node)} entries (from 0)")  # fmt: skip
+                                  f"{_entries(part, len(node))}")  # fmt: skip
         else:
             nxt = node.get(part)
             if nxt is None:
@@ -225,13 +227,20 @@ def set_key(raw: dict[str, Any], key: str, value: Any, where: str = "config") ->
         node = nxt
     if isinstance(node, list):
         if not (last.isdigit() and int(last) < len(node)):
-            raise ConfigError(f"{where}: override '{key}': '{last}': the list has {len(node)} "
-                              "entries (from 0)")  # fmt: skip
+            raise ConfigError(f"{where}: override '{key}': '{last}': "
+                              f"{_entries(last, len(node))}")  # fmt: skip
         node[int(last)] = value
     elif value is None:  # null: the key unset, its default applies
         node.pop(last, None)
     else:
         node[last] = value
+
+
+def _entries(part: str, n: int) -> str:
+    """Why ``part`` names no entry of a list of ``n``."""
+    if part.isdigit():
+        return f"the list has {n} entries (from 0)"
+    return f"not an entry number: this key is a list of {n} entries, numbered from 0"
 
 
 def parse(path: str | Path) -> tuple[Any, str]:
@@ -291,7 +300,7 @@ def validate(raw: Any, where: str, model: type[BaseModel] | None = None,
     try:
         cfg = model.model_validate(raw, context={"config_dir": str(folder)})
     except ValidationError as e:
-        raise ConfigError(f"{where}: {error_text(e, raw)}") from None
+        raise ConfigError(f"{where}: {error_text(e, raw, model)}") from None
     validation.check_tree(cfg, where)  # numbers pydantic parsed from text ("1e999", "nan")
     if isinstance(cfg, RunConfigBase):
         check_optimizer(cfg, where)
@@ -414,19 +423,34 @@ _STRUCTURE = {"list_type", "tuple_type", "dict_type", "model_type", "model_attri
               "float_type", "float_parsing", "int_type", "int_parsing", "string_type"}  # fmt: skip
 """Error types that say "the input is not of this union member's shape"."""
 
+_TAGS = ("union_tag_invalid", "union_tag_not_found")
+_NO_VALUE = {"missing", "extra_forbidden", "too_short", "too_long", "string_too_short",
+             "string_too_long"}  # fmt: skip
+"""Messages that say all without the value given (it is absent, or its length is said)."""
 
-def _input_path(err: dict, raw: Any) -> tuple[list[str], int]:
-    """The parts of a pydantic error's location that are keys of the input (union members
-    and validator tags such as ``list[float]``, ``Range`` or ``function-after[...]``
-    dropped), and how deep into the input they reach."""
-    out, node, depth = [], raw, 0
+
+def _given(v: Any) -> str:
+    """ ", got <v>" for a one-word value (YAML's spelling of null and booleans), else ""."""
+    if v is None or isinstance(v, bool):
+        return f", got {yaml.safe_dump(v).split(chr(10))[0]}"
+    if isinstance(v, int | float) or (isinstance(v, str) and len(v) <= 40 and "\n" not in v):
+        return f", got {v!r}"
+    return ""
+
+
+def _input_path(err: dict, raw: Any) -> tuple[list[str], int, list[tuple[tuple, Any]]]:
+    """The parts of a pydantic error's location that are keys of the input, how deep
+    into the input they reach, and the other parts, the *labels* (union members and
+    validator tags such as ``list[float]``, ``Range`` or ``function-after[...]``), each as
+    (the location before it, the label)."""
+    out, node, depth, labels = [], raw, 0, []
     loc = err["loc"]
     for n, x in enumerate(loc):
         nxt = loc[n + 1] if n + 1 < len(loc) else None
         if isinstance(node, dict) and x in node and not isinstance(node[x], dict | list) \
                 and isinstance(nxt, str) and nxt in node:  # fmt: skip
-            continue  # a union tag named like a key beside it (a URDF chain's "urdf")
-        if isinstance(node, dict) and x in node:
+            labels.append((tuple(loc[:n]), x))  # a union tag named like a key beside it
+        elif isinstance(node, dict) and x in node:
             node, depth = node[x], depth + 1
             out.append(str(x))
         elif isinstance(node, list | tuple) and isinstance(x, int):
@@ -434,26 +458,162 @@ def _input_path(err: dict, raw: Any) -> tuple[list[str], int]:
             out.append(str(x))
         elif n == len(loc) - 1 and err["type"] == "missing":
             out.append(str(x))  # the key that is missing
-    return out, depth
+        else:
+            labels.append((tuple(loc[:n]), x))
+    return out, depth, labels
 
 
-def error_text(e: ValidationError, raw: Any = None) -> str:
-    """ "key 'a.b.c': message" for the most telling error: of a union (``list`` or
-    ``{from, to, num}``), the member the input was meant for; study tags, union members
-    and validator names dropped from the path; pydantic's wording rewritten."""
+def most_telling(errs: list[dict], raw: Any) -> dict:
+    """The error to show of pydantic's ``errs`` on the input ``raw``, for every union
+    alike. First each union decides which of its members the input was meant for: of
+    the members that failed at one place (errors whose locations part at a label), the
+    one whose best error is the least about shape ("not a list", "not a mapping") and
+    then reaches deepest into the input; the other members' errors are dropped. Of the
+    rest, the first in pydantic's order (the fields' order): an error that a field's
+    validator raises because an earlier field failed (a name "not a design variable"
+    after ``variables`` was refused) comes after its cause and is never shown in its
+    place. A key missing beside an unknown key of the same section (a misspelt key) is
+    shown as the unknown key, the one the user wrote."""
+    if len(errs) < 2:
+        return errs[0]
+    info = [_input_path(e, raw) for e in errs]
+
+    def rank(i: int) -> tuple[bool, int]:
+        return errs[i]["type"] not in _STRUCTURE, info[i][1]
+
+    sites: dict[tuple, dict[Any, list[int]]] = {}
+    for i, (_, _, labels) in enumerate(info):
+        for where, label in labels:
+            sites.setdefault(where, {}).setdefault(label, []).append(i)
+    lost: set[int] = set()
+    for members in sites.values():
+        if len(members) < 2:
+            continue
+        best = max(members.values(), key=lambda ids: max(rank(i) for i in ids))
+        lost |= {i for ids in members.values() if ids is not best for i in ids}
+    keep = [e for i, e in enumerate(errs) if i not in lost]
+    first = keep[0]
+    if first["type"] == "missing":  # a key misspelt is missing and unknown: name what was written
+        typo = [e for e in keep if e["type"] == "extra_forbidden"
+                and tuple(e["loc"][:-1]) == tuple(first["loc"][:-1])]  # fmt: skip
+        first = typo[0] if typo else first
+    return first
+
+
+def _strip(tp: Any) -> Any:
+    while get_origin(tp) is Annotated:
+        tp = get_args(tp)[0]
+    return tp
+
+
+def _union(tp: Any) -> list[Any] | None:
+    """The members of a union type (``None`` left out; Annotated kept), else None."""
+    tp = _strip(tp)
+    if get_origin(tp) not in (Union, types.UnionType):
+        return None
+    members = [a for a in get_args(tp) if a is not type(None)]
+    inner = _union(members[0]) if len(members) == 1 else None  # (A | B) | None
+    return members if inner is None else inner
+
+
+def _is_model(tp: Any) -> bool:
+    return isinstance(tp, type) and issubclass(tp, BaseModel)
+
+
+def _names_member(member: Any, label: Any) -> bool:
+    """Whether a union's location label names this member: its ``Tag``, its class name,
+    or the value of a ``Literal`` field (``Field(discriminator="name")``)."""
+    if get_origin(member) is Annotated and any(
+            isinstance(m, Tag) and m.tag == label for m in get_args(member)[1:]):  # fmt: skip
+        return True
+    tp = _strip(member)
+    if not _is_model(tp):
+        return False
+    return tp.__name__ == label or any(
+        get_origin(_strip(f.annotation)) is Literal and label in get_args(_strip(f.annotation))
+        for f in tp.model_fields.values()
+    )
+
+
+def _type_at(model: Any, loc: tuple) -> Any:
+    """The type a pydantic location points at in ``model`` (None where it cannot tell)."""
+    tp, i = model, 0
+    while i < len(loc):
+        x = loc[i]
+        members = _union(tp)
+        if members is not None:
+            if len(members) == 1:  # X | None: no label in the location
+                tp = members[0]
+                continue
+            pick = [m for m in members if _names_member(m, x)]
+            if len(pick) != 1:
+                return None
+            tp, i = pick[0], i + 1
+            continue
+        tp = _strip(tp)
+        origin, args = get_origin(tp), get_args(tp)
+        if _is_model(tp):
+            f = next((f for n, f in tp.model_fields.items() if x in (n, f.alias)), None)
+            if f is None:
+                return None
+            tp = f.annotation
+        elif origin in (list, tuple) and isinstance(x, int) and args:
+            tp = args[0] if origin is list or args[-1] is Ellipsis else \
+                args[x] if x < len(args) else None  # fmt: skip
+        elif origin is dict and len(args) == 2:
+            tp = args[1]
+        else:
+            return None
+        i += 1
+    return tp
+
+
+def _tag_key(model: Any, loc: tuple) -> str | None:
+    """The key that picks the member of the tagged union at ``loc`` (e.g. a body wall's
+    ``shape``): the field every member declares as a ``Literal`` of its own; None when
+    the union's members do not tell."""
+    members = [_strip(m) for m in _union(_type_at(model, loc)) or []]
+    if len(members) < 2 or not all(_is_model(m) for m in members):
+        return None
+    for name, f in members[0].model_fields.items():
+        ann = [_strip(m.model_fields[name].annotation) if name in m.model_fields else None
+               for m in members]  # fmt: skip
+        if all(get_origin(a) is Literal for a in ann):
+            return f.alias or name
+    return None
+
+
+def _tag_error(err: dict, loc: list[str], model: Any) -> tuple[list[str], str]:
+    """The key and message of a tagged union's unknown or missing tag: the key that
+    names the member (``study.task.body_wall.shape``), the tags it takes."""
+    ctx = err.get("ctx", {})
+    expected = ctx.get("expected_tags") or ctx.get("expected") or ""
+    disc = str(ctx.get("discriminator", ""))
+    key = disc.strip("'") if disc[:1] == "'" and disc[-1:] == "'" else None
+    if key is None and model is not None:
+        key = _tag_key(model, err["loc"])
+    given = err.get("input")
+    if not isinstance(given, dict):
+        what = f"{key}: one of {expected}" if key else f"one of {expected}"
+        return loc, f"must be a mapping of keys with {what}"
+    if key is None:
+        return loc, f"must name one of {expected}"
+    if key not in given:
+        return [*loc, key], f"missing; give one of {expected}"
+    return [*loc, key], f"must be one of {expected}, got {given[key]!r}"
+
+
+def error_text(e: ValidationError, raw: Any = None, model: Any = None) -> str:
+    """ "key 'a.b.c': message" for the most telling error (:func:`most_telling`): the
+    deepest key the input got wrong, study tags, union members and validator names
+    dropped from the path; pydantic's wording rewritten. ``model``: the model validated
+    (to name the key of a tagged union whose tag is unknown or missing)."""
     from designopt.studies import STUDIES
 
     errs = e.errors()
-    if raw is not None and len(errs) > 1:
-        # prefer an error inside the input's structure over "not a list"/"not a mapping"
-        # from the union members the input was not meant for
-        def rank(err: dict) -> tuple[int, int]:
-            return (err["type"] not in _STRUCTURE, _input_path(err, raw)[1])
-
-        errs = sorted(errs, key=rank, reverse=True)
-    err = errs[0]
+    err = most_telling(errs, raw) if raw is not None else errs[0]
     if raw is not None:
-        loc, _ = _input_path(err, raw)
+        loc, _, _ = _input_path(err, raw)
     else:
         loc = [str(x) for x in err["loc"]]
     if len(loc) > 1 and loc[0] == "study" and loc[1] in STUDIES:
@@ -470,21 +630,32 @@ def error_text(e: ValidationError, raw: Any = None) -> str:
             msg = _MESSAGES[err["type"]].format(**err.get("ctx", {}))
         except (KeyError, IndexError):
             pass
+        if err["type"] not in _NO_VALUE:
+            msg += _given(err.get("input"))
     elif err["type"] == "literal_error":
         msg = (
             _MESSAGES["literal_error"].format(expected=err.get("ctx", {}).get("expected", msg))
             + f", got {err['input']!r}"
         )
-    if err["type"] in ("union_tag_invalid", "union_tag_not_found") and loc[:1] == ["study"]:
+    if err["type"] in _TAGS and tuple(err["loc"]) == ("study",):  # the study's own name
         name = err["input"].get("name") if isinstance(err["input"], dict) else None
         loc = ["study", "name"]
         msg = (f"unknown study {name!r}" if name is not None else "missing") + (
             f"; known: {sorted(STUDIES)} (`designopt studies` lists them)"
         )
+    elif err["type"] in _TAGS:
+        loc, msg = _tag_error(err, loc, model)
+    elif err["type"] not in _MESSAGES and err["type"] != "value_error" and model is not None \
+            and isinstance(err.get("input"), dict):  # fmt: skip
+        key = _tag_key(model, err["loc"])  # a union's own error for its tag (custom words)
+        if key is not None:
+            given = err["input"]
+            loc, msg = [*loc, key], (f"{msg}; got {given[key]!r}" if key in given
+                                     else f"missing ({msg})")  # fmt: skip
     head, sep, rest = msg.partition(": ")
     if not loc and sep and head.isidentifier():  # a whole-config check names its key first
         loc, msg = [head], rest
-    elif raw is not None and sep and _KEY.match(head):
+    elif raw is not None and sep and _KEY.match(head) and err["type"] not in _TAGS:
         # a section's check that names a key inside it ("limits.j2: ..."): the deepest key
         # at fault is that key (the location ends at the section, or at its union tag)
         first = head.split(".")[0]

@@ -17,7 +17,8 @@ first asked for.
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Mapping
+import re
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -46,6 +47,46 @@ def value_text(v: Any, se: Any = None, vfmt: str = ".5f", sefmt: str = ".1e",
     if se is None or not np.isfinite(float(np.asarray(se))):
         return f"{v:{vfmt}}"
     return f"{v:{vfmt}} ± {float(np.asarray(se)):{sefmt}}"
+
+
+def _scalar(v: Any) -> float | None:
+    """A one-number value as a float (None for arrays of several numbers and non-numbers)."""
+    try:
+        a = np.asarray(v, dtype=np.float64)
+    except (TypeError, ValueError):
+        return None
+    return float(a.reshape(())) if a.size == 1 else None
+
+
+def na_indices(final: Mapping[str, Any]) -> list[str]:
+    """The indices of one design's results that are n/a: a value NaN beside its ``_se``
+    (a ratio over too few items; every study's indices carry an SE)."""
+    out = []
+    for k, v in final.items():
+        if k == "attrs" or k.endswith(("_se", "_n", "_of")) or k + "_se" not in final:
+            continue
+        x = _scalar(v)
+        if x is not None and np.isnan(x):
+            out.append(k)
+    return out
+
+
+def na_warnings(final: Mapping[str, Any], own: Sequence[str] = ()) -> list[str]:
+    """``own`` (a study's warnings on one design's results) and a generic line for each
+    n/a index (:func:`na_indices`) that none of them speaks of (a line about ``k``
+    starts with its name): every n/a carries a ``warning:`` line, in every study.
+    ``final``: the index values (a run's ``final`` group, ``eval``'s results), with
+    ``<k>_n`` / ``<k>_of`` the ratio's counts where the study gives them."""
+    out = list(own)
+    for k in na_indices(final):
+        if any(re.match(rf"{re.escape(k)}\b", w) for w in own):
+            continue
+        n, of = _scalar(final.get(f"{k}_n")), _scalar(final.get(f"{k}_of"))
+        counts = f" ({n:.0f} of {of:.0f})" if n is not None and of is not None \
+            and np.isfinite(n) and np.isfinite(of) else ""  # fmt: skip
+        out.append(f"{k}: n/a{counts}: a ratio over too few items to be estimated; it has no "
+                   "value and no standard error in this design")  # fmt: skip
+    return out
 
 
 def text(v: Any) -> str:

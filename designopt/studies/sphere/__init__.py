@@ -49,6 +49,24 @@ def _extra(s: SphereSettings, fin) -> list[str]:
     ]
 
 
+def _warnings(s: SphereSettings, fin) -> list[str]:
+    """``gci_reached`` n/a (fewer than ``objective.N_MIN`` of the cone's directions
+    reached) says so, with the counts; any other n/a index gets the generic line
+    (``results.base.na_warnings``)."""
+    from designopt.results.base import na_indices, na_warnings
+    from designopt.studies.sphere.objective import N_MIN
+
+    own = []
+    if "gci_reached" in na_indices(fin):
+        n, of = fin.get("gci_reached_n"), fin.get("gci_reached_of")
+        k = (f"{float(n):.0f} of {float(of):.0f}" if n is not None and of is not None
+             else f"fewer than {N_MIN} of the")  # fmt: skip
+        own.append(f"gci_reached: n/a ({k} tool directions reached; under {N_MIN}): too few "
+                   "to say how isotropic the mechanism is where it reaches; gci counts every "
+                   "unreached direction as 0")  # fmt: skip
+    return na_warnings(fin, own)
+
+
 def _cost(s: SphereSettings) -> Cost:
     """Monte-Carlo cost per design (pre-flight): the directions, ``chunk`` in flight, each
     two IK branches with their 3×2 Jacobians (about 40 floats)."""
@@ -76,6 +94,7 @@ STUDY = Study(
     },
     units=units,
     extra_lines=_extra,
+    warnings=_warnings,
     example_config="configs/sphere_rcm.yaml",
     cost=_cost,
     tiny={"name": "sphere_rcm", "index": {"n_samples": 512, "sampler": "rqmc", "replicates": 4}},

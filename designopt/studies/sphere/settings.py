@@ -75,7 +75,7 @@ class SphereSettings(StudySettings):
     def _angles(cls, v: dict[str, tuple[float, float]]) -> dict[str, tuple[float, float]]:
         for k, (lo, hi) in v.items():
             if k not in DESIGN_KEYS:
-                raise ValueError(f"unknown design variable '{k}'; allowed {list(DESIGN_KEYS)}")
+                raise ValueError(f"{k}: unknown design variable; allowed {list(DESIGN_KEYS)}")
             lo_hi(k, (lo, hi))
             if not (0 < lo and hi < 180):
                 raise ValueError(f"{k}: a link angle must lie strictly between 0 and 180 "
@@ -88,7 +88,7 @@ class SphereSettings(StudySettings):
     def _fixed(cls, v: dict[str, float]) -> dict[str, float]:
         for k, x in v.items():
             if k not in DESIGN_KEYS:
-                raise ValueError(f"unknown link angle '{k}'; allowed {list(DESIGN_KEYS)}")
+                raise ValueError(f"{k}: unknown link angle; allowed {list(DESIGN_KEYS)}")
             if not 0 < x < 180:
                 raise ValueError(f"{k}: a link angle must lie strictly between 0 and 180 "
                                  f"degrees, got {x:g}")  # fmt: skip
@@ -108,9 +108,9 @@ class SphereSettings(StudySettings):
     def _consistent(self) -> SphereSettings:
         both = sorted(set(self.variables) & set(self.fixed))
         if both:
-            raise ValueError(
-                f"fixed: {both} are design variables; a link angle is either variable or fixed"
-            )
+            raise ValueError(f"fixed.{both[0]}: is a design variable too (variables: "
+                             f"{list(self.variables)}); a link angle is either variable or "
+                             "fixed")  # fmt: skip
         ext = self.constraints.reach_all_deg
         g = self.cone.axis_angle_deg
         if ext is not None and not ext < min(g, 180.0 - g):
