@@ -625,9 +625,12 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         c0 = (qc, ch.trig_q(qc), z > 0, z + jnp.inf)
         qc, _, ok, Em = jax.lax.fori_loop(0, opts.block, body, c0)
         refused = jnp.zeros_like(ok)
-        if accept is not None:
-            refused = ok & ~accept(m, t, jnp.stack(qc, -1))
-            ok = ok & ~refused
+        if accept is not None:  # asked of the converged slots only (a collision check
+            # costs several LM blocks: asked of every slot, it was most of the solve)
+            qs = jnp.stack(qc, -1)
+            acc = on_rows(lambda r: accept(m[r], t[r], qs[r]), ok, max(ok.shape[0] // 4, 1))
+            refused = ok & ~acc
+            ok = ok & acc
         return qc, ok, Em, refused
 
     nb = opts.n_best
@@ -749,8 +752,9 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         conv = (pe <= opts.tol_pos * L[:, None]) & (re <= opts.tol_rot) & inside
         ok = conv
         if accept is not None:
-            items = jnp.arange(I, dtype=jnp.int32)
-            ok = conv & accept(items // T, items % T, q.reshape(I, n)).reshape(M, T)
+            qf, cf = q.reshape(I, n), conv.reshape(I)
+            ok = conv & on_rows(lambda r: accept(r // T, r % T, qf[r]), cf,
+                                min(I, CHECK_ROWS)).reshape(M, T)  # fmt: skip
         ik_ = inv_cond(Ja.reshape(M, T, 3, n), "2")
         a_c = jax.lax.dynamic_slice_in_dim(a_out, c * I, I).reshape(M, T)
         return IKResult(q, ok, pe, re, ik_, a_c, conv)
@@ -779,6 +783,31 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
                      z > 0)
     best, _ = jax.lax.fori_loop(0, nb, pick, (best0, jnp.full((M, T), -jnp.inf, dtype)))
     return _materialised(copied(best))
+
+
+CHECK_ROWS = 256
+"""Rows per call of an ``accept`` check after the solve (:func:`on_rows`)."""
+
+
+def on_rows(fn: Callable[[jax.Array], jax.Array], mask: jax.Array, k: int) -> jax.Array:
+    """``fn`` (row indices (k,) int32 → (k, ...) values) asked of the rows where ``mask``
+    (R,) holds, k rows at a time (a loop of ⌈Σmask / k⌉ calls), its values there and
+    zeros (False) elsewhere: a costly per-row check (a collision test) paid for the rows
+    that need it, not for all R. Each row's value is what ``fn`` gives it in any batch
+    (no row's value reads another's)."""
+    R = mask.shape[0]
+    k = max(1, min(k, R))
+    n_groups = -(-R // k)
+    idx = jnp.nonzero(mask, size=n_groups * k, fill_value=R)[0].astype(jnp.int32)
+    out0 = jax.eval_shape(fn, jnp.zeros((k,), jnp.int32))
+    out = jnp.zeros((R + 1, *out0.shape[1:]), out0.dtype)
+
+    def body(g, out):
+        r = jax.lax.dynamic_slice(idx, (g * k,), (k,))
+        return out.at[r].set(fn(jnp.minimum(r, R - 1)), mode="drop")
+
+    used = (jnp.sum(mask, dtype=jnp.int32) + k - 1) // k
+    return jax.lax.fori_loop(0, used, body, out)[:R]
 
 
 def representatives(X: jax.Array) -> jax.Array:

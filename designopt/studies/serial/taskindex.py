@@ -309,7 +309,13 @@ def chunk_values(mech: Mechanism, s: SerialSettings, params: dict[str, Any], ful
     if geo is not None:
         m_all = jnp.repeat(jnp.arange(X.shape[0]), C)
         t_all = jnp.tile(jnp.arange(C), X.shape[0])
-        c, seg = clearance(m_all, pt[t_all], res.q.reshape(-1, res.q.shape[-1]))
+        qf = res.q.reshape(-1, res.q.shape[-1])
+        _, seg = clearance(m_all, pt[t_all], qf)  # the capsules of all (their FK is cheap)
+        # the clearance (the costly part) of the kept solutions that count: reached, of a
+        # representative design (the rest copy theirs)
+        need = (ok.reshape(rep.shape[0], C) & (rep == jnp.arange(rep.shape[0]))[:, None])
+        c = ik.on_rows(lambda r: clearance(m_all[r], pt[t_all[r]], qf[r])[0],
+                       need.reshape(-1), ik.CHECK_ROWS).reshape(-1, C)[rep]  # fmt: skip
         out["clearance"] = jnp.where(ok, c.reshape(ok.shape), z)
         if arms:
             out["segments"] = seg.reshape(*ok.shape, *seg.shape[1:])
