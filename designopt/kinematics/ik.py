@@ -516,7 +516,8 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
           opts: IKOptions = DEFAULTS,
           score: Callable[[jax.Array], jax.Array] | None = None,
           accept: Callable[[jax.Array, jax.Array, jax.Array], jax.Array] | None = None,
-          t0: jax.Array | int = 0, rep: jax.Array | None = None) -> IKResult:  # fmt: skip
+          t0: jax.Array | int = 0, rep: jax.Array | None = None,
+          hopeless: jax.Array | None = None) -> IKResult:  # fmt: skip
     """IK of the same T targets (p_t (T, 3), R_t (T, 3, 3) or None) for M designs
     X (M, D), or of each design's own T targets (p_t (M, T, 3), R_t (M, T, 3, 3)): every
     field has leading axes (M, T). The database draws and the seeds' hashes are shared
@@ -536,7 +537,11 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
     queue, and every other design's fields are copied from its representative's. Items
     are independent and their seeds hash (target, attempt), not the design, so the copy
     is what solving it again would give; a block of copies (a padded block, a swarm
-    that met at one point) costs one design's work."""
+    that met at one point) costs one design's work. ``hopeless`` (M, T) bool (an array
+    input): items that no solution can serve (``accept`` refuses every one, or the caller
+    rejects every one: a target out of an instrument's insertion range, its shaft through
+    the anatomy): they get one seed, not all of them, and their joints are that seed's
+    end (a failure's joints either way)."""
     _check(mode, R_t, opts)
     X = jnp.asarray(X)
     per_design = p_t.ndim == 3
@@ -683,6 +688,8 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         Eb = jnp.minimum(Eb, Em)
         give_up = ~ok & ((it >= iters) | stalled | refused)
         last = a + 1 >= attempts
+        if hopeless is not None:  # one seed only: no solution can be kept
+            last = last | one_seed[ic]
         # converged joints go to the item's next solution slot (of n_best); a dropped
         # seed's joints go to slot 0 when the item has none and they beat its best so far
         n_conv = nc[ic]
@@ -711,6 +718,7 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         q = jnp.where(take[None], seed(i, a), q)
         return i, a, it, Eb, q, head, tail, qi, qa, q_out, a_out, E_out, nc
 
+    one_seed = None if hopeless is None else jnp.broadcast_to(hopeless, (M, T)).reshape(I)
     # the queue: the representatives' items, in order (all of them without ``rep``)
     if rep is None:
         order, n_items = jnp.arange(I, dtype=jnp.int32), jnp.asarray(I, jnp.int32)

@@ -291,15 +291,19 @@ def chunk_values(mech: Mechanism, s: SerialSettings, params: dict[str, Any], ful
     rep = ik.representatives(full)
     if arms:
         rep = (jnp.arange(A, dtype=jnp.int32)[:, None] * M + rep[None]).reshape(-1)
-    res = ik.solve(mech.model, X, p_ik, R_ik, lo, hi, key, md, opts, score, accept, t0, rep)
+    hopeless = None
+    if port is not None:  # a target out of an arm's insertion range is a failure whatever
+        # the joints (below): one seed for it, not all of them
+        depth = jnp.linalg.norm(pt[None, None] - port[:, :, None, :], axis=-1)  # (A|1, M, C)
+        inside = (depth >= d0) & (depth <= d1) & (depth > 0)
+        hopeless = jnp.broadcast_to(~inside, (A, M, C)).reshape(A * M, C)
+    res = ik.solve(mech.model, X, p_ik, R_ik, lo, hi, key, md, opts, score, accept, t0, rep,
+                   hopeless)  # fmt: skip
     J = jac(res.q)
     inv_k, man = inv_cond(J * sc[:, None], ind.norm, ind.normalized, with_volume=True)
     ok, conv = res.success, res.converged
-    if port is not None:  # the insertion depth |target − port| of each arm and design
-        depth = jnp.linalg.norm(pt[None, None] - port[:, :, None, :], axis=-1)  # (A|1, M, C)
-        # each arm's own insertion range
-        inside = ((depth >= d0) & (depth <= d1) & (depth > 0)).reshape(ok.shape)
-        ok, conv = ok & inside, conv & inside
+    if hopeless is not None:  # the insertion depth |target − port|: each arm's own range
+        ok, conv = ok & ~hopeless, conv & ~hopeless
     margin = jnp.min(jnp.minimum(res.q - lo, hi - res.q) / half, -1)
     z = jnp.zeros_like(inv_k)
     out = {"success": ok.astype(dtype), "converged": conv.astype(dtype),
