@@ -3,6 +3,7 @@ changes JAX's global configuration)."""
 
 import gc
 import os
+import shutil
 import tempfile
 
 import jax
@@ -15,8 +16,12 @@ jax.config.update("jax_enable_x64", True)
 # CLI calls in the tests keep compiled programs in a cache of this session's own, never in
 # the user's (~/.cache/designopt/jax): other processes writing there at the same time (a
 # run in another terminal, another test session) must not feed this one their entries.
-# pytest-xdist's workers inherit the controller's variable: they share the folder.
-os.environ.setdefault("DESIGNOPT_CACHE_DIR", tempfile.mkdtemp(prefix="designopt-test-cache-"))
+# pytest-xdist's workers inherit the controller's variable: they share the folder, and
+# so do the child processes the tests start (they get os.environ): a program compiles
+# once per session. Only the process that made the folder removes it, at the session's end.
+_OWN_CACHE = not os.environ.get("DESIGNOPT_CACHE_DIR")
+if _OWN_CACHE:
+    os.environ["DESIGNOPT_CACHE_DIR"] = tempfile.mkdtemp(prefix="designopt-test-cache-")
 
 # The whole session keeps its compiled programs there from the first test on, as the CLI
 # does for its runs (designopt.cli.setup.use_cache): a program that another test module
@@ -45,3 +50,11 @@ def _release_compiled_programs():
     exported._CALLS.clear()
     jax.clear_caches()
     gc.collect()
+
+
+def pytest_sessionfinish(session: pytest.Session) -> None:
+    """The session's cache folder goes when the session ends (in the process that made
+    it: xdist's controller, after its workers; a folder given in $DESIGNOPT_CACHE_DIR
+    stays)."""
+    if _OWN_CACHE and not hasattr(session.config, "workerinput"):
+        shutil.rmtree(os.environ["DESIGNOPT_CACHE_DIR"], ignore_errors=True)
