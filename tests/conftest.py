@@ -19,9 +19,10 @@ jax.config.update("jax_enable_x64", True)
 # pytest-xdist's workers inherit the controller's variable: they share the folder, and
 # so do the child processes the tests start (they get os.environ): a program compiles
 # once per session. Only the process that made the folder removes it, at the session's end.
-_OWN_CACHE = not os.environ.get("DESIGNOPT_CACHE_DIR")
+_OWN_CACHE = "" if os.environ.get("DESIGNOPT_CACHE_DIR") else tempfile.mkdtemp(
+    prefix="designopt-test-cache-")  # fmt: skip
 if _OWN_CACHE:
-    os.environ["DESIGNOPT_CACHE_DIR"] = tempfile.mkdtemp(prefix="designopt-test-cache-")
+    os.environ["DESIGNOPT_CACHE_DIR"] = _OWN_CACHE
 
 # The whole session keeps its compiled programs there from the first test on, as the CLI
 # does for its runs (designopt.cli.setup.use_cache): a program that another test module
@@ -57,4 +58,4 @@ def pytest_sessionfinish(session: pytest.Session) -> None:
     it: xdist's controller, after its workers; a folder given in $DESIGNOPT_CACHE_DIR
     stays)."""
     if _OWN_CACHE and not hasattr(session.config, "workerinput"):
-        shutil.rmtree(os.environ["DESIGNOPT_CACHE_DIR"], ignore_errors=True)
+        shutil.rmtree(_OWN_CACHE, ignore_errors=True)
