@@ -71,6 +71,7 @@ def _base(name: str) -> dict:
 
 PORTS = _base("port_placement.yaml")  # two UR5 arms, ports on an ellipsoid wall, meshes
 SPHERE = _base("sphere_rcm.yaml")
+URDF_PORT = _base("urdf_puma560_port.yaml")  # a URDF arm, its origins set by variables
 
 
 @pytest.fixture(scope="module")
@@ -195,6 +196,9 @@ CONFIG_CASES = [
     # a bound the arms' names depend on: blamed on the bound, not on the arms or the chain
     ("arm-variable-bound-text", PORTS, lambda r: _study(r)["variables"].update(py1=[0, "x"]),
      "study.variables.py1.1", ["must be a number", "'x'"]),
+    ("chain-set-a-list", URDF_PORT,
+     lambda r: _study(r)["chain"]["set"].update({"joint3.origin.x": [0.3]}),
+     "study.chain.set.joint3.origin.x", ["must be a number or text"]),
     ("arm-variable-bounds-a-word", PORTS, lambda r: _study(r)["variables"].update(b="wide"),
      "study.variables.b", ["must be a list", "'wide'"]),
     # -- obstacles inside the patient
@@ -396,6 +400,9 @@ def _text(model: type[BaseModel], raw: dict) -> str:
     (_Vary, {"v": {"from": 0, "to": 1, "num": "x"}}, "key 'v.num': must be an integer, got 'x'"),
     (_Vary, {"v": [1, "x"]}, "key 'v.1': must be a number, got 'x'"),
     (_Vary, {"v": {"from": 0, "to": 1, "nun": 3}}, "key 'v.nun': unknown key"),
+    # a value no member takes: every member's shape said
+    (_Vary, {"v": 5}, "key 'v': must be a list or a mapping of keys, got 5"),
+    (_Vary, {"v": "wide"}, "key 'v': must be a list or a mapping of keys, got 'wide'"),
     # a tagged union names the key that picks the member
     (_Scene, {"things": [{"shape": "ball", "radius": 1}, {"size": [1, 1, 1]}]},
      "key 'things.1.shape': missing; give one of 'ball', 'box'"),

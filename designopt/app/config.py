@@ -500,6 +500,18 @@ def most_telling(errs: list[dict], raw: Any) -> dict:
     return first
 
 
+def _shapes(err: dict, errs: list[dict], raw: Any) -> str:
+    """ "must be a number or text": the shape error ``err`` with those of the other
+    members of its union at the same place of the input (a value no member takes)."""
+    path = _input_path(err, raw)[0]
+    out: list[str] = []
+    for e in errs:
+        if e["type"] in _STRUCTURE and _input_path(e, raw)[0] == path:
+            m = _MESSAGES[e["type"]].removeprefix("must be ")
+            out += [] if m in out else [m]
+    return "must be " + " or ".join(out)
+
+
 def _strip(tp: Any) -> Any:
     while get_origin(tp) is Annotated:
         tp = get_args(tp)[0]
@@ -630,6 +642,8 @@ def error_text(e: ValidationError, raw: Any = None, model: Any = None) -> str:
             msg = _MESSAGES[err["type"]].format(**err.get("ctx", {}))
         except (KeyError, IndexError):
             pass
+        if raw is not None and err["type"] in _STRUCTURE:  # a value no member of a union takes
+            msg = _shapes(err, errs, raw)
         if err["type"] not in _NO_VALUE:
             msg += _given(err.get("input"))
     elif err["type"] == "literal_error":
