@@ -133,10 +133,14 @@ def resolve(filename: str, urdf_path: str | Path | None) -> Path | None:
 
 @lru_cache(maxsize=64)
 def _load_file(path: str, mtime: float) -> tuple[np.ndarray, np.ndarray] | None:
+    import warnings
+
     import trimesh
 
-    try:
-        m = trimesh.load(path, force="mesh")
+    try:  # a drawing takes the file as it is: trimesh's and NumPy's warnings silenced here
+        with warnings.catch_warnings(), np.errstate(all="ignore"):
+            warnings.simplefilter("ignore")
+            m = trimesh.load(path, force="mesh")
     except Exception:  # trimesh raises many kinds for an unreadable file
         return None
     if not isinstance(m, trimesh.Trimesh) or len(m.faces) == 0:
