@@ -124,6 +124,8 @@ class IKResult(NamedTuple):
     seed: jax.Array
     converged: jax.Array  # within tolerance and limits, accepted or not (= success without
     #                       an ``accept`` predicate)
+    tries: jax.Array | None = None  # seeds tried (int32; the profile of a solve)
+    refused: jax.Array | None = None  # converged seeds ``accept`` refused (int32)
 
 
 # ------------------------------------------------------------ entry-wise kinematics
@@ -676,7 +678,7 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
                 jnp.zeros_like(s[4]).at[:, to].set(s[4], unique_indices=True), *s[5:])  # fmt: skip
 
     def round_(s):
-        i, a, it, Eb, q, head, tail, qi, qa, q_out, a_out, E_out, nc = s
+        i, a, it, Eb, q, head, tail, qi, qa, q_out, a_out, E_out, nc, n_try, n_ref = s
         active = i < I
         ic = jnp.minimum(i, I - 1)
         qc, ok, Em, refused = blocks(i, q)
@@ -700,6 +702,8 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         a_out = a_out.at[idx].set(a, mode="drop")
         E_out = E_out.at[jnp.where(idx < nb * I, i, I)].set(jnp.where(ok, -1.0, Em), mode="drop")
         nc = nc.at[jnp.where(active & ok, i, I)].add(1, mode="drop")
+        n_try = n_try.at[jnp.where(active, i, I)].max(a + 1, mode="drop")
+        n_ref = n_ref.at[jnp.where(active & refused, i, I)].add(1, mode="drop")
         more = ok & (n_conv + 1 < nb)  # converged, but n_best asks for another solution
         retry = active & (give_up | more) & ~last
         free = active & (ok | give_up)
@@ -716,7 +720,7 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         it = jnp.where(free, 0, it)
         Eb = jnp.where(free, jnp.inf, Eb)
         q = jnp.where(take[None], seed(i, a), q)
-        return i, a, it, Eb, q, head, tail, qi, qa, q_out, a_out, E_out, nc
+        return i, a, it, Eb, q, head, tail, qi, qa, q_out, a_out, E_out, nc, n_try, n_ref
 
     one_seed = None if hopeless is None else jnp.broadcast_to(hopeless, (M, T)).reshape(I)
     # the queue: the representatives' items, in order (all of them without ``rep``)
@@ -733,10 +737,12 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
          jnp.minimum(jnp.asarray(B, jnp.int32), n_items), n_items,
          order, jnp.zeros((I,), jnp.int32),
          jnp.zeros((n, nb * I), dtype), jnp.zeros((nb * I,), jnp.int32),
-         jnp.full((I,), jnp.inf, dtype), jnp.zeros((I,), jnp.int32))  # fmt: skip
+         jnp.full((I,), jnp.inf, dtype), jnp.zeros((I,), jnp.int32),
+         jnp.zeros((I,), jnp.int32), jnp.zeros((I,), jnp.int32))  # fmt: skip
 
     s = jax.lax.while_loop(lambda s: jnp.any(s[0] < I), lambda s: round_(compact(s)), s)
     q_out, a_out, n_conv = s[9], s[10], s[12].reshape(M, T)
+    tries, refusals = s[13].reshape(M, T), s[14].reshape(M, T)
 
     # the returned joints, checked afresh with XLA's sin and cos; of several converged
     # solutions, the one of highest score
@@ -765,7 +771,7 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
                                 min(I, CHECK_ROWS)).reshape(M, T)  # fmt: skip
         ik_ = inv_cond(Ja.reshape(M, T, 3, n), "2")
         a_c = jax.lax.dynamic_slice_in_dim(a_out, c * I, I).reshape(M, T)
-        return IKResult(q, ok, pe, re, ik_, a_c, conv)
+        return IKResult(q, ok, pe, re, ik_, a_c, conv, tries, refusals)
 
     def copied(r: IKResult) -> IKResult:  # every design's fields from its representative's
         return r if rep is None else IKResult(*(x[jnp.asarray(rep, jnp.int32)] for x in r))
@@ -788,7 +794,7 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
 
     z = jnp.zeros((M, T), dtype)
     best0 = IKResult(jnp.zeros((M, T, n), dtype), z > 0, z, z, z, jnp.zeros((M, T), jnp.int32),
-                     z > 0)
+                     z > 0, tries, refusals)
     best, _ = jax.lax.fori_loop(0, nb, pick, (best0, jnp.full((M, T), -jnp.inf, dtype)))
     return _materialised(copied(best))
 

@@ -205,12 +205,15 @@ def assemble(out: dict[str, Any], A: int, M: int, N: int, xp: Any = jnp) -> dict
 
 def chunk_values(mech: Mechanism, s: SerialSettings, params: dict[str, Any], full: jax.Array,
                  pt: jax.Array, Rt: jax.Array | None, t0: jax.Array, dtype: Any,
-                 opts: ik.IKOptions | None = None) -> dict[str, jax.Array]:  # fmt: skip
+                 opts: ik.IKOptions | None = None, profile: bool = False
+                 ) -> dict[str, jax.Array]:  # fmt: skip
     """:func:`per_target`'s values of designs ``full`` (M, P) at one chunk of C targets
     (``pt`` (C, 3), ``Rt`` (C, 3, 3) or None; ``t0``: the index of its first target in
     the task, which the IK's seeds hash): each (A·M, C, ...), arm-major. Reads the scene
     (:func:`scene_params`), the joint limits, the arms' bases and the IK's key from
-    ``params``, never the targets."""
+    ``params``, never the targets. ``profile``: also the IK's seeds tried per target
+    (``ik_tries``) and converged seeds refused for a collision (``ik_refused``)
+    (benchmarks/planning_profile.py)."""
     from designopt.kinematics.task import port_frames
     from designopt.studies.serial import bodies
 
@@ -297,6 +300,10 @@ def chunk_values(mech: Mechanism, s: SerialSettings, params: dict[str, Any], ful
         depth = jnp.linalg.norm(pt[None, None] - port[:, :, None, :], axis=-1)  # (A|1, M, C)
         inside = (depth >= d0) & (depth <= d1) & (depth > 0)
         hopeless = jnp.broadcast_to(~inside, (A, M, C)).reshape(A * M, C)
+        if inner is not None:  # so is a target whose instrument meets the anatomy
+            blocked = _shaft_blocked(mech, geo, full, lo, hi, port, pt, depth, inner, gp, rep,
+                                     ~hopeless, A, M, C)  # fmt: skip
+            hopeless = hopeless | blocked
     res = ik.solve(mech.model, X, p_ik, R_ik, lo, hi, key, md, opts, score, accept, t0, rep,
                    hopeless)  # fmt: skip
     J = jac(res.q)
@@ -310,6 +317,8 @@ def chunk_values(mech: Mechanism, s: SerialSettings, params: dict[str, Any], ful
            "inv_k": jnp.where(ok, inv_k, z), "manipulability": jnp.where(ok, man, z),
            "joint_margin": jnp.where(ok, jnp.clip(margin, 0.0, 1.0), z),
            "q": res.q, "pos_err": res.pos_err, "rot_err": res.rot_err}  # fmt: skip
+    if profile:
+        out |= {"ik_tries": res.tries, "ik_refused": res.refused}
     if geo is not None:
         m_all = jnp.repeat(jnp.arange(X.shape[0]), C)
         t_all = jnp.tile(jnp.arange(C), X.shape[0])
@@ -328,6 +337,58 @@ def chunk_values(mech: Mechanism, s: SerialSettings, params: dict[str, Any], ful
         zt = jnp.einsum("amij,amcj->amci", Rb, Rt_[..., 2].reshape(A, M, C, 3))
         out["axis"] = zt.reshape(A * M, C, 3)
     return out
+
+
+SHAFT_SLACK = 1e-6
+"""How far (the chain's length unit) beyond the margin a target's instrument line must
+meet the anatomy for :func:`_shaft_blocked` to call the target hopeless: many times the
+IK's tolerance, so that no converged solution's shaft can clear what its line does not."""
+
+
+def _shaft_blocked(mech: Mechanism, geo: Any, full: jax.Array, lo: jax.Array, hi: jax.Array,
+                   port: jax.Array, pt: jax.Array, depth: jax.Array, inner: Any,
+                   gp: dict[str, Any], rep: jax.Array, asked: jax.Array, A: int, M: int,
+                   C: int) -> jax.Array:  # fmt: skip
+    """(A·M, C) bool: targets whose every solution the collision check refuses, because the
+    instrument beyond the port meets the anatomy. Through a port, a converged solution's
+    tool axis runs from the port to the target, so where the chain's last capsule (the
+    instrument, rigid with the tip's link) lies on the tip's z axis, ends at the tip and
+    is longer than the insertion depth, the part of it beyond the port plane is the
+    segment from the port to the target whatever the joints (``bodies.inside_pieces``):
+    when that segment's clearance to the anatomy (the instrument's radius) is below the
+    margin by :data:`SHAFT_SLACK`, no solution is accepted. Asked only where ``asked``
+    (an arm's target in its range) of the representative designs (``rep``)."""
+    from designopt.kinematics import collision as col
+
+    dt = full.dtype
+    tol = jnp.asarray(1e-9, dt) * (1 + jnp.max(jnp.abs(full)))
+
+    def shaft(f):  # the instrument's shape at joints lo + f·(hi − lo): (on the axis, length)
+        q = jnp.broadcast_to(lo + f * (hi - lo), (M, lo.shape[0]))
+        seg = geo.items(mech.model, full, q)[:, -1]  # (M, 2, 3)
+        R, p = jax.vmap(mech.model.fk)(full, q)
+        z = R[..., 2]
+        da, db = (jnp.linalg.norm(seg[:, k] - p, axis=-1) for k in (0, 1))
+        far = jnp.where((da > db)[:, None], seg[:, 0], seg[:, 1])
+        near = jnp.minimum(da, db)
+        v = far - p
+        off = jnp.linalg.norm(jnp.cross(z, v), axis=-1)
+        on = (near <= tol) & (off <= tol) & (jnp.sum(v * z, -1) < 0)
+        return on, jnp.linalg.norm(v, axis=-1)
+
+    on0, l0 = shaft(0.25)
+    on1, l1 = shaft(0.6)
+    on = on0 & on1 & (jnp.abs(l0 - l1) <= tol)  # (M,)
+    need = (asked.reshape(A, M, C) & on[None, :, None]
+            & (depth < l0[None, :, None] - SHAFT_SLACK)
+            & (rep.reshape(A, M) == jnp.arange(A * M).reshape(A, M))[..., None])  # fmt: skip
+    ends = jnp.stack(jnp.broadcast_arrays(port[:, :, None, :], pt[None, None]), -2)
+    ends = jnp.broadcast_to(ends, (A, M, C, 2, 3)).reshape(-1, 1, 2, 3)
+    tr = gp["tool_radius"].astype(dt)
+    d = ik.on_rows(lambda r: col.clearance(ends[r], tr, inner, ()), need.reshape(-1),
+                   ik.CHECK_ROWS)  # fmt: skip
+    blocked = need.reshape(-1) & (d < gp["margin"].astype(dt) - SHAFT_SLACK)
+    return blocked.reshape(A * M, C)[rep]
 
 
 def quantile(v: jax.Array, q: float = Q) -> tuple[jax.Array, jax.Array]:
