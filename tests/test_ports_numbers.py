@@ -154,6 +154,15 @@ def test_a_single_objective_run_prints_and_archives_its_ports(tmp_path, capsys):
     np.testing.assert_allclose(_printed_ports(shown)[:2], want, atol=6e-5)
     rows = list(csv.DictReader((tmp_path / "one.csv").open()))
     assert "design" not in rows[0] and float(rows[0]["port_x [m]"]) == ports[0, 0]
+    # the HTML report's table of the final design, read back from the file
+    import html
+
+    from designopt.app import records
+    from designopt.figures.html.run import placement_table
+
+    page = html.unescape(placement_table(records.load(out).groups["final"]))
+    assert page.count("<tr>") == 3 and "base pose: x [m]" in page
+    assert f"{ports[1, 2]:.6g}" in page and f"{bases[1, 0]:.6g}" in page
 
 
 def test_csv_of_an_archive_without_targets_is_one_line(tmp_path, capsys):

@@ -169,7 +169,10 @@ def groups(job: Any, problem: Problem, res: Any) -> dict[str, Any]:
     X = np.asarray(pop.x, np.float64).reshape(-1, D)[keep]
     F_opt = np.asarray(pop.f, np.float64).reshape(-1, m)[keep]
     X = X[thin(F_opt, cfg.front.max_points)]
-    rescore, n_samples = rescoring_problem(job)
+    from designopt.app.job import build_problem
+
+    c, fresh, n_samples = rescoring(job)
+    rescore = build_problem(c, fresh, job.where, job.dtype)
     vals = score(rescore, X)
     for k, w in weights(front, problem.names).items():  # exact: no samples behind them
         vals[k], vals[k + "_se"] = X @ w, np.zeros(len(X))
@@ -210,7 +213,7 @@ def groups(job: Any, problem: Problem, res: Any) -> dict[str, Any]:
     with_placement(fr, placement(job.study, cfg.study, X), None)  # ports, bases: (n, ...)
     out = {"optimizer": opt, "front": fr, "problem": problem_group(problem)}
     if job.study.targets is not None and len(X):  # every front design at every target
-        c, fresh, _ = rescoring(job)  # the re-scoring's targets: their means are the front's
+        # the re-scoring's targets and seeds: their means are the front's indices
         tg = job.study.targets(c.study, X, fresh, job.dtype)
         if tg is not None:
             out["targets"] = tg
