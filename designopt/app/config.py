@@ -281,11 +281,14 @@ def load(path: str | Path, model: type[BaseModel] | None = None,
 
 
 def validate(raw: Any, where: str, model: type[BaseModel] | None = None,
-             folder: str | Path | None = None) -> Any:  # fmt: skip
+             folder: str | Path | None = None, checks: bool = True) -> Any:  # fmt: skip
     """Validate a parsed config (a dict); ConfigError naming ``where`` and the key.
     Relative paths inside the config (a URDF, a points file) are read from ``folder``:
     the config file's folder (default: ``where``'s folder when ``where`` is a file, else
-    the working directory); validators get it as the context key ``config_dir``."""
+    the working directory); validators get it as the context key ``config_dir``.
+    ``checks=False`` skips the study's own checks (``Study.check``: they evaluate the
+    chain, compile small programs, build distance grids): for a config an archive holds,
+    which passed them when it ran (``show``, ``report``)."""
     if folder is None:
         folder = Path(where).parent if Path(where).is_file() else Path.cwd()
     model = run_config_model() if model is None else model
@@ -305,7 +308,8 @@ def validate(raw: Any, where: str, model: type[BaseModel] | None = None,
     if isinstance(cfg, RunConfigBase):
         check_optimizer(cfg, where)
         check_front(cfg, where)
-        check_study(cfg, where)
+        if checks:
+            check_study(cfg, where)
     return cfg
 
 
