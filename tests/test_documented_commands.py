@@ -142,8 +142,9 @@ def subcommands(cmd: str) -> list[str]:
 # synopsis, the concrete argv that runs it: every flag the synopsis shows).
 SCENARIOS: list[tuple] = [
     # README "Quick start", docs/scaling.md, docs/architecture.md
-    ("designopt run configs/master9.yaml",),
-    ("designopt run configs/master9.yaml --seed 4 --out results/m.h5",),
+    # (one scenario when two commands run the same program: one folder, one compile)
+    ("designopt run configs/master9.yaml",
+     "designopt run configs/master9.yaml --seed 4 --out results/m.h5"),
     # the planar RCM mechanism, PLAS (README, docs/rcm.md, docs/plas.md, their configs)
     ("designopt run configs/rcm.yaml", "designopt report results/rcm/rcm.h5 --html"),
     ("designopt scan configs/rcm_eta.yaml",),
@@ -179,14 +180,16 @@ SCENARIOS: list[tuple] = [
     ("designopt view configs/two_ur5_front.yaml --design b=0.6 --q 0,-60,80,-110,-90,0",),
     ("designopt run configs/two_ur5_front.yaml",),
     # the planning case (configs/port_placement.yaml, docs/planning.md)
-    ("designopt eval configs/port_placement.yaml --design b=0.6 by=0 px=0.03 py0=0 py1=0",),
+    ("designopt eval configs/port_placement.yaml --design b=0.6 by=0 px=0.03 py0=0 py1=0",
+     "designopt eval configs/port_placement.yaml --design b=0.6,by=0,px=0.03,py0=0,py1=0 "
+     "--design b=0.5085,by=-0.018,px=0.021,py0=-0.119,py1=0.126"),
     ("designopt run configs/port_placement.yaml",),
     ("designopt run configs/two_arms_front.yaml",
      ("designopt report ARCHIVE --html", "report results/two_arms/two_arms_front.h5 --html")),
     # URDF (docs/urdf.md, configs/urdf_*.yaml)
-    ("designopt chain configs/urdf_arm.yaml --q 10,20,0.1,30,10,-10",),
-    (("designopt chain configs/urdf_arm.yaml --q 10,20,0.1,30,10,-10 [--design l_wrist=0.01]",
-      "chain configs/urdf_arm.yaml --q 10,20,0.1,30,10,-10 --design l_wrist=0.01"),),
+    ("designopt chain configs/urdf_arm.yaml --q 10,20,0.1,30,10,-10",
+     ("designopt chain configs/urdf_arm.yaml --q 10,20,0.1,30,10,-10 [--design l_wrist=0.01]",
+      "chain configs/urdf_arm.yaml --q 10,20,0.1,30,10,-10 --design l_wrist=0.01")),
     ("designopt eval configs/urdf_arm.yaml --design l_wrist=0.01 --design l_jaw=0.015",),
     ("designopt scan configs/urdf_arm.yaml",),
     ("designopt run configs/urdf_arm.yaml",
@@ -208,8 +211,8 @@ SCENARIOS: list[tuple] = [
      "designopt report results/urdf_mesh_arm/urdf_mesh_arm.h5 --html"),
     # the da Vinci arm (docs/davinci.md, configs/davinci*.yaml)
     ("designopt ik configs/davinci_ik.yaml --poses docs/davinci_poses.csv",),
-    ("designopt ik configs/davinci_ik.yaml --poses my.csv --trajectory",),
-    ("designopt ik configs/davinci_ik.yaml --poses path.csv --trajectory",),
+    ("designopt ik configs/davinci_ik.yaml --poses my.csv --trajectory",
+     "designopt ik configs/davinci_ik.yaml --poses path.csv --trajectory"),
     ("designopt ik configs/davinci_ik.yaml --poses my.csv --csv",
      "designopt show results/davinci/my_ik.h5",
      ("designopt ik CONFIG --poses PATH [--out PATH] [--trajectory] [--overwrite] [--quiet]",
@@ -251,8 +254,7 @@ QUICK = {
     "--html results/urdf_mesh_arm/view.html",
     "designopt view CONFIG",
     "designopt view configs/two_arms_front.yaml --design b=0.6 --html two_arms.html",
-    "designopt chain configs/urdf_arm.yaml --q 10,20,0.1,30,10,-10",
-    "designopt chain configs/urdf_arm.yaml --q 10,20,0.1,30,10,-10 [--design l_wrist=0.01]",
+    "designopt chain configs/urdf_arm.yaml --q 10,20,0.1,30,10,-10",  # and its [--design]
     "designopt chain configs/urdf_puma560.yaml --q 0,90,-90,0,0,0",
     "designopt run configs/urdf_arm.yaml",
     "designopt sweep configs/sweep_ptpso.yaml",
@@ -306,8 +308,9 @@ SMALL: dict[str, dict] = {
                        "optimizer": NSGA},
     "two_ur5_front": {"study": {"indices": {"n_samples": 32}}, "front": {"n_samples": 64},
                       "optimizer": NSGA},
-    "port_placement": {"study": {"indices": {"n_samples": 32}}, "front": {"n_samples": 64},
-                       "optimizer": NSGA},
+    # the sizes of tests/test_ports_numbers.py's TINY: the same programs, compiled once
+    "port_placement": {"study": {"indices": {"n_samples": 32}}, "front": {"n_samples": 32},
+                       "optimizer": {"n_particles": 4, "n_iters": 2, "n_runs": 1}},
     "urdf_arm": {"study": {"indices": {"n_samples": 512}}, "optimizer": OPT,
                  "scan": {"vary": {"l_wrist": {"num": 2}, "l_jaw": {"num": 2}}}},
     "urdf_mesh_arm": {"study": {"indices": {"n_samples": 512}}, "optimizer": OPT},
@@ -338,6 +341,10 @@ ELSEWHERE: dict[str, list[str]] = {
     ],
     "designopt eval CONFIG --design NAME=VALUE ... [--json]":
         ["test_serial.py::test_scan_and_eval_commands"],
+    "designopt eval CONFIG --design NAME=VALUE ... [--design ...] [--json]": [
+        "test_serial.py::test_scan_and_eval_commands",
+        "test_eval_compare.py::test_the_command_prints_a_column_per_design_and_the_paired_difference",
+    ],
     "designopt scan CONFIG [--out PATH]": ["test_serial.py::test_scan_and_eval_commands"],
     "designopt ik CONFIG --poses FILE [--mode position|axis|pose] [--design NAME=VALUE ...] "
     "[--csv] [--out PATH] [--trajectory]": [
