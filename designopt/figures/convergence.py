@@ -26,7 +26,7 @@ def convergence(best_run: dict, indices: list[str], folder: Path, title: str,
     n = len(indices)
     cols = max(1, min(n, COLUMNS))
     rows = -(-n // cols)
-    fig, axes = style.subplots(rows, cols, figsize=(3.4 * cols, 0.4 + 2.7 * rows), squeeze=False)
+    fig, axes = style.subplots(rows, cols, figsize=(3.4 * cols, 0.3 + 3.0 * rows), squeeze=False)
     for ax in axes.ravel()[n:]:  # the grid's last row, where it is not full
         fig.delaxes(ax)
     it = best_run["iteration"]

@@ -306,8 +306,10 @@ def view_plot(view: View, ids: _Ids) -> Plot:
     if len(view.poses) > 1:
         anim = {"mode": "immediate", "frame": {"duration": 0, "redraw": True},
                 "transition": {"duration": 0}}  # fmt: skip
+        ends = max(len(view.poses[0].label), len(view.poses[-1].label))
+        x0 = float(np.clip(0.0026 * ends + 0.01, 0.02, 0.25))  # the end steps' labels in view
         lay["sliders"] = [{"active": 0, "currentvalue": {"prefix": "pose: ", "font": {"size": 12}},
-                           "pad": {"t": 8, "b": 4}, "len": 0.96, "x": 0.02,
+                           "pad": {"t": 8, "b": 4}, "len": 1 - 2 * x0, "x": x0,
                            "steps": [{"method": "animate", "label": esc(p.label),
                                       "args": [[p.label], anim]} for p in view.poses]}]  # fmt: skip
     return Plot(ids("robot"), {"data": static + dyn, "layout": lay, "frames": frames}, wide=True)
