@@ -73,11 +73,24 @@ COMMANDS: list[tuple[str, list[str]]] = [
     ("urdf_puma560_port-moved", ["eval", "configs/urdf_puma560_port.yaml", "--design",
                                  "a2=0.43", "d4=0.43", "l_tool=0.4",
                                  "--set", "study.task.port=[0.51,0.11,-0.2]"]),
+    ("port_placement-eval", ["eval", "configs/port_placement.yaml", "--design",
+                             "b=0.6,by=0,px=0.03,py0=0,py1=0"]),
+    ("port_placement-compare", ["eval", "configs/port_placement.yaml", "--design",
+                                "b=0.6,by=0,px=0.03,py0=0,py1=0", "--design",
+                                "b=0.5085,by=-0.018,px=0.021,py0=-0.119,py1=0.126"]),
+    ("port_placement-show", ["show", "{tmp}/port_placement-warm.h5"]),
+    ("port_placement_mesh", ["run", "configs/port_placement.yaml", "--set",
+                             "study.task.body_wall={shape: mesh, file: data/abdomen.stl}",
+                             "--out", "{out}.h5"]),
 ]  # fmt: skip
 """The shipped configs' commands (`pso_benchmark.yaml` runs for minutes: not here)."""
-EDITS = {"urdf_puma560_port-moved": "urdf_puma560_port-eval"}
+EDITS = {"urdf_puma560_port-moved": "urdf_puma560_port-eval",
+         "port_placement-compare": "port_placement-eval",
+         "port_placement-show": "port_placement"}
 """A scene edit (``--set``) run once with the cache of the command it edits (which must
-run first): what editing the scene costs after one warm run."""
+run first): what editing the scene costs after one warm run; likewise the paired
+comparison of two layouts after one layout's ``eval``, and ``show`` of the planning run's
+warm archive (``{tmp}``: the folder of the rows' outputs)."""
 
 END_TO_END = re.compile(
     r"wall (?P<wall>[\d.]+) s end to end = start-up (?P<startup>[\d.]+) s .*figures "
@@ -129,8 +142,8 @@ def one(argv: list[str], cache: Path, out: str, log: bool = False) -> dict[str, 
         env["JAX_LOG_COMPILES"] = "1"
     exe = Path(sys.executable).with_name("designopt")
     cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "designopt.cli"]
-    cmd += [a.format(out=out) for a in argv] + (
-        ["--overwrite"] if argv[0] not in ("eval", "view") else []
+    cmd += [a.format(out=out, tmp=str(Path(out).parent)) for a in argv] + (
+        ["--overwrite"] if argv[0] not in ("eval", "view", "show") else []
     )
     t0 = time.perf_counter()
     p = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE,

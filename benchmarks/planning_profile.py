@@ -86,7 +86,7 @@ def main() -> None:
     lo = np.array([s.variables[k][0] for k in names])
     hi = np.array([s.variables[k][1] for k in names])
     rng = np.random.default_rng(0)
-    sets = {"naive": np.repeat([[NAIVE.get(k, 0.5 * (a + b)) for k, a, b in zip(names, lo, hi)]],
+    sets = {"naive": np.repeat([[NAIVE.get(k, 0.5 * (a + b)) for k, a, b in zip(names, lo, hi, strict=True)]],
                                16, 0),
             "swarm": lo + rng.random((16, len(names))) * (hi - lo),
             "centre": np.repeat([0.5 * (lo + hi)], 16, 0)}  # fmt: skip
@@ -143,7 +143,7 @@ def main() -> None:
           f"on reachable targets {seed_ms:.4f} ms ({steps / 256:.2f} seeds per target, no "
           "check)")  # fmt: skip
     A = len(s.arms) if s.arms is not None else 1
-    print(f"{'designs':8} {'block s':>16} {'reached':>8} {'seeds/item':>11} {'1 seed':>7} "
+    print(f"{'designs':8} {'block s':>16} {'reached':>8} {'seeds/item':>11} {'most':>5} {'1 seed':>7} "
           f"{'refused/item':>13} {'checks':>8} {'checks s':>9}")  # fmt: skip
     for name, Xs in sets.items():
         X = jnp.asarray(Xs)
@@ -159,15 +159,14 @@ def main() -> None:
         ok = np.concatenate([np.asarray(o["success"]) for o in outs], 1)
         distinct = len(np.unique(Xs, axis=0))
         rows = tries.reshape(A, 16, -1)[:, :distinct]  # the solved (representative) items
-        n_items = rows.size
         conv = int(np.sum(np.concatenate([np.asarray(o["converged"]) for o in outs], 1)
                           .reshape(A, 16, -1)[:, :distinct]))  # fmt: skip
         n_checks = int(refused.reshape(A, 16, -1)[:, :distinct].sum()) + 2 * conv
         print(f"{name:8} {meds:7.2f} ({los:.2f}-{his:.2f}) {ok.mean():8.3f} "
-              f"{rows.mean():11.2f} {np.mean(rows == 1):7.2f} "
+              f"{rows.mean():11.2f} {rows.max():5d} {np.mean(rows == 1):7.2f} "
               f"{refused.reshape(A, 16, -1)[:, :distinct].mean():13.2f} {n_checks:8d} "
               f"{n_checks * check_ms / 1e3:9.3f}")  # fmt: skip
-    print("seeds/item: seeds tried per (arm, distinct design, target); 1 seed: the share "
+    print("seeds/item: seeds tried per (arm, distinct design, target), most: at one; 1 seed: the share "
           "solved (or given up) with its first; checks: collision checks of converged seeds "
           "(the refused ones, and twice each kept one: in the loop and afresh at the end), "
           "× the unit cost = checks s")  # fmt: skip
