@@ -19,6 +19,9 @@
 #   6. one cold main job with XLA's GPU autotuning off (--xla_gpu_autotune_level=0)
 #   7. one cold main job logging every compilation (JAX_LOG_COMPILES): compile-log.txt
 #   8. benchmarks/ik.py --only generic, 9. benchmarks/latency.py on two commands
+# and first of all 0. benchmarks/planning_profile.py: the planning case's task block program
+# (collision-free solves per second), on the GPU and on the machine's CPU. STEPS=planning,hlo
+# runs only the steps named.
 # Everything printed goes to $OUT/gpu.log (and stdout); the HLO texts to $OUT/hlo.tar.gz.
 set -u -o pipefail
 cd "$(dirname "$0")/.."
@@ -74,6 +77,9 @@ python3 -m designopt --help >/dev/null 2>&1 && say "python3 -m designopt: runs" 
 step() {  # step NAME CAP command...: run it under min(CAP, time left), output to the log
     local name=$1 cap=$2
     shift 2
+    if [ -n "${STEPS:-}" ] && [[ ",$STEPS," != *",$name,"* ]]; then
+        return  # STEPS=a,b: only the steps named
+    fi
     local left=$((BUDGET - SECONDS))
     if ((left < 20)); then
         say "== $name: skipped ($left s of the budget left)"
@@ -93,6 +99,8 @@ if [ -n "${QUICK:-}" ]; then  # the dry run: the same steps on small work
 else
     HLO=() PSO=(--repeat 5) REP=2 IK=(--repeat 3) LAT=(--only planar2r --only puma560-eval)
 fi
+step planning 150 python3 benchmarks/planning_profile.py --repeat "$REP"
+step planning-cpu 150 env JAX_PLATFORMS=cpu python3 benchmarks/planning_profile.py --repeat "$REP"
 step hlo 90 python3 benchmarks/hlo_step.py "${HLO[@]}" --detail --dump "$OUT/hlo"
 step hlo-cpu-step 45 python3 benchmarks/hlo_step.py "${HLO[@]}" --only ptpso \
     --formulation cpu --dump "$OUT/hlo"

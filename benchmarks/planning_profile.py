@@ -12,8 +12,9 @@ Rows: ``naive`` (docs/planning.md's layout, 16 copies of it: one design's cost, 
 block solves each distinct design once), ``swarm`` (16 designs drawn uniformly in the
 box: a search's block) and ``centre`` (the box's middle, 16 copies). Columns: the
 block's warm wall time (median of ``--repeat``, with the spread), targets reached, seeds
-tried per (design, arm, target) item, refused seeds per item, and the collision checks'
-share of the time estimated from their count × the unit cost. The CPU, its vector
+tried per (design, arm, target) item, refused seeds per item, the collision checks' share
+of the time estimated from their count × the unit cost, and the collision-free solutions
+per second (bash benchmarks/gpu.sh runs it on a GPU). The CPU, its vector
 extensions and the load head the output: the numbers only compare within one run."""
 
 from __future__ import annotations
@@ -144,7 +145,7 @@ def main() -> None:
           "check)")  # fmt: skip
     A = len(s.arms) if s.arms is not None else 1
     print(f"{'designs':8} {'block s':>16} {'reached':>8} {'seeds/item':>11} {'most':>5} {'1 seed':>7} "
-          f"{'refused/item':>13} {'checks':>8} {'checks s':>9}")  # fmt: skip
+          f"{'refused/item':>13} {'checks':>8} {'checks s':>9} {'free solves/s':>14}")  # fmt: skip
     for name, Xs in sets.items():
         X = jnp.asarray(Xs)
         outs, meds, los, his = [], 0.0, 0.0, 0.0
@@ -162,14 +163,16 @@ def main() -> None:
         conv = int(np.sum(np.concatenate([np.asarray(o["converged"]) for o in outs], 1)
                           .reshape(A, 16, -1)[:, :distinct]))  # fmt: skip
         n_checks = int(refused.reshape(A, 16, -1)[:, :distinct].sum()) + 2 * conv
+        free = int(ok.reshape(A, 16, -1)[:, :distinct].sum())  # collision-free solutions
         print(f"{name:8} {meds:7.2f} ({los:.2f}-{his:.2f}) {ok.mean():8.3f} "
               f"{rows.mean():11.2f} {rows.max():5d} {np.mean(rows == 1):7.2f} "
               f"{refused.reshape(A, 16, -1)[:, :distinct].mean():13.2f} {n_checks:8d} "
-              f"{n_checks * check_ms / 1e3:9.3f}")  # fmt: skip
+              f"{n_checks * check_ms / 1e3:9.3f} {free / meds:14.0f}")  # fmt: skip
     print("seeds/item: seeds tried per (arm, distinct design, target), most: at one; 1 seed: the share "
           "solved (or given up) with its first; checks: collision checks of converged seeds "
           "(the refused ones, and twice each kept one: in the loop and afresh at the end), "
-          "× the unit cost = checks s")  # fmt: skip
+          "× the unit cost = checks s; free solves/s: the collision-free solutions of the "
+          "distinct designs' items per second of the block")  # fmt: skip
 
 
 if __name__ == "__main__":
