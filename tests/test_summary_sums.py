@@ -92,3 +92,19 @@ def test_eval_warnings_speak_of_the_design_given(tmp_path, capsys):
     warns = [ln for ln in out.splitlines() if ln.startswith("warning:")]
     assert any("missed by this design" in w for w in warns), out
     assert "best design" not in out
+
+
+def test_a_replay_run_has_one_wall_line_that_adds_up(tmp_path, capsys):
+    """A study whose run is a replay (rcm_teleop): its one stage, and no second split."""
+    cfg = ROOT / "configs/rcm_teleop.yaml"
+    assert main(["run", str(cfg), "--out", str(tmp_path / "t.h5"), "--quiet",
+                 "--no-figures"]) == 0  # fmt: skip
+    out = capsys.readouterr().out
+    wall = [ln for ln in out.splitlines() if "wall" in ln and " s" in ln]
+    assert len(wall) == 1 and wall[0].startswith("wall "), out
+    total = float(wall[0].split()[1])
+    parts = dict((k, float(v)) for k, v in re.findall(
+        r"(start-up|run|figures|rest) ([\d.]+) s", wall[0]))  # fmt: skip
+    assert list(parts) == ["start-up", "run", "figures", "rest"], wall[0]
+    assert abs(sum(parts.values()) - total) <= 5 * 0.05 + 1e-9, wall[0]
+    assert len(re.findall(r"\d+ XLA programs", out)) == 1

@@ -261,10 +261,9 @@ def _replay(job: Job, out: Path | None, dry_run: bool = False) -> Report:
         rec = bind(ReplayRecord(attrs, groups, cfg))
         if out is not None:
             archive.save(out, rec)
-    lines = [*lines, f"wall {total.wall:.1f} s = compile {total.compile:.1f} s + run "
-             f"{total.run:.1f} s; {total.compilations} XLA programs compiled or loaded from the "
-             "compilation cache"]  # fmt: skip
-    return Report(out, lines, rec)
+    # the wall time and the program count: the command line's last line (cli wall_line),
+    # the archive's attrs (wall_time_s, compile_time_s, compilations)
+    return Report(out, list(lines), rec)
 
 
 # ---------------------------------------------------------------------------- sweep

@@ -77,13 +77,17 @@ def wall_line(attrs: dict, clock, figures_s: float, config_s: float = 0.0) -> st
     every program compiled or loaded from the cache from the config on, the figures'
     included (``clock``: a Stopwatch started before the config was read). The exit after
     it skips interpreter teardown (``console``)."""
-    a = {k: float(attrs.get(k + "_time_s", 0.0)) for k in ("setup", "optimizer", "post")}
+    if "optimizer_time_s" in attrs:
+        names = {"setup": "setup", "optimizer": "optimizer", "post": "scoring"}
+    else:  # a run that is not an optimisation (a study's replay): its one stage
+        names = {"wall": "run"}
+    a = {v: float(attrs.get(k + "_time_s", 0.0)) for k, v in names.items()}
     before = max(process_age() - clock.wall, 0.0)  # Python and imports, before the clock
     startup = before + config_s
     total = before + clock.wall
     other = total - startup - sum(a.values()) - figures_s  # archive, printing: the rest
-    return (f"wall {total:.1f} s end to end = start-up {startup:.1f} s + setup "
-            f"{a['setup']:.1f} s + optimizer {a['optimizer']:.1f} s + scoring {a['post']:.1f} s"
+    stages = "".join(f" + {k} {v:.1f} s" for k, v in a.items())
+    return (f"wall {total:.1f} s end to end = start-up {startup:.1f} s{stages}"
             f" + figures {figures_s:.1f} s + archive and the rest {other:.1f} s; compile "
             f"{clock.compile:.1f} s of it ({clock.compilations} XLA programs) = tracing, "
             "lowering and compiling each program or loading it from the compilation cache")
