@@ -292,7 +292,7 @@ def _outputs(args: argparse.Namespace, cfg: Any) -> tuple[Path, Path | None]:
 
 def _view_title(s: Any, design: dict[str, float], q: np.ndarray, at_home: bool,
                 solved: str = "") -> list[str]:  # fmt: skip
-    """The view's title as its lines, unwrapped (the figure wraps them to its width; the
+    """The view's title as its lines, unwrapped (the figure wraps them to its width, the
     HTML page joins them with "; "): the chain, the design, the pose (``solved``: what
     the arms were solved for, in place of ``q``), the changed URDF numbers, the meshes,
     the arms' bases."""
@@ -317,13 +317,6 @@ def _view_title(s: Any, design: dict[str, float], q: np.ndarray, at_home: bool,
     if note:
         lines.append(note)
     return lines
-
-
-def _wrapped(lines: list[str], width: int = 110) -> str:
-    """Title lines wrapped to ``width`` for a figure."""
-    import textwrap
-
-    return "\n".join(ln for line in lines for ln in textwrap.wrap(line, width))
 
 
 def _solved_pose(s: Any, mech: Any, x: np.ndarray, seed: int) -> dict[str, Any] | None:
@@ -437,7 +430,7 @@ def cmd_view(args: argparse.Namespace, ctx: Any) -> int:
                                      title="original: the URDF's own numbers"))  # fmt: skip
     lines = _view_title(s, design, q, at_home and solved is None,
                         "" if solved is None else solved["text"])  # fmt: skip
-    fig = robot.figure(scenes, length_unit(s), _wrapped(lines))
+    fig = robot.figure(scenes, length_unit(s), "\n".join(lines))  # wrapped to its width
     written = [png.parent / p.name for p in  # printed as given (a bare name: its folder is ".")
                writer.publish_figures(lambda d: save(fig, d, png.stem), png.absolute().parent,
                                       swap=False)]  # fmt: skip
