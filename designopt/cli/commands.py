@@ -335,6 +335,8 @@ def cmd_report(args: argparse.Namespace) -> int:
 
     p = Path(args.archive)
     rec = records.load(p)
+    if not getattr(args, "no_cache", False):
+        use_cache()  # before the config is read: its mesh grids load; the figures' kernels too
     if isinstance(rec, CheckpointRecord):
         raise ConfigError(f"{p}: archive is marked incomplete (an interrupted run); "
                           "resume it with `designopt run CONFIG --resume`")  # fmt: skip
@@ -342,8 +344,6 @@ def cmd_report(args: argparse.Namespace) -> int:
         import jax
 
         jax.config.update("jax_enable_x64", True)
-    if not getattr(args, "no_cache", False):
-        use_cache()  # the figure kernels compile once, then load
     if getattr(args, "html", False):
         print(pipeline.write_html(p, rec))
         return 0
@@ -357,6 +357,7 @@ def cmd_show(args: argparse.Namespace) -> int:
 
     p = Path(args.archive)
     rec = records.load(p)
+    use_cache()  # the archived config's mesh grids load from the cache folder
     out = None
     if args.csv is not None:  # checked before anything is printed
         if "targets" not in rec:

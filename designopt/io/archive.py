@@ -145,8 +145,15 @@ def load(path: str | Path) -> Any:
     from designopt import results
 
     p = Path(path)
+    if p.is_dir():
+        raise ConfigError(f"{p}: is a folder; give a run's .h5 archive in it")
     if not p.is_file():
         raise ConfigError(f"{p}: archive not found")
+    with open(p, "rb") as f:
+        head = f.read(8)
+    if head != b"\x89HDF\r\n\x1a\n":  # HDF5's signature (at offset 0 for our archives)
+        what = " (a config: `designopt run` takes it)" if p.suffix in (".yaml", ".yml") else ""
+        raise ConfigError(f"{p}: not an HDF5 archive{what}; give a run's .h5 archive")
     try:
         tree = read(p)
     except OSError as e:

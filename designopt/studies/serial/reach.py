@@ -191,8 +191,8 @@ PORT_DESIGNS = 64
 a port that the design moves is checked before a run."""
 WALL_TOL = 1e-6
 """A port given as numbers lies on ``task.body_wall`` when within this share of the
-wall's size (its largest semi-axis, or 1 for a plane) of its surface (a mesh wall: within
-its grid's error bound, ``sdf.MeshGrid.bound``, plus this)."""
+wall's size (its largest semi-axis, or 1 for a plane; a mesh wall's bounding-box diagonal)
+of its surface."""
 
 
 def port_designs(s: SerialSettings) -> list[dict[str, float] | None]:
@@ -292,8 +292,9 @@ def _on_wall(s: SerialSettings, entries: Any, projected: np.ndarray, where: str)
     if wall is None or any(isinstance(v, str) for v in entries):
         return
     p = np.asarray(entries, np.float64)
-    if wall.shape == "mesh":  # on the wall to within the grid's interpolation error
-        tol = wall.grid().bound() + WALL_TOL
+    if wall.shape == "mesh":  # the projection is exact (wall.mesh_closest): the mesh's size
+        tri = wall.triangles()[0].reshape(-1, 3)
+        tol = WALL_TOL * float(np.linalg.norm(tri.max(0) - tri.min(0)))
     else:
         tol = WALL_TOL * (max(wall.radii) if wall.shape == "ellipsoid" else 1.0)
     off = float(np.linalg.norm(p - projected))
