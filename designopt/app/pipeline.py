@@ -41,6 +41,7 @@ from designopt.core.timing import Stopwatch
 from designopt.io import archive, writer
 from designopt.problems.evaluate import score
 from designopt.results import FrontRecord, Record, ReplayRecord, RunRecord, ScanRecord, SweepRecord
+from designopt.results.base import na_warnings
 
 Progress = Callable[[int | None, str], contextlib.AbstractContextManager[Callable[[int], None]]]
 """``progress(total, desc)``: a context giving ``update(n)`` for ``total`` iterations, or
@@ -120,7 +121,8 @@ class Single:
                                    job.dtype)  # fmt: skip
             if tg is not None:
                 groups["targets"] = tg
-        warn = job.study.warnings(job.cfg.study, groups["final"])
+        # every n/a index carries a line, whatever the study says (results.base.na_warnings)
+        warn = na_warnings(groups["final"], job.study.warnings(job.cfg.study, groups["final"]))
         if warn:  # far from what was asked: archived, printed, shown, marked on figures
             groups["final"]["attrs"]["warnings"] = list(warn)
         return groups
@@ -354,7 +356,7 @@ def check_box(problem: Any, design: Mapping[str, float], where: str) -> None:
     for n, lo, hi in zip(problem.names, problem.lower, problem.upper, strict=True):
         v = design.get(n)
         if v is not None and not float(lo) <= float(v) <= float(hi):
-            raise ConfigError(f"{where}: --design {n}={v:g}: outside the design box "
+            raise ConfigError(f"{where}: --design {n}={float(v)!r}: outside the design box "
                               f"[{float(lo):g}, {float(hi):g}] of variable '{n}'")  # fmt: skip
 
 
@@ -384,8 +386,8 @@ def compare(cfg: Any, designs: list[Mapping[str, float]], where: str = "config",
     for d in designs:
         bad = [k for k in d if k not in problem.names]
         if bad:
-            raise ConfigError(f"{where}: design variable(s) {bad} not in this study's "
-                              f"variables {list(problem.names)}")  # fmt: skip
+            raise ConfigError(f"{where}: --design {bad[0]}: not a design variable of this "
+                              f"study; its variables: {list(problem.names)}")  # fmt: skip
         check_box(problem, d, where)
     X = matrix(problem, list(designs), where)
     front = getattr(cfg.study, "pareto", None) is not None
@@ -402,7 +404,7 @@ def compare(cfg: Any, designs: list[Mapping[str, float]], where: str = "config",
         vals = {k: float(v[i]) for k, v in res.items()}
         x = dict(zip(problem.names, X[i].tolist(), strict=True))
         pl = {k: placed[k][i] for k in placed.get("attrs", {}).get("placement", [])}
-        warns = list(job.study.warnings(cfg.study, vals | {"x": X[i]}))
+        warns = na_warnings(vals, job.study.warnings(cfg.study, vals | {"x": X[i]}))
         lines = list(job.study.extra_lines(cfg.study, pl)) if pl else []
         out["designs"].append({"design": x, "filled": [n for n in problem.names if n not in d],
                                "values": vals, "warnings": warns, "units": units,
