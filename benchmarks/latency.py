@@ -97,7 +97,7 @@ END_TO_END = re.compile(
     r"(?P<figures>[\d.]+) s .*compile (?P<compile>[\d.]+) s of it \((?P<n>\d+) XLA programs\)"
 )
 COMPILE = re.compile(r"compile (?P<compile>[\d.]+) s")
-PROGRAMS = re.compile(r"(?P<n>\d+) XLA compilations")
+PROGRAMS = re.compile(r"\((?P<n>\d+) XLA programs\)")
 LOGGED = re.compile(
     r"Finished (?P<what>XLA compilation of|tracing|jaxpr to MLIR module conversion) "
     r"(?P<name>\S+).* in (?P<s>[\d.e+-]+) sec"

@@ -35,9 +35,10 @@ ROOT = Path(__file__).resolve().parent.parent
 _LAST: dict[str, float] = {}  # CPU time and load average around the last subprocess
 TARGETS = {"cold": 10.0, "warm": 5.0, "report": 3.0}  # seconds, on 2 cores (issues #14, #27)
 SUMMARY = re.compile(
-    r"wall (?P<wall>[\d.]+) s = compile (?P<compile>[\d.]+) s \+ run (?P<run>[\d.]+) s "
-    r"\(setup (?P<setup>[\d.]+) s, optimizer (?P<optimizer>[\d.]+) s, "
-    r"scoring/polish (?P<post>[\d.]+) s\); (?P<n>\d+) XLA compilations"
+    r"wall (?P<total>[\d.]+) s end to end = start-up (?P<startup>[\d.]+) s \+ setup "
+    r"(?P<setup>[\d.]+) s \+ optimizer (?P<optimizer>[\d.]+) s \+ scoring (?P<post>[\d.]+) s "
+    r"\+ figures (?P<figures>[\d.]+) s \+ archive and the rest (?P<rest>[\d.]+) s; compile "
+    r"(?P<compile>[\d.]+) s of it \((?P<n>\d+) XLA programs\)"
 )
 REPORT_AFTER_IMPORTS = """
 import sys, time
@@ -76,10 +77,6 @@ def _timed_lines(cmd: list[str], env: dict[str, str]) -> tuple[float, list[tuple
     return wall, lines
 
 
-def _at(lines: list[tuple[float, str]], prefix: str) -> float:
-    return next(t for t, ln in lines if ln.startswith(prefix))
-
-
 def one_run(config: str, out: Path, cache: Path) -> dict[str, float]:
     """The main job once, figures included, with the given compilation cache folder."""
     from designopt.io import archive
@@ -91,7 +88,6 @@ def one_run(config: str, out: Path, cache: Path) -> dict[str, float]:
     if m is None:
         sys.exit("no summary line in the run's output:\n" + "\n".join(ln for _, ln in lines))
     s = {k: float(v) for k, v in m.groupdict().items()}
-    t_arch, t_figs = _at(lines, "archive:"), _at(lines, "figures:")
     at = archive.read(out)["attrs"]
     by_stage = at.get("compile_time_by_stage")  # per-stage compile time, where archived
     pso_post_compile = (by_stage["optimizer"] + by_stage["scoring_polish"] if by_stage
@@ -100,14 +96,14 @@ def one_run(config: str, out: Path, cache: Path) -> dict[str, float]:
     arith = at["optimizer_time_s"] + at["post_time_s"] - pso_post_compile
     return {
         "end_to_end": e2e,
-        "startup": t_arch - s["wall"],  # imports, config, archive write, summary
+        "startup": s["startup"],  # Python, imports, the config
         "setup": s["setup"],
         "optimizer": s["optimizer"],
         "scoring_polish": s["post"],
         "compile": s["compile"],
         "compilations": s["n"],
-        "figures": t_figs - t_arch,
-        "exit": e2e - t_figs,
+        "figures": s["figures"],
+        "exit": e2e - s["total"] + s["rest"],  # archive, printing, the process's exit
         "arithmetic": max(arith, 0.0),
         "ratio": e2e / arith if arith > 0.05 else float("nan"),
         "exact_arithmetic": float(by_stage is not None),
