@@ -287,7 +287,7 @@ def representative(s: SerialSettings, mech: Mechanism, sol: Mapping[str, np.ndar
     idx = [int(perm[k][j]) for k in range(A)]
     Q = np.stack([np.asarray(sol["q"])[k][i] for k, i in enumerate(idx)])
     return (f"the tuple of median gap between the arms (tuple {j}: targets {idx}, gap "
-            f"{gap[j]:.3g} {length_unit(s)})", Q, [p[i] for i in idx])  # fmt: skip
+            f"{length_text(gap[j], length_unit(s))})", Q, [p[i] for i in idx])  # fmt: skip
 
 
 def design_pose(s: SerialSettings, mech: Mechanism, x: Any,
