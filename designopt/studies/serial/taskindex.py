@@ -587,8 +587,10 @@ def structure_key(s: SerialSettings) -> str:
         task["port"] = _entry_names(task.get("port"))
         task["insertion"] = task.get("insertion") is not None
         w = task.get("body_wall")
-        if w is not None:  # its kind (a mesh: and its grid's size) shapes the program
-            task["body_wall"] = [w.get("shape"), w.get("resolution")]
+        if w is not None:  # its kind (a mesh: and its triangles' count) shapes the program
+            mesh = w.get("shape") == "mesh"
+            n_tri = s.task.body_wall.triangles()[0].shape[0] if mesh else None  # type: ignore[union-attr]
+            task["body_wall"] = [w.get("shape"), n_tri]
     col = d.get("collision")
     if col is not None:
         obs = col.get("obstacles", [])
