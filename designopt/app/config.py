@@ -7,6 +7,8 @@ unchanged."""
 from __future__ import annotations
 
 import functools
+import json
+import os
 import re
 import types
 from collections.abc import Mapping
@@ -315,17 +317,76 @@ def validate(raw: Any, where: str, model: type[BaseModel] | None = None,
 
 def check_study(cfg: Any, where: str) -> None:
     """The study's own checks beyond its settings model (``Study.check``): a
-    ``ValueError("<key>: <why>")`` becomes "<where>: key 'study.<key>': <why>"."""
+    ``ValueError("<key>: <why>")`` becomes "<where>: key 'study.<key>': <why>". A study
+    settings that passed them once (the same settings, the same files they name, the same
+    designopt and JAX) is not checked again: a marker in the cache folder says so
+    (:func:`_checked_marker`; the checks evaluate the chain, compile small programs and
+    sample self-collision pairs: seconds on every warm run)."""
     from designopt.studies import get
 
     check = get(cfg.study.name).check
     if check is None:
+        return
+    marker = _checked_marker(cfg)
+    if marker is not None and marker.is_file():
         return
     try:
         check(cfg.study)
     except ValueError as e:
         key, sep, why = str(e).partition(": ")
         raise ConfigError(f"{where}: key 'study.{key}': {why}" if sep else f"{where}: {e}") from None
+    if marker is not None:
+        try:
+            marker.parent.mkdir(parents=True, exist_ok=True)
+            tmp = marker.with_suffix(f".{os.getpid()}.tmp")
+            tmp.write_text(cfg.study.name)
+            os.replace(tmp, marker)
+        except OSError:
+            pass  # a cache folder that cannot be written: checked again next time
+
+
+def _checked_marker(cfg: Any) -> Path | None:
+    """The cache folder's marker of a study settings that passed ``Study.check``
+    (None without a cache folder): named by a hash of the settings (as JSON), of every
+    file they name (its path, size and modification time), of designopt's source, and of
+    JAX's version and precision."""
+    import hashlib
+
+    import jax
+
+    from designopt.core import exported
+
+    folder = exported.folder()
+    if folder is None:
+        return None
+    dumped = cfg.study.model_dump(mode="json")
+    base = Path(getattr(cfg.study, "config_dir", None) or ".")
+    files: list[str] = []
+
+    def walk(v: Any) -> None:
+        if isinstance(v, dict):
+            for x in v.values():
+                walk(x)
+        elif isinstance(v, list):
+            for x in v:
+                walk(x)
+        elif isinstance(v, str) and len(v) < 4096:
+            for p in (Path(v), base / v):
+                try:
+                    if p.is_file():
+                        st = p.stat()
+                        files.append(f"{p.resolve()}:{st.st_size}:{st.st_mtime_ns}")
+                        break
+                except OSError:
+                    pass
+
+    walk(dumped)
+    h = hashlib.sha256(json.dumps(dumped, sort_keys=True, default=str).encode())
+    for f in sorted(files):
+        h.update(f.encode())
+    h.update(exported.source_hash().encode())
+    h.update(f"{jax.__version__} {jax.config.jax_enable_x64}".encode())
+    return folder / f"designopt-checked-{h.hexdigest()[:40]}"
 
 
 def check_optimizer(cfg: Any, where: str) -> None:
