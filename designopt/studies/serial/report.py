@@ -63,9 +63,9 @@ def run_view(rec: Any):
     q0 = home(mech)
     scene = Scene(arms=[], region=s.task.region if s.task is not None else None,
                   **obstacles_and_ports(s, x))  # fmt: skip
-    if s.arms is not None:  # every arm at tuples of targets: the tightest, median, loosest
+    if s.arms is not None:  # every arm at tuples of targets: the median, tightest, loosest
         from designopt.figures.html.robot import Pose
-        from designopt.studies.serial.drawing import arm_tuples, arms_scene
+        from designopt.studies.serial.drawing import arm_tuples, arms_scene, tuple_stats
 
         sol_all = blocks.solution(s, rec.x, rec.keys())
         scene.targets = arms_scene(s, mech, x, sol_all, rec.keys(), budget=None).targets
@@ -75,7 +75,8 @@ def run_view(rec: Any):
         if not poses:
             row = study_arms(s, mech, x, q0, budget=None)
             poses = [Pose("home pose", row, [hover(s, a.label, q0) for a in row])]
-        what = "tuples of targets (one per arm): the tightest, the median and the loosest gap"
+        what = ("tuples of targets (one per arm): the median gap (first), the tightest (next "
+                "step) and the loosest; " + tuple_stats(s, mech, sol_all, rec.keys()).text())
     elif s.indices.measure == "task":
         sol = blocks.solution(s, rec.x, rec.keys())
         p = np.asarray(sol["target_p"], np.float64)
@@ -102,7 +103,7 @@ def run_view(rec: Any):
         what = "the home pose and the worst, median and best 1/k of the workspace's joint samples"
     title = f"the final design ({_design_text(s, rec.x)}) at {what}; drag to rotate"
     note = meshes_note(s, dict(rec.x), q0, _budget(len(poses)))
-    placed = _placement_text(s, rec.groups.get("final", {}))
+    placed = _placement_text(s, getattr(rec, "groups", {}).get("final", {}))
     if placed:  # the ports and bases drawn, in numbers
         note = (note + "; " if note else "") + placed
     return View(title=title, unit=u, scene=scene, poses=poses,
