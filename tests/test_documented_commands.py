@@ -424,6 +424,8 @@ SKIP: dict[str, str] = {
     "python benchmarks/ik.py": BENCH + "; the peers from .[bench]",
     ".venv/bin/python benchmarks/plas.py": "redraws docs/img from results/plas/ archives",
     "python benchmarks/preflight.py": BENCH + " (measured peak memory of every config)",
+    "python benchmarks/planning_profile.py": BENCH + " (the planning case's block program timed "
+                                             "warm, with the IK's counts)",
     "python benchmarks/scaling.py --reps 5": BENCH + " (device layouts in child processes)",
     "python docs/make_figures.py": "regenerates docs/img (every shipped config: minutes); the "
                                    "configs run here at small sizes",
