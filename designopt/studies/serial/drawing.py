@@ -575,3 +575,24 @@ def hover(s: SerialSettings, label: str, q: np.ndarray, inv_k: float | None = No
     k = "" if inv_k is None else f"<br>1/k ({s.indices.norm}-norm; rows {rows}) = {inv_k:.4g}"
     return (f"<b>{esc(label)}</b>{k}<br>" + esc(joint_values(s, q, "<br>")).replace("&lt;br&gt;", "<br>")
             + "<extra></extra>")  # fmt: skip
+
+
+def placement_text(s: SerialSettings, g: Mapping[str, Any]) -> str:
+    """Each arm's port (the incision point) and base in numbers, from a final group or
+    one front design's values (``Study.placement``); "" without them."""
+    u = length_unit(s)
+
+    def vec(v: Any) -> str:
+        return "(" + ", ".join(f"{float(c) + 0.0:.4f}" for c in v) + ")"
+
+    ports = np.asarray(g["ports"], np.float64).reshape(-1, 3) if "ports" in g else None
+    bases = np.asarray(g["bases"], np.float64).reshape(-1, 6) if "bases" in g else None
+    if ports is None and bases is None:
+        return ""
+    out = []
+    for k in range(len(ports) if ports is not None else len(bases)):  # type: ignore[arg-type]
+        part = [f"port {vec(ports[k])} {u}"] if ports is not None else []
+        if bases is not None:
+            part.append(f"base {vec(bases[k][:3])} {u}, rpy {vec(bases[k][3:])} deg")
+        out.append(f"arm {k}: " + ", ".join(part))
+    return "; ".join(out)

@@ -395,9 +395,7 @@ def draw_front_robots(rec: Any, picks: Sequence[tuple[str, int]], folder: Path) 
         lines.append(f"{name} (design {i}): {_design(s, d)}; drawn at {label}")
         fr = getattr(rec, "groups", {}).get("front", {})
         if "ports" in fr:  # the incision points and bases of this design, in numbers
-            from designopt.studies.serial.report import _placement_text
-
-            lines.append(_placement_text(s, {k: np.asarray(fr[k])[i] for k in ("ports", "bases")
+            lines.append(drawing.placement_text(s, {k: np.asarray(fr[k])[i] for k in ("ports", "bases")
                                              if k in fr}))  # fmt: skip
     where = ("one representative tuple of targets of its own IK solution (stars): " +
              ("the tuple (one target per arm, as arms_ok draws them) of median gap between "
@@ -501,9 +499,7 @@ def _task_caption(rec: RunRecord, sol_all: dict[str, np.ndarray], sol: dict[str,
     if ta is not None:
         what += f"; tool axis within {ta.cone:g}° of {_vec(np.asarray(ta.direction))}"
     warn = [ln for w in rec.warnings for ln in textwrap.wrap("WARNING: " + w, 90)]
-    from designopt.studies.serial.report import _placement_text
-
-    placed = _placement_text(s, getattr(rec, "groups", {}).get("final", {}))
+    placed = drawing.placement_text(s, getattr(rec, "groups", {}).get("final", {}))
     placed_lines = textwrap.wrap("incision points and bases (world): " + placed, 90) if placed else []
     return "\n".join(textwrap.wrap("final design: " + des, 90) + placed_lines + [line]
                      + textwrap.wrap(what, 90) + warn)  # fmt: skip

@@ -20,6 +20,7 @@ from designopt.studies.serial.drawing import (
     meshes_note,
     obstacles_and_ports,
     original_arms,
+    placement_text,
     slider_targets,
     study_arms,
     task_scene,
@@ -103,7 +104,7 @@ def run_view(rec: Any):
         what = "the home pose and the worst, median and best 1/k of the workspace's joint samples"
     title = f"the final design ({_design_text(s, rec.x)}) at {what}; drag to rotate"
     note = meshes_note(s, dict(rec.x), q0, _budget(len(poses)))
-    placed = _placement_text(s, getattr(rec, "groups", {}).get("final", {}))
+    placed = placement_text(s, getattr(rec, "groups", {}).get("final", {}))
     if placed:  # the ports and bases drawn, in numbers
         note = (note + "; " if note else "") + placed
     return View(title=title, unit=u, scene=scene, poses=poses,
@@ -115,27 +116,6 @@ def _design_text(s: SerialSettings, x: Mapping[str, float]) -> str:
     u = length_unit(s)
     ang = s.angle_names()
     return ", ".join(f"{k} = {v:.4g} {'deg' if k in ang else u}" for k, v in x.items())
-
-
-def _placement_text(s: SerialSettings, g: Mapping[str, Any]) -> str:
-    """Each arm's port (the incision point) and base in numbers, from a final group or
-    one front design's values (``Study.placement``); "" without them."""
-    u = length_unit(s)
-
-    def vec(v: Any) -> str:
-        return "(" + ", ".join(f"{float(c) + 0.0:.4f}" for c in v) + ")"
-
-    ports = np.asarray(g["ports"], np.float64).reshape(-1, 3) if "ports" in g else None
-    bases = np.asarray(g["bases"], np.float64).reshape(-1, 6) if "bases" in g else None
-    if ports is None and bases is None:
-        return ""
-    out = []
-    for k in range(len(ports) if ports is not None else len(bases)):  # type: ignore[arg-type]
-        part = [f"port {vec(ports[k])} {u}"] if ports is not None else []
-        if bases is not None:
-            part.append(f"base {vec(bases[k][:3])} {u}, rpy {vec(bases[k][3:])} deg")
-        out.append(f"arm {k}: " + ", ".join(part))
-    return "; ".join(out)
 
 
 def front_view(rec: Any):
@@ -163,7 +143,7 @@ def front_view(rec: Any):
         d = dict(zip(s.variables, X[i], strict=True))
         objtxt = ", ".join(f"{name} = {c[i]:.4g}" for (name, _), c in zip(objs, cols, strict=True))
         fr = rec.groups["front"]
-        placed = _placement_text(s, {k: np.asarray(fr[k])[i] for k in ("ports", "bases")
+        placed = placement_text(s, {k: np.asarray(fr[k])[i] for k in ("ports", "bases")
                                      if k in fr})  # fmt: skip
         hov.append(f"{_design_text(s, d)}; {objtxt}" + (f"; {placed}" if placed else "")
                    + f"; drawn at {poses[i][0]}")  # fmt: skip
