@@ -114,7 +114,7 @@ def test_master9_non_finite_numbers_are_refused(tmp_path, capsys, edit, key):
     (["l1=nan"], "--design l1: nan is not a finite number"),
     (["l1=-inf"], "--design l1: -inf is not a finite number"),
     (["l1=1e999"], "--design l1: inf"),
-    (["l1=1", "l1=2"], "--design l1: given twice"),
+    (["l1=1,l1=2"], "--design l1: given twice"),  # within one design (one flag)
     (["l1=abc"], "--design l1: 'abc' is not a number"),
 ])  # fmt: skip
 def test_design_flags(tmp_path, capsys, design, needle):
