@@ -69,18 +69,12 @@ def main() -> None:
     from designopt.app.config import load
     from designopt.core.keys import streams
     from designopt.kinematics import ik
-    from designopt.studies.serial import bodies, taskindex
-    from designopt.studies.serial.mechanism import build
+    from designopt.studies.serial import blocks, bodies, taskindex
 
     cfg, _ = load(args.config)
     s = cfg.study
-    mech = build(s)
     dt = jnp.float64
-    key = streams(cfg.seed)["samples"]
-    p = {"fixed": jnp.asarray(mech.fixed, dt), "scale": jnp.asarray(mech.scale, dt),
-         "q_lower": jnp.asarray(mech.lower, dt), "q_upper": jnp.asarray(mech.upper, dt),
-         "sample_key": key} | taskindex.targets(s, key, dt)  # fmt: skip
-    p |= bodies.base_params(s, mech, dt) | taskindex.scene_params(s, dt, mech)
+    mech, p = blocks.host_params(s, streams(cfg.seed), dt)  # the run's params
     C = taskindex.chunk(s)
     pc, Rc, t0 = taskindex.chunked_targets(p, C, dt, np)
     names = list(s.variables)

@@ -51,21 +51,15 @@ def _solutions(s: SerialSettings, X: Any, keys: Any, dtype: Any) -> dict[str, An
     import jax.numpy as jnp
     import numpy as np
 
-    from designopt.studies.serial import blocks, bodies, taskindex
+    from designopt.studies.serial import blocks
 
     if len(X) == 1:  # one design: the figures' own call, bit for bit
         one = blocks.solution(s, X[0], keys, dtype)
         return {k: (v if k in ("target_p", "target_R") else
                     (v[None, None] if s.arms is None else v[:, None]))
                 for k, v in one.items()}  # fmt: skip
-    mech, _ = blocks.program(s, dtype)
+    _, p = blocks.host_params(s, keys, dtype)
     dt = np.dtype(jnp.dtype(dtype))
-    p = {"fixed": jnp.asarray(np.asarray(mech.fixed, dt)),
-         "scale": jnp.asarray(np.asarray(mech.scale, dt)),
-         "q_lower": jnp.asarray(np.asarray(mech.lower, dt)),
-         "q_upper": jnp.asarray(np.asarray(mech.upper, dt)),
-         "sample_key": keys["samples"]} | taskindex.targets(s, keys["samples"], dtype)  # fmt: skip
-    p |= bodies.base_params(s, mech, dtype) | taskindex.scene_params(s, dtype, mech)
     B, P, N = blocks.DESIGNS, len(X), p["target_p"].shape[0]
     pad = np.concatenate([X, np.repeat(X[-1:], -P % B, 0)]).astype(dt)
     run = blocks.values(s, dtype)

@@ -105,6 +105,23 @@ def assembled(s: SerialSettings, chunks: list[dict[str, Any]], M: int, N: int, x
     return taskindex.assemble(stacked, len(s.arms) if s.arms is not None else 1, M, N, xp)
 
 
+def host_params(s: SerialSettings, keys: Any, dtype: Any) -> tuple[Mechanism, dict[str, Any]]:
+    """(the chain, the block program's ``params`` for a run's named streams ``keys``),
+    made as ``objective.problem`` makes them: the targets drawn outside the program
+    (inside, XLA may fuse their arithmetic differently, and a target an ulp away can send
+    the IK to another of its solutions)."""
+    from designopt.studies.serial import bodies
+
+    mech, _ = program(s, dtype)
+    dt = np.dtype(jnp.dtype(dtype))
+    p = {"fixed": jnp.asarray(np.asarray(mech.fixed, dt)),
+         "scale": jnp.asarray(np.asarray(mech.scale, dt)),
+         "q_lower": jnp.asarray(np.asarray(mech.lower, dt)),
+         "q_upper": jnp.asarray(np.asarray(mech.upper, dt)),
+         "sample_key": keys["samples"]} | taskindex.targets(s, keys["samples"], dtype)  # fmt: skip
+    return mech, p | bodies.base_params(s, mech, dtype) | taskindex.scene_params(s, dtype, mech)
+
+
 def solution(s: SerialSettings, x: Any, keys: Any,
              dtype: Any = jnp.float64) -> dict[str, np.ndarray]:  # fmt: skip
     """The per-target solution of one design on a run's targets, as NumPy: ``target_p``
@@ -116,22 +133,12 @@ def solution(s: SerialSettings, x: Any, keys: Any,
     IK's seeds are those of the run, so the means of these values are the run's final
     indices (figures and the report's cloud read it). It runs the run's own compiled
     block program (:func:`program`), the design in every row of the block."""
-    from designopt.studies.serial import bodies
 
     if jnp.dtype(dtype) == jnp.float64 and not jax.config.jax_enable_x64:
         raise ValueError("the task's inverse kinematics needs float64: call "
                          "jax.config.update('jax_enable_x64', True) first")  # fmt: skip
-    mech, _ = program(s, dtype)
-    # the params objective.problem gives the program, made the same way: targets drawn
-    # outside it (inside, XLA may fuse their arithmetic differently, and a target an ulp
-    # away can send the IK to another of its solutions)
+    mech, p = host_params(s, keys, dtype)
     dt = np.dtype(jnp.dtype(dtype))
-    p = {"fixed": jnp.asarray(np.asarray(mech.fixed, dt)),
-         "scale": jnp.asarray(np.asarray(mech.scale, dt)),
-         "q_lower": jnp.asarray(np.asarray(mech.lower, dt)),
-         "q_upper": jnp.asarray(np.asarray(mech.upper, dt)),
-         "sample_key": keys["samples"]} | taskindex.targets(s, keys["samples"], dtype)  # fmt: skip
-    p |= bodies.base_params(s, mech, dtype) | taskindex.scene_params(s, dtype, mech)
     xv = np.asarray([x[k] for k in s.variables] if hasattr(x, "keys") else x, dt)
     X = np.repeat(xv[None], DESIGNS, 0)
     chunks = [{k: np.asarray(v) for k, v in c.items()} for c in values(s, dtype)(p, X)]
