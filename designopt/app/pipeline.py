@@ -356,7 +356,8 @@ def check_box(problem: Any, design: Mapping[str, float], where: str) -> None:
     for n, lo, hi in zip(problem.names, problem.lower, problem.upper, strict=True):
         v = design.get(n)
         if v is not None and not float(lo) <= float(v) <= float(hi):
-            raise ConfigError(f"{where}: --design {n}={float(v)!r}: outside the design box "
+            txt = f"{float(v):g}" if float(f"{float(v):g}") == float(v) else repr(float(v))
+            raise ConfigError(f"{where}: --design {n}={txt}: outside the design box "
                               f"[{float(lo):g}, {float(hi):g}] of variable '{n}'")  # fmt: skip
 
 
@@ -386,7 +387,7 @@ def compare(cfg: Any, designs: list[Mapping[str, float]], where: str = "config",
     for d in designs:
         bad = [k for k in d if k not in problem.names]
         if bad:
-            raise ConfigError(f"{where}: --design {bad[0]}: not a design variable of this "
+            raise ConfigError(f"{where}: --design {bad[0]!r}: not a design variable of this "
                               f"study; its variables: {list(problem.names)}")  # fmt: skip
         check_box(problem, d, where)
     X = matrix(problem, list(designs), where)

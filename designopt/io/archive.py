@@ -153,7 +153,7 @@ def load(path: str | Path) -> Any:
         head = f.read(8)
     if head != b"\x89HDF\r\n\x1a\n":  # HDF5's signature (at offset 0 for our archives)
         what = " (a config: `designopt run` takes it)" if p.suffix in (".yaml", ".yml") else ""
-        raise ConfigError(f"{p}: not an HDF5 archive{what}; give a run's .h5 archive")
+        raise ConfigError(f"{p}: not a readable HDF5 archive{what}; give a run's .h5 archive")
     try:
         tree = read(p)
     except OSError as e:
