@@ -46,6 +46,16 @@ def run(tmp_path_factory):
     return out, rec, blocks.solution(rec.config.study, rec.x, rec.keys())
 
 
+@pytest.fixture(autouse=True, scope="module")
+def _no_figure_left_open():
+    """Whatever this module's tests leave open (a recorded figure, a view's) is closed
+    after them: a later module in this worker counts the open figures."""
+    yield
+    import matplotlib.pyplot as plt
+
+    plt.close("all")
+
+
 @pytest.fixture(scope="module")
 def drawn(run, tmp_path_factory):
     """The run's figures, kept as matplotlib figures by name."""
@@ -60,7 +70,11 @@ def drawn(run, tmp_path_factory):
     finally:
         canvas.RECORD = old
     assert_clean(kept)  # labels with units, no text over another
-    return dict(kept)
+    yield dict(kept)
+    import matplotlib.pyplot as plt
+
+    for _, f in kept:  # kept open for the tests (canvas.RECORD): closed after them, so no
+        plt.close(f)   # later module of this worker finds them open
 
 
 def _seg_dist(p0, p1, q0, q1, n: int = 400) -> float:
@@ -204,6 +218,9 @@ def test_convergence_is_a_grid_of_at_most_four_columns(tmp_path):
     finally:
         canvas.RECORD = old
     (_, fig), = kept
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)  # recorded figures stay open; its axes stay readable
     axes = fig.axes
     assert len(axes) == 17
     cols = {a.get_subplotspec().colspan.start for a in axes}
