@@ -32,6 +32,7 @@ from pydantic import (
     ValidationInfo,
     field_validator,
 )
+from test_bad_inputs import _refused  # one line, exit 2, no traceback
 
 from designopt.app.config import error_text, validate
 from designopt.cli.commands import main
@@ -86,20 +87,6 @@ def files(tmp_path_factory) -> dict[str, Path]:
     with h5py.File(d / "plain.h5", "w") as h:
         h["x"] = np.arange(3)
     return {p.name: p for p in d.iterdir()}
-
-
-def _refused(capsys, argv: list[Any], *needles: str) -> str:
-    """``main(argv)`` exits 2 with one line ``designopt: error: ...`` holding every needle,
-    no traceback, nothing on stdout; the line."""
-    capsys.readouterr()
-    assert main([str(a) for a in argv]) == 2
-    out, err = capsys.readouterr()
-    assert err.startswith("designopt: error: "), err
-    assert err.count("\n") == 1 and err.endswith("\n"), err
-    assert "Traceback" not in err and out == "", (out, err)
-    for n in needles:
-        assert n in err, (n, err)
-    return err
 
 
 def _written(tmp_path: Path) -> list[Path]:
