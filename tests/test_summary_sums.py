@@ -52,7 +52,8 @@ def test_the_wall_line_adds_up_and_is_the_one_count(tmp_path, capsys):
     # one count of programs, with its meaning stated, and no other count anywhere
     assert len(re.findall(r"\d+ XLA programs", out)) == 1
     assert "compilations" not in out and "loading it from the compilation cache" in wall[0]
-    assert "samples per design: 500" in lines
+    # the search's samples, and the final design's fresh re-scoring (4 ×: final.n_samples)
+    assert "samples per design: 500 in the search, 2000 fresh for the final values" in lines
     # every index with its unit: manipulability of a planar 2R in m^2, gci dimensionless
     man = [ln for ln in lines if ln.strip().startswith("manipulability")]
     assert len(man) == 1 and man[0].rstrip().split("±")[1].split()[1] == "m^2", man

@@ -135,6 +135,10 @@ class Scan(_Strict):
         return {k: (v.values() if isinstance(v, Range) else list(v)) for k, v in self.vary.items()}
 
 
+MIN_FINAL_SAMPLES = 30
+"""The fewest samples per design a final re-scoring may take (``final.n_samples``)."""
+
+
 class Front(_Strict):
     """How a Pareto front (``study.objective.pareto``) is finished and measured."""
 
@@ -149,6 +153,18 @@ class Front(_Strict):
     thinned)."""
 
 
+class Final(_Strict):
+    """How a run's final design is quoted (docs/configs.md, "Scores you can quote"): every
+    final design (a weighted or constrained run's, each sweep member's) and, with
+    ``optimizer.n_runs`` ≥ 2, each run's best design are re-scored together on a fresh,
+    independent sample stream (``final``, folded from the root key), never seen by the
+    search."""
+
+    n_samples: int | None = Field(None, ge=MIN_FINAL_SAMPLES)
+    """Monte-Carlo samples per design of the re-scoring (default: 4 × the study's own, at
+    least 30)."""
+
+
 class RunConfigBase(_Strict):
     """Everything but the ``study`` section, whose model comes from the study registry."""
 
@@ -157,6 +173,7 @@ class RunConfigBase(_Strict):
     sweep: Sweep | None = None
     scan: Scan | None = None
     front: Front = Front()
+    final: Final = Final()
     precision: Literal["float32", "float64"] = "float64"
     seed: int = Field(0, ge=0, le=validation.SEED_MAX)
     output: str | None = None  # default results/<study>/<study>.h5

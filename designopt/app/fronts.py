@@ -8,10 +8,13 @@ maximised (F = ±index, all minimised for the optimizer). A multi-objective opti
 1. the final populations of all runs are pooled and their non-dominated designs kept
    (feasible ones first, Deb's constrained domination);
 2. those designs are re-scored on a fresh, larger sample set (``front.n_samples``, the
-   named stream ``front`` folded from the root key, never seen by the optimizer), so every
-   archived value is unbiased by the selection;
+   named stream ``front`` folded from the root key, never seen by the optimizer;
+   ``designopt.app.rescoring``), so every archived value is unbiased by the selection;
 3. pairs of designs whose order in some objective is within 2 standard errors are marked
-   ambiguous: which of the two is better there is not resolved by the samples.
+   ambiguous: which of the two is better there is not resolved by the samples;
+4. with ``optimizer.n_runs`` ≥ 2, each run's recommended design (the compromise of its
+   own non-dominated final population: ``app.rescoring.front_runs``) is re-scored in the
+   same call, on the same stream, and the runs' agreement archived (``runs``).
 """
 
 from __future__ import annotations
@@ -20,18 +23,17 @@ import dataclasses
 from collections.abc import Mapping
 from typing import Any
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
+from designopt.app import rescoring as rs
 from designopt.app.config import linear, senses
-from designopt.core.errors import ConfigError
 from designopt.problems.base import Problem, na_worst
 
-FRONT_STREAM = 0x46524F4E  # "FRON"
+FRONT_STREAM = rs.FRONT_STREAM
 """The re-scoring samples: ``fold_in(key(seed), FRONT_STREAM)``, apart from the named
 streams split from the root key (adding one there would change every other stream)."""
-Z = 2.0  # ambiguity: orders within Z standard errors
+Z = rs.Z  # ambiguity: orders within Z standard errors
 
 
 def signs(front: Mapping[str, Any]) -> np.ndarray:
@@ -122,33 +124,16 @@ def ambiguous(F: np.ndarray, se: np.ndarray, z: float = Z) -> np.ndarray:
 def rescoring_problem(job: Any) -> tuple[Problem, int]:
     """The study's problem on the fresh ``front`` sample stream with ``front.n_samples``
     (default 4 × the study's own) samples per design; (problem, samples)."""
-    from designopt.app.job import build_problem
-
-    c, fresh, n = rescoring(job)
-    return build_problem(c, fresh, job.where, job.dtype), n
+    return rs.problem(job, "front"), rs.plan(job, "front").n
 
 
 def rescoring(job: Any) -> tuple[Any, dict[str, Any], int]:
-    """(config, keys, samples) of the front's re-scoring: the config with
-    ``front.n_samples`` samples per design (the study's ``Cost.samples_key``) and the
-    named streams with ``samples`` the fresh ``front`` stream."""
-    from designopt.app import sweeps
-
-    cfg = job.cfg
-    cost = job.study.cost(cfg.study)
-    n = cfg.front.n_samples or 4 * int(cost.samples)
-    c = cfg
-    # a study scoring in blocks (Cost.designs) keeps its chunk: the re-scoring runs in the
-    # search's own compiled block program
-    keep = {cost.chunk_key: int(cost.chunk)} if cost.designs else {}
-    if cost.samples > 1:
-        try:
-            c = sweeps.apply(cfg, {cost.samples_key: n} | keep, job.where)
-        except (ValueError, ConfigError) as e:
-            why = str(e).removeprefix(job.where + ": ")
-            raise ConfigError(f"{job.where}: key 'front.n_samples': {why}") from None
-    fresh = dict(job.keys) | {"samples": jax.random.fold_in(jax.random.key(cfg.seed), FRONT_STREAM)}
-    return c, fresh, n
+    """(config, keys, samples) of the front's re-scoring (``app.rescoring.plan``): the
+    config with ``front.n_samples`` samples per design (the study's
+    ``Cost.samples_key``) and the named streams with ``samples`` the fresh ``front``
+    stream."""
+    fr = rs.plan(job, "front")
+    return fr.cfg, fr.keys, fr.n
 
 
 def groups(job: Any, problem: Problem, res: Any) -> dict[str, Any]:
@@ -169,15 +154,22 @@ def groups(job: Any, problem: Problem, res: Any) -> dict[str, Any]:
     X = np.asarray(pop.x, np.float64).reshape(-1, D)[keep]
     F_opt = np.asarray(pop.f, np.float64).reshape(-1, m)[keep]
     X = X[thin(F_opt, cfg.front.max_points)]
-    from designopt.app.job import build_problem
-
     c, fresh, n_samples = rescoring(job)
-    rescore = build_problem(c, fresh, job.where, job.dtype)
+    rescore = rs.problem(job, "front")
+    R = int(np.shape(pop.x)[0])
+    n_front = len(X)
+    if R >= 2:  # each run's recommended design, scored in the same call on the same stream
+        X_runs = rs.front_runs(res)
+        X = np.concatenate([X, X_runs])
     vals = score(rescore, X)
     for k, w in weights(front, problem.names).items():  # exact: no samples behind them
         vals[k], vals[k + "_se"] = X @ w, np.zeros(len(X))
     na = problem.na_range
     check_finite(vals, where, "the re-scored front", problem.names, X, na=tuple(na))
+    runs = None
+    if R >= 2:
+        runs = {k: v[n_front:] for k, v in vals.items()}, X[n_front:]
+        vals, X = {k: v[:n_front] for k, v in vals.items()}, X[:n_front]
     F = np.stack([vals[k] for k in names], -1)  # n/a stays NaN in the archive
     se = np.stack([vals.get(k + "_se", np.zeros(len(X))) for k in names], -1)
     Fs = np.stack([np.asarray(na_worst(jnp.asarray(F[:, j]), *na[k], g > 0)) if k in na
@@ -212,9 +204,34 @@ def groups(job: Any, problem: Problem, res: Any) -> dict[str, Any]:
                     "units": linear_units(front, job.study.units(cfg.study))}}  # fmt: skip
     with_placement(fr, placement(job.study, cfg.study, X), None)  # ports, bases: (n, ...)
     out = {"optimizer": opt, "front": fr, "problem": problem_group(problem)}
+    if runs is not None:
+        out["runs"] = runs_group(job, problem, runs[0], runs[1], names, sg, F, na)
     if job.study.targets is not None and len(X):  # every front design at every target
         # the re-scoring's targets and seeds: their means are the front's indices
         tg = job.study.targets(c.study, X, fresh, job.dtype)
         if tg is not None:
             out["targets"] = tg
     return out
+
+
+def runs_group(job: Any, problem: Problem, vals: dict[str, np.ndarray], X: np.ndarray,
+               names: list[str], sg: np.ndarray, F_front: np.ndarray,
+               na: Any) -> dict[str, Any]:  # fmt: skip
+    """The ``runs`` group of a front run: each run's recommended design on the front's
+    fresh stream, compared with the reference run: the run whose design is the compromise
+    of the re-scored ones (scaled by the re-scored front's ideal and nadir)."""
+    vals = {k: v for k, v in vals.items() if k not in ("f", "f_se")}  # the weighted f: moot
+    F = np.stack([vals[k] for k in names], -1)
+    Fs = np.stack([np.asarray(na_worst(jnp.asarray(F[:, j]), *na[k], g > 0)) if k in na
+                   else F[:, j] for j, (k, g) in enumerate(zip(names, sg, strict=True))],
+                  -1) * sg  # fmt: skip  # minimised, n/a at its worst
+    Ff = F_front * sg
+    scale = np.stack(
+        [np.nanmin(np.concatenate([Ff, Fs]), 0), np.nanmax(np.concatenate([Ff, Fs]), 0)]
+    )
+    ref = rs.compromise(Fs, scale)
+    fr = rs.plan(job, "front")
+    return rs.runs_group(X, vals, names, list(senses(job.cfg.study.pareto).values()),
+                                ref, problem.lower, problem.upper, problem.names, fr,
+                                "each run's recommended design: the compromise of its own "
+                                "non-dominated final population")  # fmt: skip

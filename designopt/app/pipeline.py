@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from designopt.app import checkpoint as ckpt
-from designopt.app import fronts
+from designopt.app import fronts, rescoring
 from designopt.app.designs import Designs, matrix, scan_designs
 from designopt.app.job import Job, base_attrs, build_problem
 from designopt.app.optimise import optimise
@@ -98,6 +98,17 @@ def _writing(out: Path | None, cfg: Any, est: Estimate) -> Iterator[writer.Sessi
 # ----------------------------------------------------------------- run strategies
 
 
+def warnings(job: Job, final: dict[str, Any]) -> None:
+    """A final group's ``warnings`` attr: the study's lines on the (fresh) values, a line
+    for every n/a index (``results.base.na_warnings``) and the optimism lines of
+    :func:`designopt.app.rescoring.final_groups` (attr ``optimism``, then dropped)."""
+    at = final.setdefault("attrs", {})
+    own = list(job.study.warnings(job.cfg.study, final))
+    warn = na_warnings(final, own) + list(at.pop("optimism", []))
+    if warn:  # far from what was asked: archived, printed, shown, marked on figures
+        at["warnings"] = list(warn)
+
+
 class Single:
     """A single-objective run: the study's problem, its weighted f optimised, the best
     run's history and the final design scored → ``RunRecord``."""
@@ -113,29 +124,36 @@ class Single:
 
     def groups(self, job: Job, problem: Any, res: Any) -> dict[str, Any]:
         groups = run_groups(job.cfg, problem, res, job.dtype)
+        # the final design (and each run's best) re-scored on the fresh ``final`` stream:
+        # the quoted values; the search's own stay in best_run/final
+        groups = rescoring.final_groups(job, problem, res, groups)
+        fr = rescoring.plan(job, "final")
         # where the final design puts the robot in the world (the study's placement)
         with_placement(groups["final"], placement(job.study, job.cfg.study,
                                                   groups["final"]["x"]), 0)  # fmt: skip
-        if job.study.targets is not None:  # the final design at every target (a task's)
-            tg = job.study.targets(job.cfg.study, np.asarray(groups["final"]["x"]), job.keys,
+        if job.study.targets is not None:  # the final design at every target of the fresh
+            # stream (a task's): their means are final/'s indices
+            tg = job.study.targets(fr.cfg.study, np.asarray(groups["final"]["x"]), fr.keys,
                                    job.dtype)  # fmt: skip
             if tg is not None:
                 groups["targets"] = tg
-        # every n/a index carries a line, whatever the study says (results.base.na_warnings)
-        warn = na_warnings(groups["final"], job.study.warnings(job.cfg.study, groups["final"]))
-        if warn:  # far from what was asked: archived, printed, shown, marked on figures
-            groups["final"]["attrs"]["warnings"] = list(warn)
+        warnings(job, groups["final"])
         return groups
 
     def check(self, job: Job, groups: dict[str, Any]) -> None:
-        check_finite(groups["final"], job.where, "the final design", na=tuple(job.problem.na_range))
+        na = tuple(job.problem.na_range)
+        check_finite(groups["final"], job.where, "the final design", na=na)
+        check_finite(groups["best_run"].get("final", {}), job.where,
+                     "the final design on the search's samples", na=na)  # fmt: skip
 
     def lines(self, rec: Any) -> list[str]:
         return [*rec.design_lines(), rec.run_line()]
 
     def scoring(self, job: Job) -> str:
         """What the phase after the optimizer does (shown while it runs)."""
-        return "scoring the best run" + (" and polishing" if job.cfg.refine else "")
+        n = rescoring.plan(job, "final").n
+        polish = ", polishing" if job.cfg.refine else ""
+        return f"scoring the best run{polish} and re-scoring the final design on {n} fresh samples"
 
 
 class Front(Single):
@@ -161,7 +179,7 @@ class Front(Single):
         return [*rec.summary()[1:], rec.run_line()]
 
     def scoring(self, job: Job) -> str:
-        n = job.cfg.front.n_samples or 4 * int(job.study.cost(job.cfg.study).samples)
+        n = rescoring.plan(job, "front").n
         return f"re-scoring the front on {n} fresh samples per design"
 
 
@@ -184,9 +202,10 @@ def run(cfg: Any, text: str | None = None, where: str = "config", out: Path | No
     job = Job.build(cfg, where, text)
     if job.study.replay is not None:  # a front of a replay study is refused by validation
         return _replay(job, out, dry_run)
+    how = Single() if cfg.study.pareto is None else Front()
+    rescoring.plan(job, how.kind if how.kind == "front" else "final")  # its samples checked now
     if dry_run:
         return _dry(out, cfg, job.estimate)
-    how = Single() if cfg.study.pareto is None else Front()
     o = cfg.optimizer
     resolved = ckpt.resume_key(cfg)
     attrs = job.attrs(how.kind) | {"resume_key": resolved}
@@ -299,8 +318,13 @@ def sweep(cfg: Any, text: str | None = None, where: str = "config", out: Path | 
                 opt_sets = [sw.split(m)[1] for _, m in mem]
                 res = optimise(job, job.problem, members=opt_sets, progress=bar)
                 for j, (i, m) in enumerate(mem):
-                    t = run_groups(job.cfg, job.problem, res.member(j), job.dtype)
-                    check_finite(t["final"], where, f"sweep member {i} {m}", na=tuple(job.problem.na_range))
+                    mres = res.member(j)
+                    t = run_groups(job.cfg, job.problem, mres, job.dtype)
+                    na = tuple(job.problem.na_range)
+                    check_finite(t["final"], where, f"sweep member {i} {m}", na=na)
+                    t = rescoring.final_groups(job, job.problem, mres, t)
+                    check_finite(t["final"], where, f"sweep member {i} {m}", na=na)
+                    warnings(job, t["final"])
                     t["attrs"] = {"overrides": m,
                                   "config_resolved_yaml": sw.resolved(cfg, m)}  # fmt: skip
                     tree["members"][f"{i:03d}"] = t
@@ -312,13 +336,15 @@ def sweep(cfg: Any, text: str | None = None, where: str = "config", out: Path | 
         rec = bind(SweepRecord(attrs, tree, cfg))
         if out is not None:
             archive.save(out, rec)
-    lines = [f"{len(members)} members in {len(groups)} vmapped batch(es); wall "
+    lines = [f"{len(members)} members in {len(groups)} vmapped batch(es), each final design "
+             "re-scored on fresh samples (final.n_samples); wall "
              f"{total.wall:.1f} s (compile {total.compile:.1f} s, run {total.run:.1f} s)"]  # fmt: skip
     subs = next(iter(jobs.values())).study.summary(cfg.study)[:3]
     for i, m, fin in sorted(rows, key=lambda r: r[0]):
         keys_txt = ", ".join(f"{k} = {v:g}" for k, v in m.items())
         vals = ", ".join(f"{s} = {float(fin[s]):.4f}" for s in subs)
         lines.append(f"  [{i:3d}] {keys_txt}:  f = {float(fin['f']):.5f}, {vals}")
+        lines += [f"        warning: {w}" for w in fin.get("attrs", {}).get("warnings", [])]
     return Report(out, lines, rec)
 
 
@@ -362,7 +388,7 @@ def check_box(problem: Any, design: Mapping[str, float], where: str) -> None:
 
 
 def compare(cfg: Any, designs: list[Mapping[str, float]], where: str = "config",
-            replicas: int = PAIRED_REPLICAS) -> dict[str, Any]:
+            replicas: int = PAIRED_REPLICAS, fresh: bool = False) -> dict[str, Any]:  # fmt: skip
     """Designs scored together, and the paired differences of every design from the
     first (``designopt eval --design … --design …``).
 
@@ -378,12 +404,23 @@ def compare(cfg: Any, designs: list[Mapping[str, float]], where: str = "config",
     Returns {"designs": [{"design": {variable: value}, "filled": [variables that took
     the middle of their box], "values": {index: value, index_se: SE, ...}, "warnings",
     "units", "placement": {name: array}, "lines": the study's lines of them}], "differences": [{"of": (k, 0), "values":
-    {index: value, index_se: paired SE}}], "replicas": replicas}. A variable outside the
-    box: ConfigError naming it."""
+    {index: value, index_se: paired SE}}], "replicas": replicas, "n_samples": samples per
+    design}. A variable outside the box: ConfigError naming it.
+
+    ``fresh``: on the fresh ``final`` stream (``final.n_samples`` per design, the run's
+    normalisation; ``designopt.app.rescoring``) a run quotes its final design on, so the
+    final design's values are the archive's ``final/``; the replicas fold from it."""
     import jax
 
     job = Job.build(cfg, where, n_designs=len(designs))
     problem = job.problem
+    base_cfg, base_keys = cfg, job.keys
+    n_used = int(problem.n_samples_used)
+    if fresh:
+        fr = rescoring.plan(job, "final")
+        search = problem
+        problem = rescoring.problem(job, "final", search)
+        base_cfg, base_keys, n_used = fr.cfg, fr.keys, int(problem.n_samples_used or fr.n)
     for d in designs:
         bad = [k for k in d if k not in problem.names]
         if bad:
@@ -400,7 +437,8 @@ def compare(cfg: Any, designs: list[Mapping[str, float]], where: str = "config",
     res = scored(problem)
     units = dict(job.study.units(cfg.study))
     placed = placement(job.study, cfg.study, X)
-    out: dict[str, Any] = {"designs": [], "differences": [], "replicas": int(replicas)}
+    out: dict[str, Any] = {"designs": [], "differences": [], "replicas": int(replicas),
+                           "n_samples": n_used}  # fmt: skip
     for i, d in enumerate(designs):
         vals = {k: float(v[i]) for k, v in res.items()}
         x = dict(zip(problem.names, X[i].tolist(), strict=True))
@@ -414,10 +452,11 @@ def compare(cfg: Any, designs: list[Mapping[str, float]], where: str = "config",
         return out
     names = [k for k in res if k + "_se" in res]
     diffs = [{k: res[k][1:] - res[k][0] for k in names}]
-    root = jax.random.fold_in(job.keys["samples"], PAIRED_STREAM)
+    root = jax.random.fold_in(base_keys["samples"], PAIRED_STREAM)
     for r in range(replicas):  # the same designs on independent sample sets
-        keys = dict(job.keys) | {"samples": jax.random.fold_in(root, r)}
-        rep = scored(build_problem(cfg, keys, where, job.dtype))
+        keys = dict(base_keys) | {"samples": jax.random.fold_in(root, r)}
+        prob = build_problem(base_cfg, keys, where, job.dtype)
+        rep = scored(rescoring.same_normalisation(prob, search) if fresh else prob)
         diffs.append({k: rep[k][1:] - rep[k][0] for k in names})
     for j in range(len(designs) - 1):
         vals: dict[str, float] = {}

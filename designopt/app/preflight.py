@@ -143,6 +143,9 @@ def estimate(cfg: Any, study: Study, n_designs: int = 0, members: int = 1) -> Es
         if front:  # the front's designs (at most the swarm's) re-scored on more samples
             n_front = cfg.front.n_samples or 4 * samples
             rescore = (min(cfg.front.max_points, swarm), max(1, min(n_front, int(cost.chunk))))
+        else:  # each run's best and the final design re-scored on fresh samples (app.rescoring)
+            n_final = cfg.final.n_samples or max(4 * samples, 30)
+            rescore = (o.n_runs + 1, max(1, min(n_final, int(cost.chunk))))
     key, designs = max(flight.items(), key=lambda kv: kv[1])
     itemsize = 4 if getattr(cfg, "precision", "float64") == "float32" else 8
     if cost.designs:  # a study scoring in blocks holds one block's designs at a time

@@ -72,10 +72,11 @@ def members(cfg: Any) -> list[dict[str, float]]:
     return [dict(zip(keys, c, strict=True)) for c in combos]
 
 
-def apply(cfg: Any, overrides: dict[str, Any], where: str = "config") -> Any:
+def apply(cfg: Any, overrides: dict[str, Any], where: str = "config", checks: bool = True) -> Any:
     """The validated config of ``cfg`` with the overrides set (and no sweep section),
     through the one override path (``config.set_key``, then ``config.validate``); a whole
-    number key keeps whole numbers."""
+    number key keeps whole numbers. ``checks=False`` skips the study's own checks
+    (``config.validate``): for overrides of sample counts of a config that passed them."""
     from designopt.app.config import set_key, validate
 
     d = cfg.model_dump(by_alias=True)
@@ -90,7 +91,7 @@ def apply(cfg: Any, overrides: dict[str, Any], where: str = "config") -> Any:
                 raise ValueError(f"'{path}' takes whole numbers, got {v}")
             v = int(v)
         set_key(d, path, v, where)
-    return validate(d, where)
+    return validate(d, where, checks=checks)
 
 
 def split(overrides: dict[str, Any]) -> tuple[dict[str, Any], dict[str, float]]:

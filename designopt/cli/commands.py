@@ -177,7 +177,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
     cfg, _ = _load(args)
     groups = getattr(args, "design_groups", None) or [[w] for w in args.design]
     designs = design_groups(groups)
-    out = pipeline.compare(cfg, designs, where=args.config)
+    fresh = bool(getattr(args, "fresh", False))
+    out = pipeline.compare(cfg, designs, where=args.config, fresh=fresh)
     if args.json:
         print(json.dumps(_eval_json(out, len(designs) == 1), allow_nan=False))
         return 0
@@ -188,6 +189,9 @@ def cmd_eval(args: argparse.Namespace) -> int:
         _print_one(out["designs"][0], box, units)
     else:
         _print_many(out, box, units)
+    if fresh:
+        print(f"scored on the fresh stream a run quotes its final design on ({out['n_samples']} "
+              "samples per design; the run's normalisation)")  # fmt: skip
     front = getattr(st, "pareto", None)
     if front is not None:
         from designopt.app.config import senses
@@ -553,6 +557,10 @@ def build_parser() -> argparse.ArgumentParser:
         "Two or more designs: one column each and design k − design 1 with its paired SE",
     )
     e.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    e.add_argument("--fresh", action="store_true",
+                   help="score on the fresh sample stream a run quotes its final design on "
+                        "(final.n_samples per design; the run's final/ values), not the "
+                        "search's samples")  # fmt: skip
     e.set_defaults(func=cmd_eval)
     st = sub.add_parser("studies", help="list the registered studies")
     st.set_defaults(func=cmd_studies)

@@ -89,6 +89,65 @@ def na_warnings(final: Mapping[str, Any], own: Sequence[str] = ()) -> list[str]:
     return out
 
 
+SEARCH_LABEL = "on the search's samples"
+"""How the archive and the summaries name values of the final design on the samples the
+search chose it on (``best_run/final``), beside the fresh ones they quote."""
+
+
+def runs_lines(runs: Mapping[str, Any] | None, names: list[str],
+               units: Mapping[str, str] | None = None) -> list[str]:  # fmt: skip
+    """The summary of a ``runs`` group (each run's design re-scored on one common fresh
+    stream): one line per run (its objectives ± SE, whether it agrees with the reference
+    run), whether the runs agree, and the flat directions; [] without one."""
+    if not runs:
+        return []
+    at = runs.get("attrs", {})
+    objs = [str(k) for k in at.get("objectives", ["f"])]
+    ref = int(at.get("reference", 0))
+    agree = np.asarray(runs["agree"]).astype(bool)
+    z = float(at.get("z", 2.0))
+    R = len(agree)
+    units = units or {}
+    pick = str(at.get("pick", "each run's design"))
+    out = [f"runs: {pick}, re-scored on one common fresh stream ({at.get('n_samples', '-')} "
+           f"samples per design), each against run {ref}:"]  # fmt: skip
+    Xr = np.asarray(runs["x"], np.float64)
+    for r in range(R):
+        xs = ", ".join(f"{n} = {v:.4g}" for n, v in zip(names, Xr[r], strict=False))
+        vals = ", ".join(f"{k} = " + value_text(np.asarray(runs[k])[r],
+                                                 np.asarray(runs[k + "_se"])[r]
+                                                 if k + "_se" in runs else None)
+                         for k in objs)  # fmt: skip
+        tag = "reference" if r == ref else ("agrees" if agree[r] else "differs")
+        out.append(f"  run {r}: {vals}  ({tag}; {xs})")
+    what = ", ".join(objs)
+    if agree.all():
+        out.append(f"the {R} runs agree within {z:g} SE on {what}")
+    else:
+        bad = [str(r) for r in range(R) if not agree[r]]
+        out.append(f"the runs do not all agree: run{'s' if len(bad) > 1 else ''} "
+                   f"{', '.join(bad)} differ{'' if len(bad) > 1 else 's'} from run {ref} by more "
+                   f"than {z:g} SE on {what}")  # fmt: skip
+    flat = [str(n) for n in at.get("flat", [])]
+    share = float(at.get("flat_share", 0.1))
+    if int(agree.sum()) >= 2:
+        X = np.asarray(runs["x"], np.float64)[agree]
+        span = np.asarray(runs["span"], np.float64)
+        if flat:
+            parts = []
+            for n in flat:
+                j = names.index(n) if n in names else None
+                u = "" if j is None or units.get(n) in (None, "", "-") else f" {units[n]}"
+                rng = "" if j is None else f"{X[:, j].min():.4g}-{X[:, j].max():.4g}{u}, "
+                parts.append(f"{n} ({rng}{100 * span[j] if j is not None else 0:.0f} % of its box)")
+            out.append(f"flat directions (the agreeing designs differ by more than "
+                       f"{100 * share:.0f} % of the box): {'; '.join(parts)}")  # fmt: skip
+        else:
+            out.append(f"no flat direction: the agreeing designs lie within {100 * share:.0f} % "
+                       "of the box in every variable")  # fmt: skip
+    return out
+
+
 def text(v: Any) -> str:
     """A name as ``str`` (HDF5 gives bytes)."""
     return v.decode() if isinstance(v, bytes | np.bytes_) else str(v)

@@ -7,7 +7,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from designopt.results.base import Record, names
+from designopt.results.base import Record, names, runs_lines
 
 SHOWN = 12
 """Front designs printed by the summary (the archive holds them all)."""
@@ -206,7 +206,16 @@ class FrontRecord(Record):
             for i in rows:
                 lines.append(f"  #{i}: {per[i][0].strip()}")
                 lines += [f"      {ln.strip()}" for ln in per[i][1:]]
+        lines += runs_lines(self.runs, self.names, self.units())
         return lines
+
+    @property
+    def runs(self) -> dict[str, Any] | None:
+        """Each run's recommended design (the compromise of its own non-dominated final
+        population) re-scored with the front (``runs``: ``x`` (R, D), every index ± SE
+        (R,), ``agree`` (R,), ``span`` (D,), attrs) with ``optimizer.n_runs`` ≥ 2; None
+        otherwise."""
+        return self.groups.get("runs")
 
     @property
     def n_samples(self) -> int:

@@ -12,7 +12,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from designopt.results.base import Record, value_text
+from designopt.results.base import SEARCH_LABEL, Record, runs_lines, value_text
 
 
 def _unit(u: str | None) -> str:
@@ -88,8 +88,10 @@ def targets_csv_text(g: Mapping[str, Any]) -> str:
 class RunRecord(Record):
     """One optimisation: groups ``optimizer`` (history (runs, T+1), best_f, best_x,
     converged_at, history_x), ``best_run`` (every index along the best run),
-    ``problem`` (names, box, info), ``final`` (the final design with every index ± SE)
-    and, after a polish, ``refine``."""
+    ``problem`` (names, box, info), ``final`` (the final design with every index ± SE,
+    re-scored on fresh samples; its values on the search's samples in ``best_run/final``)
+    and, after a polish, ``refine``; with ``optimizer.n_runs`` ≥ 2, ``runs`` (each run's
+    best design on one common fresh stream, and whether the runs agree)."""
 
     KIND: ClassVar[str] = "run"
     GROUPS: ClassVar[tuple[str, ...]] = ("optimizer", "best_run", "problem", "final")
@@ -129,7 +131,35 @@ class RunRecord(Record):
     @property
     def best_run(self) -> dict[str, np.ndarray]:
         """Every index (and ``_se``) along the best run, with ``iteration`` (T+1,)."""
-        return {k: np.asarray(v) for k, v in self.groups["best_run"].items() if k != "attrs"}
+        return {k: np.asarray(v) for k, v in self.groups["best_run"].items()
+                if k != "attrs" and not isinstance(v, Mapping)}  # fmt: skip
+
+    @property
+    def search(self) -> dict[str, Any]:
+        """The final design's values on the search's own samples (``best_run/final``:
+        f and every index with ``_se``), biased by the search's choice among designs
+        scored on them; {} in archives written before the final re-scoring."""
+        g = self.groups["best_run"].get("final", {})
+        return {k: v for k, v in g.items() if k != "attrs"}
+
+    @property
+    def fresh(self) -> bool:
+        """Whether ``final`` holds values on a fresh sample stream (``final`` attrs
+        ``samples``), not the search's own."""
+        return str(self.groups["final"].get("attrs", {}).get("samples", "")) == "fresh"
+
+    @property
+    def n_samples_search(self) -> int:
+        """Samples per design in the search (the final design's re-scoring: ``n_samples_used``)."""
+        at = self.groups["final"].get("attrs", {})
+        return int(at.get("n_samples_search", at.get("n_samples_used", 0)))
+
+    @property
+    def runs(self) -> dict[str, Any] | None:
+        """Each run's best design re-scored on one common fresh stream (``runs``: ``x``
+        (R, D), every index ± SE (R,), ``agree`` (R,), ``span`` (D,), attrs) with
+        ``optimizer.n_runs`` ≥ 2; None otherwise."""
+        return self.groups.get("runs")
 
     @property
     def final(self) -> dict[str, Any]:
@@ -163,8 +193,16 @@ class RunRecord(Record):
         fin, opt, best = self.groups["final"], self.groups["optimizer"], self.best_run_index
         lines = [f"best design (run {best} of {cfg.optimizer.n_runs}; final stage: {self.stage}):"]
         lines += [f"  {n} = {v:9.4f} {units.get(n, '')}".rstrip() for n, v in self.x.items()]
-        lines.append(f"  f     = {self.f:.5f}   ({cfg.optimizer.name} {opt['best_f'][best]:.5f}, "
-                     f"converged at iteration {opt['converged_at'][best]})")  # fmt: skip
+        srch = self.search
+        if self.fresh and "f" in srch:
+            se = fin.get("f_se")
+            lines.append(f"  f     = {value_text(self.f, se)}   (fresh samples, "
+                         f"{self.n_samples_used} per design; {SEARCH_LABEL} "
+                         f"{value_text(srch['f'], srch.get('f_se'))}; {cfg.optimizer.name} "
+                         f"converged at iteration {opt['converged_at'][best]})")  # fmt: skip
+        else:
+            lines.append(f"  f     = {self.f:.5f}   ({cfg.optimizer.name} {opt['best_f'][best]:.5f}, "
+                         f"converged at iteration {opt['converged_at'][best]})")  # fmt: skip
         if "refine" in self.groups:
             r = self.groups["refine"]
             lines.append(f"  polish ({r['attrs']['method']}, {r['attrs']['steps']} steps) "
@@ -178,6 +216,7 @@ class RunRecord(Record):
             ok = "feasible" if v <= 0 else f"violated by {v:.3g} (no feasible design found)"
             lines.append(f"  constraints: {ok}")
         lines += list(self.hint("extra_lines", []))
+        lines += [f"  {ln}" for ln in runs_lines(self.runs, self.names, units)]
         lines += [f"  warning: {w}" for w in self.warnings]
         return lines
 
@@ -185,6 +224,9 @@ class RunRecord(Record):
         """The Monte-Carlo samples behind each index (printed after a run; the command
         line's last line splits the wall time, ``designopt.cli.commands.wall_line``)."""
         n = self.n_samples_used
+        if self.fresh:
+            return (f"samples per design: {self.n_samples_search or '-'} in the search, "
+                    f"{n or '-'} fresh for the final values")  # fmt: skip
         return f"samples per design: {n or '-'}"
 
     def summary(self) -> list[str]:
@@ -204,6 +246,12 @@ class RunRecord(Record):
                                  for k in subs))  # fmt: skip
         lines += [ln[2:] if ln.startswith("  ") else ln
                   for ln in self.hint("extra_lines", [])]  # the study's own (placement)
+        srch = self.search
+        if self.fresh and "f" in srch:
+            lines.append(f"(fresh samples, {self.n_samples_used} per design; {SEARCH_LABEL}, "
+                         f"{self.n_samples_search} per design: f = "
+                         f"{value_text(srch['f'], srch.get('f_se'))})")  # fmt: skip
+        lines += runs_lines(self.runs, self.names, units)
         lines += [f"warning: {w}" for w in self.warnings]
         return lines
 

@@ -34,7 +34,7 @@ from designopt.figures.html.plots import (
     _value_band,
     merged,
 )
-from designopt.results.base import value_text
+from designopt.results.base import SEARCH_LABEL, value_text
 
 
 def _run_sections(tree: Mapping[str, Any], ids: _Ids, units: dict[str, str],
@@ -61,11 +61,13 @@ def _run_sections(tree: Mapping[str, Any], ids: _Ids, units: dict[str, str],
                                           style.label("violation", style.DIMENSIONLESS), "violation"))  # fmt: skip
         out.append(sec)
     if "best_run" in tree:
-        sec = PageSection("best-run", "The best run's indices")
+        sec = PageSection("best-run", f"The best run's indices ({SEARCH_LABEL})")
         sec.items += _best_run(tree["best_run"], ids, units, rates)
         out.append(sec)
     if "final" in tree:
         out.append(PageSection("final", "Final design", [_final_tables(tree, units)]))
+    if isinstance(tree.get("runs"), Mapping) and "agree" in tree["runs"]:
+        out.append(_runs(tree, units))
     if "refine" in tree and "f0" in tree["refine"]:
         r = tree["refine"]
         rows = [(int(i), f"{a:.6g}", f"{b:.6g}", f"{a - b:.3g}")
@@ -163,17 +165,23 @@ def _final_tables(tree: Mapping[str, Any], units: dict[str, str]) -> str:
                 for n, v, a, b in zip(names, x, lo, hi, strict=False)]  # fmt: skip
         parts.append("<h3>Final design</h3>"
                      + _table(["variable", "value", "lower", "upper", "unit"], rows))  # fmt: skip
+    srch = tree.get("best_run", {}).get("final")  # the search's values of the final design
+    srch = srch if isinstance(srch, Mapping) else None
+
+    def cell(g: Mapping[str, Any], k: str) -> str:
+        if k not in g:
+            return "-"
+        v = float(_f(g[k]))
+        if np.isnan(v):  # n/a: a ratio over too few items, with its counts
+            n, of = (float(_f(g[k + s])) if k + s in g else None for s in ("_n", "_of"))
+            return value_text(v, n=n, of=of)
+        return _num(v, float(_f(g[k + "_se"])) if k + "_se" in g else None)
+
     rows = []
     for k in _index_names(fin, skip=("x",)):
-        v = _f(fin[k])
-        if v.ndim:
+        if _f(fin[k]).ndim:
             continue
-        se = float(_f(fin[k + "_se"])) if k + "_se" in fin else None
-        if np.isnan(v):  # n/a: a ratio over too few items, with its counts
-            n, of = (float(_f(fin[k + s])) if k + s in fin else None for s in ("_n", "_of"))
-            rows.append((k, value_text(float(v), n=n, of=of), style.unit_of(k, units)))
-            continue
-        rows.append((k, _num(float(v), se), style.unit_of(k, units)))
+        rows.append((k, cell(fin, k), *([cell(srch, k)] if srch else []), style.unit_of(k, units)))
     placed = placement_table(fin)
     if placed:  # where the design puts the robot, in numbers (e.g. the ports and bases)
         parts.append("<h3>In the world frame</h3><p class='note'>each arm's placement as the "
@@ -186,11 +194,55 @@ def _final_tables(tree: Mapping[str, Any], units: dict[str, str]) -> str:
         parts.append("<h3>Warnings</h3><ul>" + "".join(f"<li>{esc(_s(w))}</li>" for w in warns)
                      + "</ul>")  # fmt: skip
     cap = f"stage: {_s(at['stage'])}" if "stage" in at else ""
+    fresh = _s(at.get("samples", "")) == "fresh"
     if "n_samples_used" in at:
-        cap += f"; Monte-Carlo samples: {_s(at['n_samples_used'])}"
+        cap += (f"; Monte-Carlo samples: {_s(at['n_samples_used'])} per design"
+                + (" on a fresh stream the search never saw (the quoted values)" if fresh else ""))  # fmt: skip
+    head = ["index", "value ± SE" + (" (fresh samples)" if fresh else "")]
+    if srch:
+        n = _s(srch.get("attrs", {}).get("n_samples", "?"))
+        head.append(f"{SEARCH_LABEL} ({n} per design)")
+        cap += ("; the search's own values of the design are biased by its choice among designs "
+                "scored on the same samples")  # fmt: skip
     parts.append("<h3>Final indices (± 1 SE)</h3>" + (f"<p class='note'>{esc(cap)}</p>" if cap else "")
-                 + _table(["index", "value ± SE", "unit"], rows))  # fmt: skip
+                 + _table([*head, "unit"], rows))  # fmt: skip
     return "".join(parts)
+
+
+def _runs(tree: Mapping[str, Any], units: dict[str, str]) -> PageSection:
+    """Each run's design re-scored on one common fresh stream, whether it agrees with the
+    reference run, and the flat directions (``runs``)."""
+    g, prob = tree["runs"], tree.get("problem", {})
+    at = g.get("attrs", {})
+    objs = [_s(k) for k in (_attr_obj(at.get("objectives")) or ["f"])]
+    X = np.atleast_2d(_f(g["x"]))
+    names = _names(prob["names"]) if "names" in prob else [f"x{i}" for i in range(X.shape[1])]
+    agree = np.asarray(_f(g["agree"])).astype(bool)
+    ref = int(_f(at.get("reference", 0)))
+    z = float(_f(at.get("z", 2.0)))
+    rows = []
+    for r in range(len(X)):
+        vals = [_num(float(_f(g[k])[r]), float(_f(g[k + "_se"])[r]) if k + "_se" in g else None)
+                for k in objs]  # fmt: skip
+        tag = "reference" if r == ref else ("agrees" if agree[r] else "differs")
+        rows.append((str(r), *(f"{v:.6g}" for v in X[r]), *vals, tag))
+    head = ["run", *(style.label(n, style.unit_of(n, units)) for n in names),
+            *(f"{k} ± SE" for k in objs), f"within {z:g} SE of run {ref}"]  # fmt: skip
+    flat = [_s(k) for k in (_attr_obj(at.get("flat")) or [])]
+    share = float(_f(at.get("flat_share", 0.1)))
+    verdict = (f"The {len(X)} runs agree within {z:g} SE on {', '.join(objs)}." if agree.all()
+               else f"Runs {', '.join(str(r) for r in np.flatnonzero(~agree))} differ from run "
+                    f"{ref} by more than {z:g} SE on {', '.join(objs)}.")  # fmt: skip
+    if agree.sum() >= 2:
+        verdict += (f" Flat directions (the agreeing designs differ by more than {100 * share:.0f} % "
+                    f"of the box): {', '.join(flat)}." if flat else
+                    f" No flat direction: the agreeing designs lie within {100 * share:.0f} % of "
+                    "the box in every variable.")  # fmt: skip
+    note = (f"{_s(at.get('pick', 'each run'))}, re-scored on one common fresh stream "
+            f"({_s(at.get('n_samples', '?'))} samples per design); a run agrees when every "
+            f"objective is within {z:g} √(SE² + SE_ref²) of the reference run's.")  # fmt: skip
+    return PageSection("runs", "Runs that agree", [f"<p class='note'>{esc(note)}</p>"
+                       f"<p>{esc(verdict)}</p>" + _table(head, rows)])  # fmt: skip
 
 
 def _teleop(t: Mapping[str, Any], ids: _Ids) -> list[PageSection]:
