@@ -103,7 +103,8 @@ class IKOptions(NamedTuple):
     window: int = 32  # database entries ranked per target (Z-order neighbours)
     block: int = 4  # steps between checks (convergence, seed change, refill)
     slots: int = 0  # items in flight (0: min(M·T, clip(M·T/4, 1024, 4096)))
-    n_best: int = 1  # converged seeds compared per target (1: the first that converges)
+    n_best: int = 1  # distinct converged seeds compared per target (1: the first found)
+    climb: int = 0  # null-space ascent steps of the score from each kept solution (0: none)
 
 
 DEFAULTS = IKOptions()
@@ -442,12 +443,27 @@ def _index(q_db: jax.Array, p_db: jax.Array, R_db: jax.Array, L: jax.Array, mode
 _CHUNK = 8192  # targets per nearest-entry search (bounds the T × window intermediates)
 
 
+def _joint_gap(a: jax.Array, b: jax.Array, rev: tuple[bool, ...], L: jax.Array) -> jax.Array:
+    """The largest joint difference of configurations a and b (..., n): revolute joints
+    by their angle apart (wrapped to [0, π]), prismatic ones in units of the reach L
+    (a scalar or (...,))."""
+    d = a - b
+    r = jnp.asarray(rev)
+    d = jnp.where(r, jnp.abs(jnp.remainder(d + math.pi, 2 * math.pi) - math.pi),
+                  jnp.abs(d) / jnp.asarray(L)[..., None])
+    return jnp.max(d, -1)
+
+
 def _nearest(index, p_t: jax.Array, R_t: jax.Array | None, L: jax.Array, mode: Mode,
-             k: int, window: int) -> jax.Array:  # fmt: skip
-    """(T, k) indices into one design's sorted database (:func:`_index`) of the k
-    entries nearest to each target among the ``window`` entries around its own Z-order
-    code (binary search), by :func:`_features` distance."""
-    lo, scale, code, f_db, _ = index
+             k: int, window: int, rev: tuple[bool, ...] = ()) -> jax.Array:  # fmt: skip
+    """(T, k) indices into one design's sorted database (:func:`_index`) of k entries
+    near each target among the ``window`` entries around its own Z-order code (binary
+    search): the nearest by :func:`_features` distance first, then, of the 2k nearest,
+    each next the one farthest in joint space from those already picked (greedy
+    farthest-point, :func:`_joint_gap`), so that the seeds start on different branches of
+    the arm (shoulder, elbow, wrist sides) rather than on one. ``rev``: the joints'
+    kinds (empty: the k nearest, in order)."""
+    lo, scale, code, f_db, q_db = index
     n = code.shape[0]
     W = min(window, n)
     T = p_t.shape[0]
@@ -464,11 +480,23 @@ def _nearest(index, p_t: jax.Array, R_t: jax.Array | None, L: jax.Array, mode: M
         cand = jnp.clip(i - W // 2, 0, n - W)[:, None] + jnp.arange(W)  # (C, W)
         d = sum((f_db[j][cand] - ft[:, j, None]) ** 2 for j in range(f_db.shape[0]))
         picks = []
-        for _ in range(min(k, W)):
+        P = min(k if not rev else 2 * k, W)  # the pool the spread seeds come from
+        for _ in range(P):
             j = jnp.argmin(d, 1)
             picks.append(j)
             d = jnp.where(jnp.arange(W) == j[:, None], jnp.inf, d)
-        return jnp.take_along_axis(cand, jnp.stack(picks, 1), 1).astype(jnp.int32)
+        pool = jnp.take_along_axis(cand, jnp.stack(picks, 1), 1).astype(jnp.int32)  # (C, P)
+        if not rev or k <= 1:
+            return pool[:, :k]
+        qp = q_db[pool]  # (C, P, n)
+        chosen = [jnp.zeros((C,), jnp.int32)]
+        gap = _joint_gap(qp, qp[:, :1], rev, L)  # (C, P)
+        for _ in range(min(k, P) - 1):
+            j = jnp.argmax(gap, 1).astype(jnp.int32)
+            chosen.append(j)
+            qj = jnp.take_along_axis(qp, j[:, None, None], 1)
+            gap = jnp.minimum(gap, _joint_gap(qp, qj, rev, L))
+        return jnp.take_along_axis(pool, jnp.stack(chosen, 1), 1)
 
     return jax.lax.map(chunk, (code_t, f_t)).reshape(-1, min(k, W))[:T]
 
@@ -511,6 +539,8 @@ def _check(mode: Mode, R_t, opts: IKOptions) -> None:
         raise ValueError(f"mode {mode!r} needs target orientations R_t")
     if min(opts.iters, opts.block, opts.n_db, opts.window, opts.n_best) < 1:
         raise ValueError("IKOptions: iters, block, n_db, window and n_best must be ≥ 1")
+    if opts.climb < 0:
+        raise ValueError("IKOptions: climb must be ≥ 0")
 
 
 def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | None,
@@ -565,11 +595,11 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
     q_sorted = index[4]  # (M, n_db, n)
     n_near = min(opts.n_nearest, opts.n_db, opts.window)
     if n_near and per_design:
-        near = jax.lax.map(lambda a: _nearest(a[:5], a[6], a[7], a[5], mode, n_near, opts.window),
-                           (*index, L, p_t, R_t))  # (M, T, k)  # fmt: skip
+        near = jax.lax.map(lambda a: _nearest(a[:5], a[6], a[7], a[5], mode, n_near, opts.window,
+                                              rev), (*index, L, p_t, R_t))  # (M, T, k)  # fmt: skip
     elif n_near:
-        near = jax.lax.map(lambda a: _nearest(a[:5], p_t, R_t, a[5], mode, n_near, opts.window),
-                           (*index, L))  # (M, T, k)  # fmt: skip
+        near = jax.lax.map(lambda a: _nearest(a[:5], p_t, R_t, a[5], mode, n_near, opts.window,
+                                              rev), (*index, L))  # (M, T, k)  # fmt: skip
     else:
         near = jnp.zeros((M, T, 1), jnp.int32)
     attempts = max(n_near + opts.n_random * opts.rounds, 1)
@@ -677,8 +707,18 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         return (*(jnp.zeros_like(x).at[to].set(x, unique_indices=True) for x in s[:4]),
                 jnp.zeros_like(s[4]).at[:, to].set(s[4], unique_indices=True), *s[5:])  # fmt: skip
 
+    def inv_k_rows(m, t, q):  # the default score: the 2-norm 1/k of the position Jacobian
+        xr = [xT[k, m] for k in range(ch.D)]
+        qc = [q[:, j] for j in range(n)]
+        _, _, J = ch.fk(xr, qc, ch.trig_q(qc, exact=True), ch.trig_x(xr), (0, 1, 2))
+        B = q.shape[0]
+        return inv_cond(jnp.stack([jnp.stack([jnp.broadcast_to(jnp.asarray(x, dtype), (B,))
+                                              for x in row], -1) for row in J], -2), "2")  # fmt: skip
+
+    score_rows = inv_k_rows if score is None else score
+
     def round_(s):
-        i, a, it, Eb, q, head, tail, qi, qa, q_out, a_out, E_out, nc, n_try, n_ref = s
+        i, a, it, Eb, q, head, tail, qi, qa, q_out, a_out, E_out, nc, n_try, n_ref, sc_out = s
         active = i < I
         ic = jnp.minimum(i, I - 1)
         qc, ok, Em, refused = blocks(i, q)
@@ -692,21 +732,41 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         last = a + 1 >= attempts
         if hopeless is not None:  # one seed only: no solution can be kept
             last = last | one_seed[ic]
+        n_conv = nc[ic]
+        dup = jnp.zeros_like(ok)
+        sc_new = jnp.zeros(ok.shape, dtype)
+        if nb > 1:  # a solution the item has already found (the same joints, or the same
+            # score: a self-motion the score is flat along, a symmetric branch) is no new
+            # one: the item goes on with its next seed (n_best counts distinct solutions)
+            m_, t_ = split(i)
+            qT = q.T
+            sc_new = on_rows(lambda r: score_rows(m_[r], t_[r], qT[r]), ok,
+                             max(ok.shape[0] // 4, 1))  # fmt: skip
+
+            def same(c, dup):
+                qs = jax.lax.dynamic_slice_in_dim(q_out, c * I, I, 1)[:, ic]  # (n, B)
+                ss = sc_out[c * I + ic]
+                near_ = (_joint_gap(qT, qs.T, rev, L[ic // T]) <= DUPLICATE) | (
+                    jnp.abs(sc_new - ss) <= DUPLICATE_SCORE * jnp.maximum(1.0, jnp.abs(ss)))
+                return dup | ((c < n_conv) & near_)
+
+            dup = ok & jax.lax.fori_loop(0, nb, same, dup)
+            ok = ok & ~dup
         # converged joints go to the item's next solution slot (of n_best); a dropped
         # seed's joints go to slot 0 when the item has none and they beat its best so far
-        n_conv = nc[ic]
         better = Em < E_out[ic]
         idx = jnp.where(active & ok, n_conv * I + i,
                         jnp.where(active & give_up & better, i, nb * I))  # fmt: skip
         q_out = q_out.at[:, idx].set(q, mode="drop")
         a_out = a_out.at[idx].set(a, mode="drop")
+        sc_out = sc_out.at[jnp.where(active & ok, idx, nb * I)].set(sc_new, mode="drop")
         E_out = E_out.at[jnp.where(idx < nb * I, i, I)].set(jnp.where(ok, -1.0, Em), mode="drop")
         nc = nc.at[jnp.where(active & ok, i, I)].add(1, mode="drop")
         n_try = n_try.at[jnp.where(active, i, I)].max(a + 1, mode="drop")
         n_ref = n_ref.at[jnp.where(active & refused, i, I)].add(1, mode="drop")
-        more = ok & (n_conv + 1 < nb)  # converged, but n_best asks for another solution
+        more = (ok & (n_conv + 1 < nb)) | dup  # n_best asks for another (new) solution
         retry = active & (give_up | more) & ~last
-        free = active & (ok | give_up)
+        free = active & (ok | give_up | dup)
         # an item whose seed was dropped goes to the back of the queue with its next seed
         at = jnp.where(retry, (tail + jnp.cumsum(retry, dtype=jnp.int32) - 1) % I, I)
         qi, qa = qi.at[at].set(i, mode="drop"), qa.at[at].set(a + 1, mode="drop")
@@ -720,7 +780,7 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         it = jnp.where(free, 0, it)
         Eb = jnp.where(free, jnp.inf, Eb)
         q = jnp.where(take[None], seed(i, a), q)
-        return i, a, it, Eb, q, head, tail, qi, qa, q_out, a_out, E_out, nc, n_try, n_ref
+        return i, a, it, Eb, q, head, tail, qi, qa, q_out, a_out, E_out, nc, n_try, n_ref, sc_out
 
     one_seed = None if hopeless is None else jnp.broadcast_to(hopeless, (M, T)).reshape(I)
     # the queue: the representatives' items, in order (all of them without ``rep``)
@@ -738,23 +798,50 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
          order, jnp.zeros((I,), jnp.int32),
          jnp.zeros((n, nb * I), dtype), jnp.zeros((nb * I,), jnp.int32),
          jnp.full((I,), jnp.inf, dtype), jnp.zeros((I,), jnp.int32),
-         jnp.zeros((I,), jnp.int32), jnp.zeros((I,), jnp.int32))  # fmt: skip
+         jnp.zeros((I,), jnp.int32), jnp.zeros((I,), jnp.int32),
+         jnp.zeros((nb * I if nb > 1 else 1,), dtype))  # fmt: skip
 
     s = jax.lax.while_loop(lambda s: jnp.any(s[0] < I), lambda s: round_(compact(s)), s)
     q_out, a_out, n_conv = s[9], s[10], s[12].reshape(M, T)
     tries, refusals = s[13].reshape(M, T), s[14].reshape(M, T)
 
     # the returned joints, checked afresh with XLA's sin and cos; of several converged
-    # solutions, the one of highest score
+    # solutions, the one of highest score, each first climbed along its self-motion
     xc = [jnp.repeat(X[:, k], T) for k in range(ch.D)]
     tx = ch.trig_x(xc)
+    n_conv_f = s[12]
+    solved = (jnp.ones((I,), bool) if rep is None else
+              jnp.repeat(jnp.asarray(rep, jnp.int32) == jnp.arange(M, dtype=jnp.int32), T))  # fmt: skip
 
     def arr(x):
         return jnp.broadcast_to(jnp.asarray(x, dtype), (I,))
 
+
+    def climb(r, q0):
+        """Rows r (items, (k,)) from their converged joints q0 (k, n) up the score along
+        the null space of the target's rows (:func:`_climb`): the climbed joints where
+        they are converged, within the limits, accepted and better; else q0."""
+        m, t = split(r)
+        xr = [xT[k, m] for k in range(ch.D)]
+        tc = tcol(r, t)
+        pt = [ptT[j, tc] for j in range(3)]
+        Rt = None
+        if RtT is not None:
+            Rt = [[RtT[3 * a + b, tc] if b in cols else 0.0 for b in range(3)] for a in range(3)]
+        return _climb(ch, xr, pt, Rt, L[m], mode, rev, lower, upper, opts,
+                      lambda q: score_rows(m, t, q),
+                      None if accept is None else (lambda q: accept(m, t, q)), q0)  # fmt: skip
+
     def result(c):
-        """The solutions of slot c (of n_best) checked afresh, and their scores."""
+        """The solutions of slot c (of n_best), climbed, checked afresh, and scored."""
         qc = [jax.lax.dynamic_slice_in_dim(q_out[j], c * I, I) for j in range(n)]
+        climbed = None
+        if opts.climb > 0:  # a representative's converged (and accepted) solutions
+            climbed = (c < n_conv_f) & solved
+            qf = jnp.stack(qc, -1)
+            qn = on_rows(lambda r: climb(r, qf[r]), climbed, min(I, CLIMB_ROWS))
+            qf = jnp.where(climbed[:, None], qn, qf)
+            qc = [qf[:, j] for j in range(n)]
         R, p, J = ch.fk(xc, qc, ch.trig_q(qc, exact=True, one=one), tx, (0, 1, 2))
         Ra = jnp.stack([jnp.stack([arr(x) for x in row], -1) for row in R], -2)
         pa = jnp.stack([arr(x) for x in p], -1).reshape(M, T, 3)
@@ -765,10 +852,11 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         inside = jnp.all((q >= lower) & (q <= upper), -1)
         conv = (pe <= opts.tol_pos * L[:, None]) & (re <= opts.tol_rot) & inside
         ok = conv
-        if accept is not None:
+        if accept is not None:  # (a climbed row's joints were accepted by the climb)
             qf, cf = q.reshape(I, n), conv.reshape(I)
-            ok = conv & on_rows(lambda r: accept(r // T, r % T, qf[r]), cf,
-                                min(I, CHECK_ROWS)).reshape(M, T)  # fmt: skip
+            need = cf if climbed is None else cf & ~climbed
+            acc = on_rows(lambda r: accept(r // T, r % T, qf[r]), need, min(I, CHECK_ROWS))
+            ok = conv & (acc if climbed is None else acc | climbed).reshape(M, T)
         ik_ = inv_cond(Ja.reshape(M, T, 3, n), "2")
         a_c = jax.lax.dynamic_slice_in_dim(a_out, c * I, I).reshape(M, T)
         return IKResult(q, ok, pe, re, ik_, a_c, conv, tries, refusals)
@@ -785,8 +873,13 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         best, sc_best = carry
         r = result(c)
         ok = r.success & ((c == 0) | (c < n_conv))
-        sc = jnp.where(ok, jnp.nan_to_num(score(r.q) if score else r.inv_k, nan=-jnp.inf),
-                       -jnp.inf)  # fmt: skip
+        if score is None:
+            val = r.inv_k
+        else:
+            qf = r.q.reshape(I, n)
+            val = on_rows(lambda rr: score(rr // T, rr % T, qf[rr]), ok.reshape(I),
+                          min(I, CHECK_ROWS)).reshape(M, T)  # fmt: skip
+        sc = jnp.where(ok, jnp.nan_to_num(val, nan=-jnp.inf), -jnp.inf)
         take = jax.lax.optimization_barrier((c == 0) | (sc > sc_best))
         best = IKResult(*(jnp.where(take.reshape(take.shape + (1,) * (x.ndim - 2)), y, x)
                           for x, y in zip(best, r, strict=True)))  # fmt: skip
@@ -799,8 +892,138 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
     return _materialised(copied(best))
 
 
+CLIMB_ROWS = 256
+"""Rows per call of the null-space climb (:func:`_climb`) after the solve."""
+CLIMB_STEP = 1.0
+"""The climb's first step length factor α (joints move α × the projected gradient)."""
+CLIMB_MAX = 0.25
+"""The climb's largest joint move per step (rad; prismatic joints in units of the reach):
+two Gauss–Newton corrections bring a move of this size back onto the target."""
+CLIMB_CORRECT = 4
+"""LM steps that bring a climb step back onto the target (the ``axis`` rows' derivative is
+exact only at a solution: the correction converges linearly at first)."""
+CLIMB_NEAR = 1e-6
+"""A climb step stands when its corrected joints are this close to the target (× the
+reach; rad): the last steps polish to the solver's tolerance."""
+NULL_EPS = 1e-12
+"""The regularisation of J Jᵀ in the null-space projector (the task rows of an ``axis``
+target have rank 5 of 6: J Jᵀ is singular, and the regularised solve stays exact there,
+since the singular direction's components of Jg and Jᵀ vanish together)."""
+
+
+def _climb(ch: _Chain, xr: list, pt: list, Rt: list | None, L: jax.Array, mode: Mode,
+           rev: tuple[bool, ...], lower: jax.Array, upper: jax.Array, opts: IKOptions,
+           score: Callable[[jax.Array], jax.Array],
+           accept: Callable[[jax.Array], jax.Array] | None, q0: jax.Array) -> jax.Array:  # fmt: skip
+    """Projected gradient ascent of ``score`` (joints (k, n) → (k,)) over a target's
+    solution set, from converged joints q0 (k, n) (design columns ``xr``, targets
+    ``pt``, ``Rt`` entry by entry, reach L (k,)). Where the chain keeps free directions
+    at the target (a seventh joint, the roll about a tool axis, the roll through a
+    port), a step moves along the score's gradient projected onto the null space of the
+    target's rows (in the LM step's joint units; N = I − Jᵀ(JJᵀ + εI)⁻¹J), then two
+    Gauss–Newton–Levenberg–Marquardt steps bring it back onto the target; it stands when
+    it is back (:data:`CLIMB_NEAR`) and scores higher, and the step length follows
+    Barzilai and Borwein (a secant along the projected gradient: in one free direction
+    Newton's step), shrinking 4× after a step that does not stand. ``opts.climb`` steps,
+    then LM steps to the solver's tolerance. The climbed joints are kept where they are
+    within the tolerance and the limits, score higher than q0 and ``accept`` takes them;
+    elsewhere q0 (converged and accepted already) is returned unchanged. Without free
+    directions the projected gradient is 0 and nothing moves."""
+    n = len(rev)
+    dtype = q0.dtype
+    B = q0.shape[0]
+    invL = 1.0 / L
+    rows = _rows(mode)
+
+    def b(x):
+        return jnp.broadcast_to(jnp.asarray(x, dtype), (B,))
+
+    tx = ch.trig_x(xr)
+
+    def resid(qc):
+        R, p, J = ch.fk(xr, qc, ch.trig_q(qc, exact=True), tx, rows)
+        return _residual(R, p, J, pt, Rt, mode, invL)
+
+    def near(e, cz, tol_p, tol_r):
+        ok = _dot(e[:3], e[:3]) <= tol_p**2
+        if mode != "position":
+            ok = ok & (_dot(e[3:], e[3:]) <= tol_r**2) & (cz > 0)
+        return jnp.broadcast_to(ok, (B,))
+
+    def lm(qc, freeze=None):
+        e, J, cz = resid(qc)
+        E = 0.5 * _dot(e, e)
+        dq = _lm_step(e, J, rev, L, opts.damping_e * E + opts.damping, qc, lower, upper)
+        new = _project([x + d for x, d in zip(qc, dq, strict=True)], lower, upper, rev)
+        if freeze is None:
+            return new
+        done = near(e, cz, 0.5 * opts.tol_pos, 0.5 * opts.tol_rot)
+        return [jnp.where(done, a, c) for a, c in zip(qc, new, strict=True)]
+
+    def value_grad(qa):
+        v, vjp = jax.vjp(score, qa)
+        g = vjp(jnp.ones_like(v))[0]
+        return jnp.nan_to_num(v, nan=-jnp.inf), jnp.nan_to_num(g, nan=0.0, posinf=0.0,
+                                                                neginf=0.0)  # fmt: skip
+
+    def direction(qc, g):
+        """(the projected gradient in joint units (k, n), whether qc is on the target)."""
+        e, J, cz = resid(qc)
+        k = len(J)
+        Jc = [[J[r][i] if rev[i] else F.mul(J[r][i], L) for i in range(n)] for r in range(k)]
+        gu = [g[:, i] if rev[i] else g[:, i] * L for i in range(n)]
+        Jg = [_dot(Jc[r], gu) for r in range(k)]
+        A = [[F.add(_dot(Jc[i], Jc[j]), NULL_EPS if i == j else 0.0) for j in range(k)]
+             for i in range(k)]  # fmt: skip
+        y = _chol_solve(A, Jg)
+        du = [F.sub(gu[i], F.total(F.mul(Jc[r][i], y[r]) for r in range(k))) for i in range(n)]
+        d = jnp.stack([b(du[i]) if rev[i] else b(du[i]) * L for i in range(n)], -1)
+        return d, near(e, cz, CLIMB_NEAR, CLIMB_NEAR)
+
+    def step(i, c):
+        """Step i: a trial along the projected gradient, corrected and scored (step 0
+        scores q0 itself: one copy of the score's gradient in the program)."""
+        qa, s, d, al, s0 = c
+        nd = jnp.max(jnp.abs(d), -1)
+        h = jnp.where(i == 0, 0.0, jnp.minimum(al, CLIMB_MAX / jnp.maximum(nd, jnp.finfo(dtype).tiny)))
+        qt = _project([qa[:, j] + h * d[:, j] for j in range(n)], lower, upper, rev)
+        qt = jax.lax.fori_loop(0, jnp.where(i == 0, 0, CLIMB_CORRECT), lambda _, q: lm(q), qt)
+        qta = jnp.stack(qt, -1)
+        st, gt = value_grad(qta)
+        dt, on = direction(qt, gt)
+        up = (i == 0) | (on & (st > s))
+        dq, dd = qta - qa, dt - d
+        curv = -jnp.sum(dq * dd, -1)
+        bb = jnp.where(curv > 0, jnp.sum(dq * dq, -1) / jnp.where(curv > 0, curv, 1.0), 2 * al)
+        al = jnp.where(i == 0, al, jnp.where(up, jnp.clip(bb, 1e-6, 1e3), al / 4))
+        return (jnp.where(up[:, None], qta, qa), jnp.where(up, st, s),
+                jnp.where(up[:, None], dt, d), al, jnp.where(i == 0, st, s0))  # fmt: skip
+
+    z = jnp.zeros((B,), dtype)
+    c0 = (q0, z - jnp.inf, jnp.zeros_like(q0), z + CLIMB_STEP, z)
+    qa, s, _, _, s0 = jax.lax.fori_loop(0, opts.climb + 1, step, c0)
+    qc = jax.lax.fori_loop(0, 2 * CLIMB_CORRECT, lambda _, q: lm(q, freeze=True), [qa[:, j] for j in range(n)])
+    qa = jnp.stack(qc, -1)
+    R, p, _ = ch.fk(xr, qc, ch.trig_q(qc, exact=True), tx, None)
+    e, _, cz = _residual(R, p, None, pt, Rt, mode, invL)
+    inside = jnp.all((qa >= lower) & (qa <= upper), -1)
+    keep = near(e, cz, 0.5 * opts.tol_pos, 0.5 * opts.tol_rot) & inside & (s > s0)
+    keep = keep & (score(qa) > s0)
+    if accept is not None:
+        keep = keep & accept(qa)
+    return jnp.where(keep[:, None], qa, q0)
+
+
 CHECK_ROWS = 256
 """Rows per call of an ``accept`` check after the solve (:func:`on_rows`)."""
+DUPLICATE = 1e-6
+"""Two converged solutions of a target are one when no joint differs by more than this
+(rad; prismatic joints in units of the reach): seeds converge to 1e-9."""
+DUPLICATE_SCORE = 1e-7
+"""... or when their scores agree to this (relative above 1): the same point of a
+self-motion the score does not see (a straight instrument's roll about its own axis
+leaves the position Jacobian as it is), or a branch symmetric to one found (a wrist
+flipped). Either way it adds nothing to the choice of the best."""
 
 
 def on_rows(fn: Callable[[jax.Array], jax.Array], mask: jax.Array, k: int) -> jax.Array:

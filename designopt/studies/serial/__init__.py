@@ -80,7 +80,9 @@ def _targets(s: SerialSettings, x: Any, keys: Any, dtype: Any) -> dict[str, Any]
     in the world frame; the run's own targets and IK seeds (``blocks.solution``, the
     program the figures use). ``arm_values`` (A, K): each arm's port and base
     (:func:`_placement`), written on every row of ``show --csv``. Designs ``x`` (P, D)
-    (a front's): every array but ``target_p`` with a leading design axis P."""
+    (a front's): every array but ``target_p`` with a leading design axis P. For one
+    design, attrs ``ik_better`` and ``ik_better_n``: the IK's coverage figure
+    (``blocks.coverage``)."""
     if s.indices.measure != "task":
         return None
     import numpy as np
@@ -105,6 +107,13 @@ def _targets(s: SerialSettings, x: Any, keys: Any, dtype: Any) -> dict[str, Any]
     types = [j.type for j in s.chain.joints]
     out["attrs"] = {"joints": list(joint_names(s)), "types": types, "length_unit": u,
                     "q_units": ["rad" if t == "R" else u for t in types]}  # fmt: skip
+    if not many:  # the final design: how often a second, independent set of IK seeds
+        # finds a better solution (blocks.coverage; attrs ik_better, ik_better_n)
+        from designopt.studies.serial import blocks
+
+        one = {k: (v if k in ("target_p", "target_R") else v[:, 0] if s.arms is not None
+                   else v[0, 0]) for k, v in sol.items()}  # fmt: skip
+        out["attrs"] |= blocks.coverage(s, X[0], keys, one, dtype)
     pl = _placement(s, X)
     if pl is not None:
         cols, vals = [], []

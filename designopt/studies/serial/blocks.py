@@ -122,8 +122,8 @@ def host_params(s: SerialSettings, keys: Any, dtype: Any) -> tuple[Mechanism, di
     return mech, p | bodies.base_params(s, mech, dtype) | taskindex.scene_params(s, dtype, mech)
 
 
-def solution(s: SerialSettings, x: Any, keys: Any,
-             dtype: Any = jnp.float64) -> dict[str, np.ndarray]:  # fmt: skip
+def solution(s: SerialSettings, x: Any, keys: Any, dtype: Any = jnp.float64,
+             ik_key: Any = None, first: int | None = None) -> dict[str, np.ndarray]:  # fmt: skip
     """The per-target solution of one design on a run's targets, as NumPy: ``target_p``
     (N, 3) (``target_R`` (N, 3, 3) with a tool axis), ``success`` (N,) bool, ``inv_k``,
     ``manipulability``, ``joint_margin`` (0 where unreached), ``q`` (N, n), ``pos_err``,
@@ -132,12 +132,18 @@ def solution(s: SerialSettings, x: Any, keys: Any,
     order), ``keys`` the run's named streams (``record.keys()``): the targets and the
     IK's seeds are those of the run, so the means of these values are the run's final
     indices (figures and the report's cloud read it). It runs the run's own compiled
-    block program (:func:`program`), the design in every row of the block."""
+    block program (:func:`program`), the design in every row of the block. ``ik_key``:
+    another key for the IK's seeds (the same targets, an independent set of seeds:
+    :func:`coverage`); ``first``: only the first that many targets."""
 
     if jnp.dtype(dtype) == jnp.float64 and not jax.config.jax_enable_x64:
         raise ValueError("the task's inverse kinematics needs float64: call "
                          "jax.config.update('jax_enable_x64', True) first")  # fmt: skip
     mech, p = host_params(s, keys, dtype)
+    if ik_key is not None:  # the IK's seeds come from the sample key (taskindex.chunk_values)
+        p["sample_key"] = ik_key
+    if first is not None:
+        p = p | {k: p[k][:first] for k in ("target_p", "target_R") if k in p}
     dt = np.dtype(jnp.dtype(dtype))
     xv = np.asarray([x[k] for k in s.variables] if hasattr(x, "keys") else x, dt)
     X = np.repeat(xv[None], DESIGNS, 0)
@@ -146,3 +152,34 @@ def solution(s: SerialSettings, x: Any, keys: Any,
     out = {k: np.asarray(v[0, 0] if s.arms is None else v[:, 0]) for k, v in per.items()}
     out["success"] = out["success"] > 0.5
     return out | {k: np.asarray(p[k]) for k in ("target_p", "target_R") if k in p}
+
+
+COVERAGE_STREAM = 0x434F5645  # "COVE"
+COVERAGE_MIN = 64
+COVERAGE_BETTER = 1e-3
+COVERAGE_WARN = 0.02
+"""The IK's coverage check (:func:`coverage`): at least :data:`COVERAGE_MIN` targets
+solved again with an independent set of seeds (the key ``fold_in(sample key,
+COVERAGE_STREAM)``); a target where that solve finds a solution better by more than
+:data:`COVERAGE_BETTER` counts; a share above :data:`COVERAGE_WARN` is warned about."""
+
+
+def coverage(s: SerialSettings, x: Any, keys: Any, sol: dict[str, np.ndarray],
+             dtype: Any = jnp.float64) -> dict[str, float]:  # fmt: skip
+    """How often the IK's kept solution is not the best it could have kept: the run's
+    first chunk of targets (at least :data:`COVERAGE_MIN`, at most the task's) solved
+    again for the design ``x`` with an independent set of seeds, and compared target by
+    target (and arm by arm) with the run's own solution ``sol`` (:func:`solution`) by
+    the score the IK maximises (``study.task.ik.best``: 1/k, or the clearance): the
+    share of those targets where the second solve is better by more than
+    :data:`COVERAGE_BETTER` (or reaches a target the first did not). {"ik_better": the
+    share, "ik_better_n": targets compared (× arms)}."""
+    N = int(np.asarray(sol["target_p"]).shape[0])
+    K = min(N, max(COVERAGE_MIN, taskindex.chunk(s)))
+    key = jax.random.fold_in(keys["samples"], COVERAGE_STREAM)
+    alt = solution(s, x, keys, dtype, ik_key=key, first=K)
+    name = "clearance" if s.task.ik.best == "clearance" else "inv_k"  # type: ignore[union-attr]
+    a_ok, b_ok = np.asarray(alt["success"]), np.asarray(sol["success"])[..., :K]
+    a_v, b_v = np.asarray(alt[name], np.float64), np.asarray(sol[name], np.float64)[..., :K]
+    better = a_ok & (~b_ok | (a_v > b_v + COVERAGE_BETTER))
+    return {"ik_better": float(np.mean(better)), "ik_better_n": float(better.size)}

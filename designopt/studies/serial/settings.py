@@ -276,8 +276,10 @@ AnyConstraint = Annotated[
 class TaskIK(Section):
     """The IK behind ``measure: task`` (``designopt.kinematics.ik.IKOptions``, whose
     defaults these are): LM steps per seed, rounds of random seeds, FK-database size,
-    seeds per target (nearest database entries, then random draws), converged seeds
-    compared (``n_best``: the best by the study's 1/k is kept), tolerances (position ×
+    seeds per target (nearest database entries spread over the arm's branches, then
+    random draws), distinct converged solutions compared (``n_best``: the best by
+    ``best``, the study's 1/k (``dexterity``) or the ``clearance``, is kept), the
+    null-space climb of that score from each (``climb`` steps; 0: none), tolerances (position ×
     the reach scale, orientation in rad), the damping (λ = damping_e·E + damping), and
     the scheduling (stall factor, Z-order window, steps per block, slots in flight)."""
 
@@ -287,6 +289,8 @@ class TaskIK(Section):
     n_nearest: int = Field(4, ge=0, le=64)
     n_random: int = Field(6, ge=0, le=64)
     n_best: int = Field(2, ge=1, le=64)
+    climb: int = Field(0, ge=0, le=200)
+    best: Literal["dexterity", "clearance"] = "dexterity"
     tol_pos: float = Field(1e-9, gt=0, le=1)
     tol_rot: float = Field(1e-9, gt=0, le=1)
     damping: float = Field(1e-16, gt=0, le=1)
@@ -517,6 +521,9 @@ class SerialSettings(StudySettings):
                 raise ValueError(f"indices.sampler: measure 'task' draws its targets "
                                  f"uniformly in the task region; '{ind.sampler}' is for the "
                                  "joint and cartesian measures (give sampler: uniform)")  # fmt: skip
+            if self.task.ik.best == "clearance" and self.collision is None:
+                raise ValueError("task.ik.best: 'clearance' keeps the solution farthest from "
+                                 "the obstacles: give study.collision, or best: dexterity")  # fmt: skip
         elif self.task is not None:
             raise ValueError(f"task: a task region is scored under indices.measure: task; "
                              f"this config's measure is '{ind.measure}' (set measure: task "

@@ -280,14 +280,20 @@ def chunk_values(mech: Mechanism, s: SerialSettings, params: dict[str, Any], ful
     def jac(q):  # the study's Jacobian block (A·M, C, rows, n) at joints q (A·M, C, n)
         return jax.vmap(lambda x, q: mech.model.jacobian(x, q, rows=rows))(X, q)
 
-    def score(q):  # of several converged seeds, keep the best-conditioned
-        return inv_cond(jac(q) * sc[:, None], ind.norm, ind.normalized)
+    def score(m, t, q):  # what "best" means at a target (items: rows m of X, joints q)
+        J = jax.vmap(lambda x, q: mech.model.jacobian(x, q, rows=rows))(X[m], q)
+        return inv_cond(J * sc[:, None], ind.norm, ind.normalized)
 
     accept = None
     if geo is not None:
 
         def accept(m, t, q):
             return clearance(m, pt[t], q)[0] >= gp["margin"].astype(dtype)  # type: ignore[index]
+
+        if s.task.ik.best == "clearance":  # type: ignore[union-attr]
+
+            def score(m, t, q):  # as far from the anatomy (and the rest) as the arm can be
+                return clearance(m, pt[t], q)[0]
 
     # a design equal to an earlier one of the block (a padded block's copies, particles
     # that met) is solved once: its representative's solutions are copied (ik.solve)
