@@ -410,6 +410,7 @@ SKIP: dict[str, str] = {
     "srun designopt run configs/big.yaml --devices 32 --quiet":
         "a SLURM cluster and a cluster's own config (configs/big.yaml is an example name)",
     "python benchmarks/main_job.py --repeat 3": BENCH + " (cold and warm pairs of master9)",
+    "python benchmarks/best_solution.py": BENCH + " (its comparison is tests/test_best_solution.py)",
     "python benchmarks/mo_nsga2.py": BENCH + "; needs pymoo (.[bench])",
     "python benchmarks/mo_nsga2.py [--runs 11] [--repeat 3] [--problems …] [--float32] "
     "[--survival pruning|crowding]": BENCH + "; needs pymoo (.[bench])",
