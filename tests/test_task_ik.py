@@ -159,7 +159,7 @@ def test_n_best_keeps_the_best_conditioned_of_the_converged_seeds():
     one, four = run(1), run(4)
     worst = run(
         4,
-        lambda q: (
+        lambda m, t, q: (  # rows: design indices, target indices, joints (B, n)
             -inv_cond(
                 jax.vmap(lambda q1: SIX_R.jacobian(jnp.asarray(PUMA), q1, rows=(0, 1, 2)))(q), "2"
             )

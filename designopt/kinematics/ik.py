@@ -555,9 +555,11 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
     field has leading axes (M, T). The database draws and the seeds' hashes are shared
     by the designs (common random numbers); the designs' targets share one queue of
     slots. With ``opts.n_best`` > 1 a target's solver goes on after a seed converged,
-    until ``n_best`` have (or its seeds run out), and keeps the solution of highest
-    ``score(q)`` (q (M, T, n) → (M, T); default the 2-norm 1/k of the position Jacobian,
-    :attr:`IKResult.inv_k`). ``accept(m, t, q)`` (design indices (B,), target indices
+    until ``n_best`` distinct solutions have (or its seeds run out), and keeps the
+    solution of highest ``score(m, t, q)`` (rows: design indices (B,), target indices
+    (B,), joints (B, n) → (B,); default the 2-norm 1/k of the position Jacobian,
+    :attr:`IKResult.inv_k`), each first climbed along its self-motion when
+    ``opts.climb`` > 0 (:func:`_climb`). ``accept(m, t, q)`` (design indices (B,), target indices
     (B,), joints (B, n) → bool (B,)), e.g. "collision-free": a converged seed it refuses
     is dropped like one that failed and the target goes on with its next seed; only
     accepted solutions count as successes (and towards ``n_best``). ``t0`` (an array
@@ -1062,6 +1064,7 @@ def solve_design(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Arra
                  opts: IKOptions = DEFAULTS,
                  score: Callable[[jax.Array], jax.Array] | None = None) -> IKResult:  # fmt: skip
     """IK of T targets (p_t (T, 3), R_t (T, 3, 3) or None) for one design X (D,)
-    (:func:`solve` with M = 1; ``score`` maps q (1, T, n) to (1, T))."""
+    (:func:`solve` with M = 1; ``score(m, t, q)`` as :func:`solve`'s: rows' design and
+    target indices (B,) and joints (B, n) to (B,))."""
     r = solve(model, jnp.asarray(X)[None], p_t, R_t, lower, upper, key, mode, opts, score)
     return IKResult(*(x[0] for x in r))
