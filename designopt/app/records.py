@@ -31,7 +31,21 @@ def binder(rec: Record) -> tuple[Any, dict[str, Any]]:
         # the study's checks passed when the run was made: not again (they compile
         # programs and build distance grids; ``show`` needs the typed config)
         cfg = validate(rec.raw_config(), f"archive ({rec.kind})", folder=folder, checks=False)
-    return cfg, study_hints(cfg, rec.groups.get("final"), rec.groups.get("front"))
+    hints = study_hints(cfg, rec.groups.get("final"), rec.groups.get("front"))
+    fin = rec.groups.get("final")
+    if isinstance(fin, dict) and str(fin.get("attrs", {}).get("samples", "")) == "fresh":
+        hints["final_stream"] = lambda: _final_stream(cfg, rec)
+    return cfg, hints
+
+
+def _final_stream(cfg: Any, rec: Record) -> tuple[Any, dict[str, Any]]:
+    """(study settings, named keys) of the samples a run's ``final/`` values are on: the
+    fresh ``final`` stream with ``final.n_samples`` (``app.rescoring.stream``)."""
+    from designopt.app import rescoring
+    from designopt.studies import get
+
+    fr = rescoring.stream(cfg, get(cfg.study.name), rec.keys(), "final", f"archive ({rec.kind})")
+    return fr.cfg.study, fr.keys
 
 
 def study_hints(cfg: Any, final: Any = None, front: Any = None) -> dict[str, Any]:

@@ -58,8 +58,9 @@ MIN_DEFAULT = 30
 class Fresh:
     """A re-scoring's plan: the ``section`` (``front`` or ``final``) whose ``n_samples``
     it takes, the config ``cfg`` with that many samples per design (the study's
-    ``Cost.samples_key``), the named ``keys`` with ``samples`` the fresh stream, and
-    ``n`` (samples per design); ``problem`` once built (:func:`problem`)."""
+    ``Cost.samples_key``), the named ``keys`` with ``samples`` the fresh stream, ``n``
+    (samples per design) and ``n_search`` (the search's); ``problem`` once built
+    (:func:`problem`)."""
 
     section: str
     cfg: Any
@@ -72,8 +73,11 @@ class Fresh:
 def samples(job: Any, section: str) -> int:
     """Samples per design of the re-scoring: ``<section>.n_samples`` or 4 × the study's
     own (a final re-scoring: at least :data:`MIN_DEFAULT`)."""
-    cost = job.study.cost(job.cfg.study)
-    n = getattr(job.cfg, section).n_samples
+    return _samples(job.cfg, job.study.cost(job.cfg.study), section)
+
+
+def _samples(cfg: Any, cost: Any, section: str) -> int:
+    n = getattr(cfg, section).n_samples
     if n:
         return int(n)
     n = 4 * int(cost.samples)
@@ -81,20 +85,26 @@ def samples(job: Any, section: str) -> int:
 
 
 def plan(job: Any, section: str = "front") -> Fresh:
-    """The re-scoring of ``section`` for ``job``: its config (the study's samples key set
-    to ``<section>.n_samples``; a study scoring in blocks keeps its chunk, so the
-    re-scoring runs in the search's own block program; a normalised objective probes
-    only the fewest designs, as its bounds are replaced by the run's) and its keys (the
-    fresh stream). A sample count the study refuses: ConfigError naming
-    ``<section>.n_samples``. Cached on the job (a sweep's members share it)."""
+    """The re-scoring of ``section`` for ``job`` (:func:`stream`), cached on the job (a
+    sweep's members share it)."""
+    cache = job.__dict__.setdefault("_fresh", {})
+    if section not in cache:
+        cache[section] = stream(job.cfg, job.study, job.keys, section, job.where)
+    return cache[section]
+
+
+def stream(cfg: Any, study: Any, keys: Mapping[str, Any], section: str = "final",
+           where: str = "config") -> Fresh:  # fmt: skip
+    """The re-scoring of ``section`` for the validated ``cfg`` of ``study`` with the named
+    ``keys``: its config (the study's samples key set to ``<section>.n_samples``; a study
+    scoring in blocks keeps its chunk, so the re-scoring runs in the search's own block
+    program; a normalised objective probes only the fewest designs, as its bounds are
+    replaced by the run's) and its keys (``samples``: the fresh stream). A sample count
+    the study refuses: ConfigError naming ``<section>.n_samples``."""
     from designopt.app import sweeps
 
-    cache = job.__dict__.setdefault("_fresh", {})
-    if section in cache:
-        return cache[section]
-    cfg = job.cfg
-    cost = job.study.cost(cfg.study)
-    n = samples(job, section)
+    cost = study.cost(cfg.study)
+    n = _samples(cfg, cost, section)
     c = cfg
     keep = {cost.chunk_key: int(cost.chunk)} if cost.designs else {}
     if section == "final" and cost.norm_key and cfg.study.pareto is None:
@@ -102,17 +112,15 @@ def plan(job: Any, section: str = "front") -> Fresh:
     if cost.samples > 1:
         try:
             # the study's own checks passed for the run's config: only sample counts differ
-            c = sweeps.apply(cfg, {cost.samples_key: n} | keep, job.where, checks=False)
+            c = sweeps.apply(cfg, {cost.samples_key: n} | keep, where, checks=False)
         except (ValueError, ConfigError) as e:
-            why = str(e).removeprefix(job.where + ": ")
-            raise ConfigError(f"{job.where}: key '{section}.n_samples': {why}") from None
+            why = str(e).removeprefix(where + ": ")
+            raise ConfigError(f"{where}: key '{section}.n_samples': {why}") from None
     else:
         n = int(cost.samples)  # a closed-form study: the same numbers on any samples
-    fresh = dict(job.keys) | {"samples": jax.random.fold_in(jax.random.key(cfg.seed),
-                                                            STREAMS[section])}  # fmt: skip
-    out = Fresh(section, c, fresh, n, int(cost.samples))
-    cache[section] = out
-    return out
+    fresh = dict(keys) | {"samples": jax.random.fold_in(jax.random.key(cfg.seed),
+                                                        STREAMS[section])}  # fmt: skip
+    return Fresh(section, c, fresh, n, int(cost.samples))
 
 
 def problem(job: Any, section: str = "front", like: Problem | None = None) -> Problem:

@@ -154,6 +154,14 @@ class RunRecord(Record):
         at = self.groups["final"].get("attrs", {})
         return int(at.get("n_samples_search", at.get("n_samples_used", 0)))
 
+    def final_stream(self) -> tuple[Any, dict[str, Any]]:
+        """(study settings, named keys) of the samples ``final/`` is on, for drawing the
+        final design where its quoted values were measured (a task's targets): the fresh
+        ``final`` stream with ``final.n_samples`` (from the binder); a run written before
+        the re-scoring: its own (``config.study``, ``keys()``)."""
+        made = self.hint("final_stream")
+        return made() if made is not None else (self.config.study, self.keys())
+
     @property
     def runs(self) -> dict[str, Any] | None:
         """Each run's best design re-scored on one common fresh stream (``runs``: ``x``
