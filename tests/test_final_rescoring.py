@@ -86,7 +86,7 @@ def test_runs_lines_say_which_runs_differ():
                    "flat": [], "n_samples": 100, "pick": "each run's best design"}}  # fmt: skip
     lines = runs_lines(g, ["l1", "l2"])
     assert "  run 2: f = -0.50000 ± 1.0e-02  (differs; l1 = 0.3, l2 = 0.9)" in lines
-    assert "the runs do not all agree: run 2 differs from run 0 by more than 2 SE on f" in lines
+    assert "the runs do not all agree within 2 SE of run 0: run 2 on f (35.4 SE)" in lines
     assert lines[-1].startswith("no flat direction")
 
 

@@ -124,10 +124,19 @@ def runs_lines(runs: Mapping[str, Any] | None, names: list[str],
     if agree.all():
         out.append(f"the {R} runs agree within {z:g} SE on {what}")
     else:
-        bad = [str(r) for r in range(R) if not agree[r]]
-        out.append(f"the runs do not all agree: run{'s' if len(bad) > 1 else ''} "
-                   f"{', '.join(bad)} differ{'' if len(bad) > 1 else 's'} from run {ref} by more "
-                   f"than {z:g} SE on {what}")  # fmt: skip
+        why = []
+        for r in np.flatnonzero(~agree):
+            far = []
+            for k in objs:
+                v, v0 = float(np.asarray(runs[k])[r]), float(np.asarray(runs[k])[ref])
+                se = np.asarray(runs.get(k + "_se", np.zeros(R)), np.float64)
+                s = float(np.hypot(np.nan_to_num(se[r]), np.nan_to_num(se[ref])))
+                if not np.isfinite(v - v0):
+                    far.append(f"{k} (n/a)")
+                elif abs(v - v0) > z * s:
+                    far.append(f"{k} ({abs(v - v0) / s:.1f} SE)" if s > 0 else k)
+            why.append(f"run {r} on {', '.join(far)}")
+        out.append(f"the runs do not all agree within {z:g} SE of run {ref}: {'; '.join(why)}")
     flat = [str(n) for n in at.get("flat", [])]
     share = float(at.get("flat_share", 0.1))
     if int(agree.sum()) >= 2:
@@ -138,7 +147,7 @@ def runs_lines(runs: Mapping[str, Any] | None, names: list[str],
             for n in flat:
                 j = names.index(n) if n in names else None
                 u = "" if j is None or units.get(n) in (None, "", "-") else f" {units[n]}"
-                rng = "" if j is None else f"{X[:, j].min():.4g}-{X[:, j].max():.4g}{u}, "
+                rng = "" if j is None else f"{X[:, j].min():.4g} to {X[:, j].max():.4g}{u}, "
                 parts.append(f"{n} ({rng}{100 * span[j] if j is not None else 0:.0f} % of its box)")
             out.append(f"flat directions (the agreeing designs differ by more than "
                        f"{100 * share:.0f} % of the box): {'; '.join(parts)}")  # fmt: skip
