@@ -47,6 +47,13 @@ def record():
     plt.close("all")
 
 
+def _final(rec):
+    """(study settings, x, keys) of the samples the record's final/ values are on (the
+    fresh final stream: what the figures draw)."""
+    s, keys = rec.final_stream()
+    return s, rec.x, keys
+
+
 def _inv_k_2r(l1: float, l2: float, q2: np.ndarray) -> np.ndarray:
     """σmin/σmax of the planar 2R position Jacobian: σ1σ2 = |det J| = l1 l2 |sin q2| and
     σ1² + σ2² = ‖J‖_F² = l1² + 2 l2² + 2 l1 l2 cos q2, so 1/k = |det J|/σmax²."""
@@ -60,10 +67,10 @@ def test_cloud_is_the_final_design_at_its_ik_solutions(run):
     _, rec = run
     l1, l2 = rec.x["l1"], rec.x["l2"]
     c = serial_figs.cloud(rec)
-    sol = blocks.solution(rec.config.study, rec.x, rec.keys())
+    sol = blocks.solution(*_final(rec))
     p, ok, flag = c["xyz"], ~c["flag"], c["flag"]
     N = len(p)
-    assert N == 256 and p.shape == (N, 3) and np.all(p[:, 2] == 0)
+    assert N == 1024 and p.shape == (N, 3) and np.all(p[:, 2] == 0)  # final.n_samples: 4 × 256
     np.testing.assert_array_equal(p, sol["target_p"])
     r = np.hypot(p[:, 0], p[:, 1])
     assert flag[r > l1 + l2 + 1e-9].all() and (r > l1 + l2).sum() > 20  # out of reach
@@ -100,7 +107,7 @@ def test_task_figure_shows_targets_by_inv_k_and_unreached(run, record, tmp_path)
     (fig,) = [f for n, f in record if n == "task"]
     (ax,) = [a for a in fig.axes if not hasattr(a, "_colorbar")]
     dots, crosses = ax.collections
-    sol = blocks.solution(rec.config.study, rec.x, rec.keys())
+    sol = blocks.solution(*_final(rec))
     ok = sol["success"]
     p = sol["target_p"]
     got = dots.get_offsets()
@@ -149,7 +156,7 @@ def test_task_figure_draws_the_arm_at_its_representative_targets(run, record, tm
     serial_figs.draw_task(rec, tmp_path)
     (fig,) = [f for n, f in record if n == "task"]
     (ax,) = [a for a in fig.axes if not hasattr(a, "_colorbar")]
-    sol = blocks.solution(rec.config.study, rec.x, rec.keys())
+    sol = blocks.solution(*_final(rec))
     ok, ik = sol["success"], sol["inv_k"]
     reps = drawing.representatives(sol)
     assert [n for n, _ in reps] == ["worst-conditioned", "median", "best-conditioned"]
@@ -178,7 +185,7 @@ def test_task_report_slider_moves_the_arm(run, tmp_path):
     from designopt.figures.html import robot as hrobot
 
     out, rec = run
-    sol = blocks.solution(rec.config.study, rec.x, rec.keys())
+    sol = blocks.solution(*_final(rec))
     view = report.run_view(rec)
     picks = drawing.slider_targets(sol)
     assert [p.label for p in view.poses] == [lab for lab, _ in picks] and len(picks) >= 5

@@ -305,11 +305,11 @@ def _one_robot(rec: RunRecord, sol: dict[str, np.ndarray] | None) -> robot.Scene
     region = s.task.region if s.task is not None else None
     around = {"region": region, **drawing.obstacles_and_ports(s, dict(rec.x))}
     if sol is not None and s.arms is not None:
-        tup = drawing.arm_tuples(s, mech, x, sol, rec.keys(), counted=False)
+        tup = drawing.arm_tuples(s, mech, x, sol, final_keys(rec), counted=False)
         if tup:
-            st = drawing.tuple_stats(s, mech, sol, rec.keys())
+            st = drawing.tuple_stats(s, mech, sol, final_keys(rec))
             label, arms, pairs, _ = tup[0]
-            perm = drawing._tuples(s, mech, sol, rec.keys())[0]
+            perm = drawing._tuples(s, mech, sol, final_keys(rec))[0]
             tg = [np.asarray(sol["target_p"])[perm[k][st.median]] for k in range(len(s.arms))]
             return robot.Scene(arms=arms, collisions=pairs, marks=[(t, "#d62728") for t in tg],
                                title=f"the final design at the {label}\n{st.text()}", **around)  # fmt: skip
@@ -436,10 +436,20 @@ def _uniform_q(mech: Mechanism, rec: RunRecord, n: int) -> np.ndarray:
     return mech.lower + (mech.upper - mech.lower) * rng.uniform(size=(n, mech.n))
 
 
+def final_keys(rec: Any) -> Any:
+    """The named keys of the samples the record's ``final/`` values are on (the fresh
+    ``final`` stream, ``RunRecord.final_stream``; a record without one: its own)."""
+    fs = getattr(rec, "final_stream", None)
+    return fs()[1] if fs is not None else rec.keys()
+
+
 def task_solution(rec: RunRecord) -> dict[str, np.ndarray]:
-    """The final design's per-target solution on the run's targets
-    (``blocks.solution``): targets, success, 1/k, joints."""
-    return blocks.solution(rec.config.study, rec.x, rec.keys())
+    """The final design's per-target solution on the targets its ``final/`` values were
+    measured on (``blocks.solution`` on ``RunRecord.final_stream``): targets, success,
+    1/k, joints."""
+    fs = getattr(rec, "final_stream", None)
+    s, keys = fs() if fs is not None else (rec.config.study, rec.keys())
+    return blocks.solution(s, rec.x, keys)
 
 
 def plane(p: np.ndarray, rtol: float = 1e-9) -> tuple[np.ndarray, tuple[str, str]] | None:
@@ -540,7 +550,7 @@ def draw_task(rec: RunRecord, folder: Path,
     x = np.asarray(list(rec.x.values()), np.float64)
     if s.arms is not None:  # every arm at one tuple of targets; targets where all reach
         sol = drawing.combined(sol_all)
-        scene = drawing.arms_scene(s, mech, x, sol_all, rec.keys())
+        scene = drawing.arms_scene(s, mech, x, sol_all, final_keys(rec))
     else:
         sol = sol_all
         scene = drawing.task_scene(s, mech, x, sol)

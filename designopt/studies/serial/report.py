@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from designopt.figures.robot import Scene
-from designopt.studies.serial import blocks, figures
+from designopt.studies.serial import figures
 from designopt.studies.serial.drawing import (
     arms,
     design_pose,
@@ -25,6 +25,7 @@ from designopt.studies.serial.drawing import (
     study_arms,
     task_scene,
 )
+from designopt.studies.serial.figures import final_keys, task_solution
 from designopt.studies.serial.mechanism import Mechanism, build
 from designopt.studies.serial.settings import SerialSettings, UrdfChain, length_unit
 
@@ -68,18 +69,19 @@ def run_view(rec: Any):
         from designopt.figures.html.robot import Pose
         from designopt.studies.serial.drawing import arm_tuples, arms_scene, tuple_stats
 
-        sol_all = blocks.solution(s, rec.x, rec.keys())
-        scene.targets = arms_scene(s, mech, x, sol_all, rec.keys(), budget=None).targets
-        tup = arm_tuples(s, mech, x, sol_all, rec.keys(), budget=None)
+        fkeys = final_keys(rec)  # where final/'s values were measured
+        sol_all = task_solution(rec)
+        scene.targets = arms_scene(s, mech, x, sol_all, fkeys, budget=None).targets
+        tup = arm_tuples(s, mech, x, sol_all, fkeys, budget=None)
         poses = [Pose(lab, row, [hover(s, a.label, q, None) for a, q in zip(row, qs, strict=True)])
                  for lab, row, _, qs in tup]  # fmt: skip
         if not poses:
             row = study_arms(s, mech, x, q0, budget=None)
             poses = [Pose("home pose", row, [hover(s, a.label, q0) for a in row])]
         what = ("tuples of targets (one per arm): the median gap (first), the tightest (next "
-                "step) and the loosest; " + tuple_stats(s, mech, sol_all, rec.keys()).text())
+                "step) and the loosest; " + tuple_stats(s, mech, sol_all, fkeys).text())
     elif s.indices.measure == "task":
-        sol = blocks.solution(s, rec.x, rec.keys())
+        sol = task_solution(rec)
         p = np.asarray(sol["target_p"], np.float64)
         ts = task_scene(s, mech, x, sol, budget=None)
         scene.cone, scene.targets = ts.cone, ts.targets
