@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from designopt.figures.robot import Scene
-from designopt.studies.serial import figures
+from designopt.studies.serial import blocks, figures  # noqa: F401  (blocks: tests patch it)
 from designopt.studies.serial.drawing import (
     arms,
     design_pose,
