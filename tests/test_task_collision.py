@@ -173,12 +173,18 @@ def test_two_facing_arms_reach_all_and_arms_free_match_the_enumeration():
         assert got["arms_free_of"][m] == 4096 and got["arms_free_n"][m] > 30
 
 
-def _seg_seg(a0, a1, b0, b1, n: int = 64):
+def _seg_seg(a0, a1, b0, b1, n: int = 64, block: int = 4096):
     """Segment–segment distance by dense sampling of the first segment (exact point-to-
-    segment distance for each sample): within |a1 − a0|/(2n) of the true distance."""
+    segment distance for each sample): within |a1 − a0|/(2n) of the true distance. In
+    blocks of segment pairs: the same numbers (each pair's own arithmetic), four times
+    faster than one (n, 2e5, 3) array that fits no cache."""
+    out = np.empty(len(a0))
     t = np.linspace(0, 1, n)[:, None, None]
-    pts = a0[None] + t * (a1 - a0)[None]
-    return np.min(_seg_point(b0[None], b1[None], pts), 0)
+    for s in range(0, len(a0), block):
+        e = slice(s, s + block)
+        pts = a0[None, e] + t * (a1[e] - a0[e])[None]
+        out[e] = np.min(_seg_point(b0[None, e], b1[None, e], pts), 0)
+    return out
 
 
 @pytest.mark.parametrize("bad, says", [
