@@ -32,6 +32,7 @@ ROOT = Path(__file__).resolve().parents[1]
 PORTS = ROOT / "configs/port_placement.yaml"
 N = 32  # targets: tuples of one target per arm
 RUN = {"study.objective": {"arms_ok": -1.0, "gci": -1.0}, "study.indices.n_samples": N,
+       "final.n_samples": N,  # the final design is quoted (and drawn) on N fresh tuples
        "optimizer": {"name": "ptpso", "n_particles": 2, "n_iters": 1, "n_runs": 1}}  # fmt: skip
 
 
@@ -43,7 +44,13 @@ def run(tmp_path_factory):
     out = tmp_path_factory.mktemp("pp") / "pp.h5"
     designopt.run(cfg, out=out)
     rec = designopt.load(out)
-    return out, rec, blocks.solution(rec.config.study, rec.x, rec.keys())
+    s, keys = rec.final_stream()  # the fresh samples final/ and the figures are on
+    return out, rec, blocks.solution(s, rec.x, keys)
+
+
+def _samples(rec):
+    """The samples key of the stream the final design is quoted and drawn on."""
+    return rec.final_stream()[1]["samples"]
 
 
 @pytest.fixture(autouse=True, scope="module")
@@ -95,7 +102,7 @@ def _gaps(rec, sol):
 
     s = rec.config.study
     g = bodies.geometry(s, build(s))
-    key = jax.random.fold_in(rec.keys()["samples"], 2)
+    key = jax.random.fold_in(_samples(rec), 2)
     perm = [np.arange(N), np.asarray(jax.random.permutation(jax.random.fold_in(key, 1), N))]
     ok = np.asarray(sol["success"], bool)
     both = ok[0][perm[0]] & ok[1][perm[1]]
@@ -149,7 +156,7 @@ def test_robot_png_is_one_panel_when_no_link_geometry_is_a_variable(run, drawn):
     tips = [ln.get_data_3d() for ln in ax.get_lines() if str(ln.get_gid()).endswith("-joints")]
     assert len(tips) == 2
     j = int(re.search(r"median tuple (\d+)", ax.get_title()).group(1))
-    key = jax.random.fold_in(rec.keys()["samples"], 2)
+    key = jax.random.fold_in(_samples(rec), 2)
     p1 = int(np.asarray(jax.random.permutation(jax.random.fold_in(key, 1), N))[j])
     targets = np.asarray(sol["target_p"])[[j, p1]]
     for (x, y, z), t in zip(tips, targets, strict=True):
@@ -160,13 +167,13 @@ def test_robot_png_is_one_panel_when_no_link_geometry_is_a_variable(run, drawn):
 
 def test_workspace_of_a_port_task_plots_the_targets(run, drawn):
     """workspace.png of a port task: the scatters hold exactly the task's targets (the
-    run's, drawn from its samples stream), the reached ones coloured by the arms' mean
+    final design's, drawn from the fresh final stream), the reached ones coloured by the arms' mean
     1/k; no cloud of joint draws."""
     from designopt.studies.serial import taskindex
 
     _, rec, sol = run
-    s = rec.config.study
-    want = np.asarray(taskindex.targets(s, rec.keys()["samples"], np.float64)["target_p"])
+    s, keys = rec.final_stream()
+    want = np.asarray(taskindex.targets(s, keys["samples"], np.float64)["target_p"])
     ax = next(a for a in drawn["workspace"].axes if hasattr(a, "get_zlim"))
     pts = [np.column_stack(c._offsets3d) for c in ax.collections if hasattr(c, "_offsets3d")
            and len(c._offsets3d[0]) > 2]  # fmt: skip

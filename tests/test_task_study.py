@@ -367,7 +367,9 @@ def test_index_constraint_values_are_the_indices_minus_their_bounds(swarm):
 def test_reach_constraint_binds_a_run(method):
     """configs/planar2r_task.yaml pulled toward small arms (minimise manipulability) with
     reach ≥ 0.99: the final design's exact reach (lens areas: the re-evaluation on every
-    point of the disk) is ≥ 0.99 − 2 SE, and the constraint binds (exact reach < 0.999)."""
+    point of the disk) is ≥ 0.99 − 2 SE, its fresh quoted reach is the exact one to 4 SE,
+    the constraint binds (exact reach < 0.999), and with Deb's rules the reach on the
+    search's own samples (``best_run/final``) is ≥ 0.99 with no violation."""
     cfg = designopt.load_config("configs/planar2r_task.yaml", {
         "study.indices.n_samples": 512, "study.task.ik": IK,
         "study.objective": {"manipulability": 1.0},
@@ -376,12 +378,15 @@ def test_reach_constraint_binds_a_run(method):
                       "constraints": {"method": method, "weight": 1e4}}})  # fmt: skip
     rec = designopt.run(cfg)
     x = rec.x
-    reach, se = rec.indices["reach"]
+    reach, se = rec.indices["reach"]  # on the fresh final samples
     exact = disk_reference(x["l1"], x["l2"])["reach"]
-    assert exact >= 0.99 - 2 * se, (x, exact, se)
+    assert abs(reach - exact) <= 4 * se, (x, reach, exact, se)
+    found = float(np.asarray(rec.search["reach"]))  # on the samples the search chose it on
+    found_se = float(np.asarray(rec.search["reach_se"]))
+    assert exact >= 0.99 - 2 * found_se - 2 * se, (x, exact, found_se, se)
     assert exact < 0.999, (x, exact)  # the pull reached the constraint
-    if method == "deb":
-        assert reach >= 0.99 and rec.indices["violation"][0] == 0.0
+    if method == "deb":  # Deb's rules hold the constraint where the search measured it
+        assert found >= 0.99 and float(np.asarray(rec.search["violation"])) == 0.0
 
 
 def joint_gci_2r(l1: float, l2: float) -> float:

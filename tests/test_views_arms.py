@@ -221,7 +221,9 @@ def test_report_html_of_a_two_arm_run(two_run, tmp_path, capsys):
     for name in ("arm 0: joints", "arm 1: joints", "obstacle 0: box", "targets (1/k)"):
         assert f'"name":"{name}"' in text
     cl = serial_figs.cloud(rec)
-    assert cl["xyz"].shape == (32, 3) and cl["value"].shape == cl["flag"].shape == (32,)
+    n = rec.final_stream()[0].indices.n_samples  # the fresh targets final/ is quoted on
+    assert n == 4 * 32  # final.n_samples' default: 4 × the search's
+    assert cl["xyz"].shape == (n, 3) and cl["value"].shape == cl["flag"].shape == (n,)
     assert "2 arms" in cl["title"]
 
 
