@@ -11,6 +11,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from designopt.cli import main
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -77,3 +79,30 @@ def test_coverage_figure_sees_a_weak_search_and_not_a_thorough_one():
     assert a["ik_better_n"] >= 64 and b["ik_better_n"] == a["ik_better_n"]
     assert a["ik_better"] > 0.2, a["ik_better"]
     assert b["ik_better"] <= 0.02, b["ik_better"]
+    # printed (the run summary's line) and, above 2 %, warned about with what to raise
+    share = f"{100 * a['ik_better']:.1f} % of {int(a['ik_better_n'])} targets"
+    assert len(a["lines"]) == 1 and share in a["lines"][0], a["lines"]
+    assert len(a["warnings"]) == 1 and share in a["warnings"][0], a["warnings"]
+    assert "raise study.task.ik.n_best (now 1)" in a["warnings"][0]
+    assert f"{100 * b['ik_better']:.1f} % of" in b["lines"][0] and "warnings" not in b
+
+
+def test_coverage_warning_reaches_the_run_summary_and_the_archive(tmp_path, capsys):
+    """A run whose IK keeps the first converged seed on the redundant 3R: the coverage
+    line and its ``warning:`` are printed by ``designopt run`` and kept in the archive's
+    final warnings (what ``show`` prints)."""
+    import designopt
+
+    out = tmp_path / "weak.h5"
+    argv = ["run", str(ROOT / "tests/data/planar3r_task.yaml"), "--out", str(out),
+            "--no-figures", "--set", "study.task.ik.n_best=1", "--set", "study.task.ik.climb=0",
+            "--set", "optimizer.n_iters=1", "--set", "optimizer.n_particles=2"]  # fmt: skip
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    assert "  IK coverage: a second, independent set of seeds finds a better solution" in text
+    warn = [ln for ln in text.splitlines() if ln.startswith("  warning: IK coverage")]
+    assert len(warn) == 1 and "raise study.task.ik.n_best (now 1)" in warn[0], text
+    rec = designopt.load(out)
+    assert any(w.startswith("IK coverage") for w in rec.warnings)
+    share = rec.groups["targets"]["attrs"]["ik_better"]
+    assert share > 0.02 and f"{100 * share:.1f} %" in warn[0]

@@ -98,13 +98,17 @@ def _writing(out: Path | None, cfg: Any, est: Estimate) -> Iterator[writer.Sessi
 # ----------------------------------------------------------------- run strategies
 
 
-def warnings(job: Job, final: dict[str, Any]) -> None:
+def warnings(job: Job, final: dict[str, Any], targets: dict[str, Any] | None = None) -> None:
     """A final group's ``warnings`` attr: the study's lines on the (fresh) values, a line
-    for every n/a index (``results.base.na_warnings``) and the optimism lines of
-    :func:`designopt.app.rescoring.final_groups` (attr ``optimism``, then dropped)."""
+    for every n/a index (``results.base.na_warnings``), the optimism lines of
+    :func:`designopt.app.rescoring.final_groups` (attr ``optimism``, then dropped) and
+    the ``warnings`` attr of the final design's ``targets`` group (the study's
+    ``targets`` hook: a task's IK coverage)."""
     at = final.setdefault("attrs", {})
     own = list(job.study.warnings(job.cfg.study, final))
-    warn = na_warnings(final, own) + list(at.pop("optimism", []))
+    tw = (targets or {}).get("attrs", {}).get("warnings", [])
+    warn = (na_warnings(final, own) + list(at.pop("optimism", []))
+            + ([tw] if isinstance(tw, str) else list(tw)))
     if warn:  # far from what was asked: archived, printed, shown, marked on figures
         at["warnings"] = list(warn)
 
@@ -137,7 +141,7 @@ class Single:
                                    job.dtype)  # fmt: skip
             if tg is not None:
                 groups["targets"] = tg
-        warnings(job, groups["final"])
+        warnings(job, groups["final"], groups.get("targets"))
         return groups
 
     def check(self, job: Job, groups: dict[str, Any]) -> None:

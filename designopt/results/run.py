@@ -224,6 +224,8 @@ class RunRecord(Record):
             ok = "feasible" if v <= 0 else f"violated by {v:.3g} (no feasible design found)"
             lines.append(f"  constraints: {ok}")
         lines += list(self.hint("extra_lines", []))
+        tl = self.groups.get("targets", {}).get("attrs", {}).get("lines", [])
+        lines += [f"  {ln}" for ln in ([tl] if isinstance(tl, str) else tl)]
         lines += [f"  {ln}" for ln in runs_lines(self.runs, self.names, units)]
         lines += [f"  warning: {w}" for w in self.warnings]
         return lines

@@ -82,7 +82,8 @@ def _targets(s: SerialSettings, x: Any, keys: Any, dtype: Any) -> dict[str, Any]
     (:func:`_placement`), written on every row of ``show --csv``. Designs ``x`` (P, D)
     (a front's): every array but ``target_p`` with a leading design axis P. For one
     design, attrs ``ik_better`` and ``ik_better_n``: the IK's coverage figure
-    (``blocks.coverage``)."""
+    (``blocks.coverage``), with its summary ``lines`` and ``warnings`` (a share above
+    ``blocks.COVERAGE_WARN``)."""
     if s.indices.measure != "task":
         return None
     import numpy as np
@@ -113,7 +114,9 @@ def _targets(s: SerialSettings, x: Any, keys: Any, dtype: Any) -> dict[str, Any]
 
         one = {k: (v if k in ("target_p", "target_R") else v[:, 0] if s.arms is not None
                    else v[0, 0]) for k, v in sol.items()}  # fmt: skip
-        out["attrs"] |= blocks.coverage(s, X[0], keys, one, dtype)
+        cov = blocks.coverage(s, X[0], keys, one, dtype)
+        lines, warns = blocks.coverage_lines(s, cov)
+        out["attrs"] |= cov | {"lines": lines} | ({"warnings": warns} if warns else {})
     pl = _placement(s, X)
     if pl is not None:
         cols, vals = [], []

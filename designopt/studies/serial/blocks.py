@@ -183,3 +183,21 @@ def coverage(s: SerialSettings, x: Any, keys: Any, sol: dict[str, np.ndarray],
     a_v, b_v = np.asarray(alt[name], np.float64), np.asarray(sol[name], np.float64)[..., :K]
     better = a_ok & (~b_ok | (a_v > b_v + COVERAGE_BETTER))
     return {"ik_better": float(np.mean(better)), "ik_better_n": float(better.size)}
+
+
+def coverage_lines(s: SerialSettings, cov: dict[str, float]) -> tuple[list[str], list[str]]:
+    """(summary lines, ``warning:`` lines) of a coverage figure (:func:`coverage`): the
+    share is always said; above :data:`COVERAGE_WARN` a warning says to raise the
+    seeds (``study.task.ik.n_best``, ``n_nearest``, ``climb``)."""
+    share, n = 100.0 * cov["ik_better"], int(cov["ik_better_n"])
+    score = "clearance" if s.task.ik.best == "clearance" else "1/k"  # type: ignore[union-attr]
+    line = (f"IK coverage: a second, independent set of seeds finds a better solution "
+            f"({score} higher by > {COVERAGE_BETTER:g}) at {share:.1f} % of {n} targets")
+    if cov["ik_better"] <= COVERAGE_WARN:
+        return [line], []
+    ik = s.task.ik  # type: ignore[union-attr]
+    warn = (f"IK coverage: a second set of seeds finds a better solution at {share:.1f} % "
+            f"of {n} targets (more than {100 * COVERAGE_WARN:g} %): the indices are read "
+            f"at solutions that are not the best; raise study.task.ik.n_best (now "
+            f"{ik.n_best}), n_nearest (now {ik.n_nearest}) or climb (now {ik.climb})")
+    return [line], [warn]
