@@ -633,8 +633,8 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
 
     def block(i, qc):
         """``opts.block`` steps from qc (frozen where converged) for items i. Returns
-        (qc, converged and accepted, the least E = ½|e|² met, converged but refused by
-        ``accept``)."""
+        (qc, converged, the least E = ½|e|² met); ``accept`` is asked in the round, of
+        the converged seeds that are no duplicate."""
         m, t = split(i)
         xc = [xT[k, m] for k in range(ch.D)]
         tx = ch.trig_x(xc)
@@ -663,14 +663,7 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         z = jnp.zeros_like(qc[0])
         c0 = (qc, ch.trig_q(qc), z > 0, z + jnp.inf)
         qc, _, ok, Em = jax.lax.fori_loop(0, opts.block, body, c0)
-        refused = jnp.zeros_like(ok)
-        if accept is not None:  # asked of the converged slots only (a collision check
-            # costs several LM blocks: asked of every slot, it was most of the solve)
-            qs = jnp.stack(qc, -1)
-            acc = on_rows(lambda r: accept(m[r], t[r], qs[r]), ok, max(ok.shape[0] // 4, 1))
-            refused = ok & ~acc
-            ok = ok & acc
-        return qc, ok, Em, refused
+        return qc, ok, Em
 
     nb = opts.n_best
     B0 = opts.slots if opts.slots > 0 else max(1024, min(4096, I // 4))
@@ -685,19 +678,17 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         busy = jnp.sum(i < I, dtype=jnp.int32)
 
         def chunk(k, c):
-            q, ok, Em, rf = c
+            q, ok, Em = c
             o = (k * C).astype(jnp.int32)
             qk = [jax.lax.dynamic_slice(q[j], (o,), (C,)) for j in range(n)]
-            qc, okk, Emk, rfk = block(jax.lax.dynamic_slice(i, (o,), (C,)), qk)
+            qc, okk, Emk = block(jax.lax.dynamic_slice(i, (o,), (C,)), qk)
             return (jax.lax.dynamic_update_slice(q, jnp.stack(qc), (jnp.int32(0), o)),
                     jax.lax.dynamic_update_slice(ok, okk, (o,)),
-                    jax.lax.dynamic_update_slice(Em, Emk, (o,)),
-                    jax.lax.dynamic_update_slice(rf, rfk, (o,)))  # fmt: skip
+                    jax.lax.dynamic_update_slice(Em, Emk, (o,)))  # fmt: skip
 
-        z = jnp.zeros(i.shape, bool)
-        c0 = (q, z, jnp.full(i.shape, jnp.inf, dtype), z)
-        q, ok, Em, rf = jax.lax.fori_loop(0, (busy + C - 1) // C, chunk, c0)
-        return list(q), ok, Em, rf
+        c0 = (q, jnp.zeros(i.shape, bool), jnp.full(i.shape, jnp.inf, dtype))
+        q, ok, Em = jax.lax.fori_loop(0, (busy + C - 1) // C, chunk, c0)
+        return list(q), ok, Em
 
     def compact(s):
         """The busy slots moved to the front, in their order (a slot's place changes no
@@ -723,27 +714,19 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         i, a, it, Eb, q, head, tail, qi, qa, q_out, a_out, E_out, nc, n_try, n_ref, sc_out = s
         active = i < I
         ic = jnp.minimum(i, I - 1)
-        qc, ok, Em, refused = blocks(i, q)
+        qc, ok, Em = blocks(i, q)
         q = jnp.stack(qc)
         it = it + opts.block
-        # a seed is dropped when it used its steps or its least error stopped falling, or
-        # converged to joints ``accept`` refuses
-        stalled = ~(Em < opts.stall * Eb)
-        Eb = jnp.minimum(Eb, Em)
-        give_up = ~ok & ((it >= iters) | stalled | refused)
-        last = a + 1 >= attempts
-        if hopeless is not None:  # one seed only: no solution can be kept
-            last = last | one_seed[ic]
         n_conv = nc[ic]
+        m_, t_ = split(i)
+        qT = q.T
         dup = jnp.zeros_like(ok)
         sc_new = jnp.zeros(ok.shape, dtype)
         if nb > 1:  # a solution the item has already found (the same joints, or the same
             # score: a self-motion the score is flat along, a symmetric branch) is no new
             # one: the item goes on with its next seed (n_best counts distinct solutions)
-            m_, t_ = split(i)
-            qT = q.T
             sc_new = on_rows(lambda r: score_rows(m_[r], t_[r], qT[r]), ok,
-                             max(ok.shape[0] // 4, 1))  # fmt: skip
+                             max(C // 4, 1))  # fmt: skip
 
             def same(c, dup):
                 qs = jax.lax.dynamic_slice_in_dim(q_out, c * I, I, 1)[:, ic]  # (n, B)
@@ -754,6 +737,21 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
 
             dup = ok & jax.lax.fori_loop(0, nb, same, dup)
             ok = ok & ~dup
+        refused = jnp.zeros_like(ok)
+        if accept is not None:  # asked of the converged slots that bring a new solution
+            # only (a collision check costs several LM blocks; a duplicate's joints are
+            # those of a solution the item holds, accepted already)
+            acc = on_rows(lambda r: accept(m_[r], t_[r], qT[r]), ok, max(C // 4, 1))
+            refused = ok & ~acc
+            ok = ok & acc
+        # a seed is dropped when it used its steps or its least error stopped falling, or
+        # converged to joints ``accept`` refuses
+        stalled = ~(Em < opts.stall * Eb)
+        Eb = jnp.minimum(Eb, Em)
+        give_up = ~ok & ~dup & ((it >= iters) | stalled | refused)
+        last = a + 1 >= attempts
+        if hopeless is not None:  # one seed only: no solution can be kept
+            last = last | one_seed[ic]
         # converged joints go to the item's next solution slot (of n_best); a dropped
         # seed's joints go to slot 0 when the item has none and they beat its best so far
         better = Em < E_out[ic]
