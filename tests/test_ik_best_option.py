@@ -89,8 +89,8 @@ def test_coverage_figure_sees_a_weak_search_and_not_a_thorough_one():
 
 def test_coverage_warning_reaches_the_run_summary_and_the_archive(tmp_path, capsys):
     """A run whose IK keeps the first converged seed on the redundant 3R: the coverage
-    line and its ``warning:`` are printed by ``designopt run`` and kept in the archive's
-    final warnings (what ``show`` prints)."""
+    line and its ``warning:`` are printed by ``designopt run`` and by ``designopt show``
+    of its archive, and kept in the archive's final warnings."""
     import designopt
 
     out = tmp_path / "weak.h5"
@@ -102,6 +102,10 @@ def test_coverage_warning_reaches_the_run_summary_and_the_archive(tmp_path, caps
     assert "  IK coverage: a second, independent set of seeds finds a better solution" in text
     warn = [ln for ln in text.splitlines() if ln.startswith("  warning: IK coverage")]
     assert len(warn) == 1 and "raise study.task.ik.n_best (now 1)" in warn[0], text
+    assert main(["show", str(out)]) == 0  # show prints the line and the warning too
+    shown = capsys.readouterr().out
+    assert "IK coverage: a second, independent set of seeds" in shown
+    assert f"warning: {warn[0].strip().removeprefix('warning: ')}" in shown
     rec = designopt.load(out)
     assert any(w.startswith("IK coverage") for w in rec.warnings)
     share = rec.groups["targets"]["attrs"]["ik_better"]

@@ -190,6 +190,13 @@ class RunRecord(Record):
         return [w] if isinstance(w, str) else [str(x) for x in w]
 
     @property
+    def target_lines(self) -> list[str]:
+        """The study's lines on the final design's targets (the ``targets`` group's attr
+        ``lines``: a task's IK coverage); empty without them."""
+        tl = self.groups.get("targets", {}).get("attrs", {}).get("lines", [])
+        return [tl] if isinstance(tl, str) else [str(x) for x in tl]
+
+    @property
     def n_samples_used(self) -> int:
         return int(self.groups["final"]["attrs"].get("n_samples_used", 0))
 
@@ -224,8 +231,7 @@ class RunRecord(Record):
             ok = "feasible" if v <= 0 else f"violated by {v:.3g} (no feasible design found)"
             lines.append(f"  constraints: {ok}")
         lines += list(self.hint("extra_lines", []))
-        tl = self.groups.get("targets", {}).get("attrs", {}).get("lines", [])
-        lines += [f"  {ln}" for ln in ([tl] if isinstance(tl, str) else tl)]
+        lines += [f"  {ln}" for ln in self.target_lines]
         lines += [f"  {ln}" for ln in runs_lines(self.runs, self.names, units)]
         lines += [f"  warning: {w}" for w in self.warnings]
         return lines
@@ -256,6 +262,7 @@ class RunRecord(Record):
                                  for k in subs))  # fmt: skip
         lines += [ln[2:] if ln.startswith("  ") else ln
                   for ln in self.hint("extra_lines", [])]  # the study's own (placement)
+        lines += self.target_lines
         srch = self.search
         if self.fresh and "f" in srch:
             lines.append(f"(fresh samples, {self.n_samples_used} per design; {SEARCH_LABEL}, "
