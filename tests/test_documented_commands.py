@@ -272,7 +272,7 @@ def _final(n: int) -> dict:
     """A run's final re-scoring (#52) on the study's own sample count (by default 4 ×):
     its program has the shapes of `eval`'s of one design, so an `eval` or a run of the
     config after it loads the program from the session's cache instead of compiling
-    another (davinci's run and eval: 55 s of CPU down to 45 s)."""
+    another."""
     return {"final": {"n_samples": n}}
 
 

@@ -110,3 +110,19 @@ def test_coverage_warning_reaches_the_run_summary_and_the_archive(tmp_path, caps
     assert any(w.startswith("IK coverage") for w in rec.warnings)
     share = rec.groups["targets"]["attrs"]["ik_better"]
     assert share > 0.02 and f"{100 * share:.1f} %" in warn[0]
+
+
+def test_coverage_lines_count_targets_per_arm_and_give_clearance_its_unit():
+    """Two arms compare targets × arms (``ik_better_n`` = 128 is 64 targets × 2 arms), and
+    the clearance's threshold carries the chain's length unit; at 2 % exactly no warning."""
+    from types import SimpleNamespace as NS
+
+    from designopt.studies.serial import blocks
+
+    ik = NS(best="clearance", n_best=1, n_nearest=4, climb=0)
+    s = NS(arms=[0, 1], task=NS(ik=ik), chain=None, units=NS(length="mm"))
+    (line,), (warn,) = blocks.coverage_lines(s, {"ik_better": 0.05, "ik_better_n": 128.0})
+    assert line.endswith("(clearance higher by > 0.001 mm) at 5.0 % of 64 targets × 2 arms")
+    assert "at 5.0 % of 64 targets × 2 arms (more than 2 %)" in warn
+    lines, warns = blocks.coverage_lines(s, {"ik_better": 0.02, "ik_better_n": 128.0})
+    assert warns == [] and "2.0 % of 64 targets × 2 arms" in lines[0]

@@ -33,7 +33,7 @@ import numpy as np
 from designopt.core import exported
 from designopt.studies.serial import taskindex
 from designopt.studies.serial.mechanism import Mechanism, build
-from designopt.studies.serial.settings import SerialSettings
+from designopt.studies.serial.settings import SerialSettings, length_unit
 
 DESIGNS = 16
 """Designs per block: a 16-particle swarm's evaluation is one call per chunk of targets.
@@ -190,14 +190,18 @@ def coverage_lines(s: SerialSettings, cov: dict[str, float]) -> tuple[list[str],
     share is always said; above :data:`COVERAGE_WARN` a warning says to raise the
     seeds (``study.task.ik.n_best``, ``n_nearest``, ``climb``)."""
     share, n = 100.0 * cov["ik_better"], int(cov["ik_better_n"])
-    score = "clearance" if s.task.ik.best == "clearance" else "1/k"  # type: ignore[union-attr]
+    A = 1 if s.arms is None else len(s.arms)
+    of = f"{n} targets" if A == 1 else f"{n // A} targets × {A} arms"
+    score = (f"clearance higher by > {COVERAGE_BETTER:g} {length_unit(s)}"
+             if s.task.ik.best == "clearance"  # type: ignore[union-attr]
+             else f"1/k higher by > {COVERAGE_BETTER:g}")  # fmt: skip
     line = (f"IK coverage: a second, independent set of seeds finds a better solution "
-            f"({score} higher by > {COVERAGE_BETTER:g}) at {share:.1f} % of {n} targets")
+            f"({score}) at {share:.1f} % of {of}")
     if cov["ik_better"] <= COVERAGE_WARN:
         return [line], []
     ik = s.task.ik  # type: ignore[union-attr]
     warn = (f"IK coverage: a second set of seeds finds a better solution at {share:.1f} % "
-            f"of {n} targets (more than {100 * COVERAGE_WARN:g} %): the indices are read "
+            f"of {of} (more than {100 * COVERAGE_WARN:g} %): the indices are read "
             f"at solutions that are not the best; raise study.task.ik.n_best (now "
             f"{ik.n_best}), n_nearest (now {ik.n_nearest}) or climb (now {ik.climb})")
     return [line], [warn]
