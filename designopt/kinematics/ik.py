@@ -898,13 +898,24 @@ CLIMB_STEP = 1.0
 """The climb's first step length factor α (joints move α × the projected gradient)."""
 CLIMB_MAX = 0.25
 """The climb's largest joint move per step (rad; prismatic joints in units of the reach):
-two Gauss–Newton corrections bring a move of this size back onto the target."""
-CLIMB_CORRECT = 4
-"""LM steps that bring a climb step back onto the target (the ``axis`` rows' derivative is
-exact only at a solution: the correction converges linearly at first)."""
+:data:`CLIMB_CORRECT` LM corrections bring a move of this size back onto the target."""
+CLIMB_CORRECT = 3
+"""LM steps that bring a climb step back onto the target: from a step of CLIMB_MAX, the
+error falls quadratically (measured on the UR5 with a tilted instrument: 3.5e-3, 3e-5,
+1e-9, 2e-16 × the reach), so three reach :data:`CLIMB_NEAR` with room to spare."""
 CLIMB_NEAR = 1e-6
 """A climb step stands when its corrected joints are this close to the target (× the
 reach; rad): the last steps polish to the solver's tolerance."""
+CLIMB_DAMPING = 1e-9
+"""The damping floor of the climb's LM corrections (the solver's own is 1e-16). Along the
+self-motion the task rows' JᵀJ has a zero pivot: with the solver's floor, the rounding of
+Jᵀe along it (≈ 1e-16 |e|) was divided by ≈ 1e-16 and moved the joints along the
+self-motion by far more than the error being corrected, so the corrections oscillated
+around 1e-7 instead of converging, and about half the climb's steps were refused
+(measured on the UR5 with a tilted instrument, 2026-11-29). With 1e-9 the null-space
+move is ≤ 1e-7 |e| and the corrections converge quadratically (3.5e-3, 3e-5, 1e-9,
+2e-16); a direction is slowed only where σ(J) < 3e-5 (a solution at a singularity,
+where the climb's step then does not stand and the converged joints are kept)."""
 NULL_EPS = 1e-12
 """The regularisation of J Jᵀ in the null-space projector (the task rows of an ``axis``
 target have rank 5 of 6: J Jᵀ is singular, and the regularised solve stays exact there,
@@ -920,9 +931,10 @@ def _climb(ch: _Chain, xr: list, pt: list, Rt: list | None, L: jax.Array, mode: 
     ``pt``, ``Rt`` entry by entry, reach L (k,)). Where the chain keeps free directions
     at the target (a seventh joint, the roll about a tool axis, the roll through a
     port), a step moves along the score's gradient projected onto the null space of the
-    target's rows (in the LM step's joint units; N = I − Jᵀ(JJᵀ + εI)⁻¹J), then two
-    Gauss–Newton–Levenberg–Marquardt steps bring it back onto the target; it stands when
-    it is back (:data:`CLIMB_NEAR`) and scores higher, and the step length follows
+    target's rows (in the LM step's joint units; N = I − Jᵀ(JJᵀ + εI)⁻¹J), then
+    :data:`CLIMB_CORRECT` Levenberg–Marquardt steps bring it back onto the target; it stands when
+    it is back (:data:`CLIMB_NEAR`), scores higher and ``accept`` takes it (the best free
+    solution often lies where the arm meets an obstacle), and the step length follows
     Barzilai and Borwein (a secant along the projected gradient: in one free direction
     Newton's step), shrinking 4× after a step that does not stand. ``opts.climb`` steps,
     then LM steps to the solver's tolerance. The climbed joints are kept where they are
@@ -953,7 +965,8 @@ def _climb(ch: _Chain, xr: list, pt: list, Rt: list | None, L: jax.Array, mode: 
     def lm(qc, freeze=None):
         e, J, cz = resid(qc)
         E = 0.5 * _dot(e, e)
-        dq = _lm_step(e, J, rev, L, opts.damping_e * E + opts.damping, qc, lower, upper)
+        lam = opts.damping_e * E + jnp.maximum(opts.damping, CLIMB_DAMPING)
+        dq = _lm_step(e, J, rev, L, lam, qc, lower, upper)
         new = _project([x + d for x, d in zip(qc, dq, strict=True)], lower, upper, rev)
         if freeze is None:
             return new
@@ -991,7 +1004,10 @@ def _climb(ch: _Chain, xr: list, pt: list, Rt: list | None, L: jax.Array, mode: 
         qta = jnp.stack(qt, -1)
         st, gt = value_grad(qta)
         dt, on = direction(qt, gt)
-        up = (i == 0) | (on & (st > s))
+        up = on & (st > s)
+        if accept is not None:  # a step into a collision does not stand: the best free
+            up = up & accept(qta)  # solution often lies on the edge of a collision
+        up = (i == 0) | up
         dq, dd = qta - qa, dt - d
         curv = -jnp.sum(dq * dd, -1)
         bb = jnp.where(curv > 0, jnp.sum(dq * dq, -1) / jnp.where(curv > 0, curv, 1.0), 2 * al)
