@@ -41,7 +41,10 @@ def test_second_run_in_the_same_process_compiles_nothing(tmp_path):
 
 def _run(tmp_path: Path, out: str, cache: Path, *flags: str) -> dict[str, np.ndarray]:
     cfg = tmp_path / "c.yaml"
-    cfg.write_text(yaml.safe_dump(TINY | {"output": str(tmp_path / "unused.h5")}))
+    # a checkpoint every chunk in every run: with the default cadence (10 s) a run slowed by
+    # a loaded machine wrote one, and compiled its program, where the other had not
+    cfg.write_text(yaml.safe_dump(TINY | {"output": str(tmp_path / "unused.h5"),
+                                          "checkpoint_every_s": 0}))
     env = os.environ | {"DESIGNOPT_CACHE_DIR": str(cache)}
     cmd = [sys.executable, "-m", "designopt.cli", "run", str(cfg), "--quiet", "--no-figures",
            "--out", str(tmp_path / out), *flags]  # fmt: skip

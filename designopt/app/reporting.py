@@ -12,7 +12,6 @@ from typing import Any
 
 from designopt.app import records
 from designopt.core.errors import ConfigError
-from designopt.figures import canvas
 from designopt.figures.hints import NONE, Hints
 from designopt.io import writer
 from designopt.results import (
@@ -94,6 +93,8 @@ def draw_figures(path: Path, record: Record | None = None) -> list[Path]:
         draw, folder, swap = drawer(rec, path)
 
         def drawn(d: Path) -> list[Path]:
+            from designopt.figures import canvas  # matplotlib: only when figures are drawn
+
             with canvas.parallel_saves():  # each figure written by a child process
                 return draw(rec, d)
 

@@ -7,9 +7,6 @@ from pathlib import Path
 
 import numpy as np
 
-from designopt.figures import style
-from designopt.figures.canvas import save
-
 COLUMNS = 4
 """At most this many panels a row: a study with many indices gets a grid, not a strip."""
 
@@ -22,6 +19,9 @@ def convergence(best_run: dict, indices: list[str], folder: Path, title: str,
     a ± 2 SE band where ``<index>_se`` exists; ``units`` labels the axes; ``rates`` names
     the success rates (clipped to [0, 1], Wilson band; value: the number of trials, or None
     to infer it from the SE). Saved as ``convergence``."""
+    from designopt.figures import style  # matplotlib: imported when a figure is drawn
+    from designopt.figures.canvas import save
+
     units, rates = units or {}, rates or {}
     n = len(indices)
     cols = max(1, min(n, COLUMNS))

@@ -68,6 +68,7 @@ how many cells per axis each uses), ``origin`` and ``cell`` (nm, 3), ``R`` (nm, 
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import math
 import os
 import warnings
@@ -113,13 +114,40 @@ def load_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     return _load(str(p.resolve()), st.st_mtime_ns, st.st_size)
 
 
+MESH_VERSION = 1
+"""Part of a checked mesh's cache key (:func:`load_mesh`): raise it when the checks or the
+repair change."""
+
+
 @lru_cache(maxsize=32)
 def _load(path: str, mtime_ns: int, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """A checked mesh, from the cache folder when this file's bytes passed the checks
+    before (``designopt-mesh-*.npz``: a warm command then neither imports trimesh, about
+    0.4 s, nor reads and repairs the file again); else checked and kept there."""
+    folder = cache_folder()
+    file = key = None
+    with contextlib.suppress(OSError):  # (a folder, unreadable: _checked says which)
+        key = f"{MESH_VERSION}:{_content_hash(path, mtime_ns, size)}"
+    if folder is not None and key is not None:
+        file = folder / f"designopt-mesh-{hashlib.sha256(key.encode()).hexdigest()[:40]}.npz"
+        try:
+            with np.load(file, allow_pickle=False) as z:
+                if str(z["key"]) == key:
+                    v, f = np.array(z["v"], np.float64), np.array(z["f"], np.int64)
+                    if v.ndim == 2 and v.shape[1] == 3 and f.ndim == 2 and f.shape[1] == 3:
+                        v.flags.writeable = False
+                        f.flags.writeable = False
+                        return v, f
+        except Exception:  # noqa: BLE001  (none yet, truncated, foreign: check the file)
+            pass
     # trimesh's checks divide by a flat mesh's zero volume (NumPy's RuntimeWarnings) and
     # warn on odd files: silenced here only, so a refusal is the one line of its error
     with warnings.catch_warnings(), np.errstate(all="ignore"):
         warnings.simplefilter("ignore")
-        return _checked(path)
+        v, f = _checked(path)
+    if file is not None and key is not None:
+        _write_npz(file, key=np.array(key), v=v, f=f)
+    return v, f
 
 
 def _checked(path: str) -> tuple[np.ndarray, np.ndarray]:
@@ -433,11 +461,17 @@ def _read_grid(path: Path, key: str, resolution: int) -> MeshGrid | None:
 def _write_grid(path: Path, key: str, g: MeshGrid) -> None:
     """``g`` into ``path`` whole (a temporary file renamed over it), or nothing when the
     folder cannot be written (the cache only saves time)."""
+    _write_npz(path, key=np.array(key), values=g.values, origin=g.origin, cell=g.cell)
+
+
+def _write_npz(path: Path, **arrays: np.ndarray) -> None:
+    """``arrays`` into ``path`` whole (a temporary file renamed over it), or nothing when
+    the folder cannot be written (the cache only saves time)."""
     import io
     import tempfile
 
     buf = io.BytesIO()
-    np.savez(buf, key=np.array(key), values=g.values, origin=g.origin, cell=g.cell)
+    np.savez(buf, **arrays)
     tmp = None
     try:
         path.parent.mkdir(parents=True, exist_ok=True)

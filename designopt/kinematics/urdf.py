@@ -96,10 +96,74 @@ def _finite(where: str, what: str, v: Sequence[float]) -> tuple[float, ...]:
     return out
 
 
+PARSE_VERSION = 1
+"""Part of a parsed URDF's cache key (:func:`parse`): raise it when :func:`parse` changes
+what it makes of a file."""
+
+
+def _parsed_file(text: str, where: str):
+    """Where :func:`parse` keeps what it made of ``text`` (JSON, beside the compiled
+    programs and mesh grids of ``kinematics.sdf.cache_folder``), or None without a cache."""
+    import hashlib
+
+    from designopt.kinematics.sdf import cache_folder
+
+    folder = cache_folder()
+    if folder is None:
+        return None
+    h = hashlib.sha256(f"{PARSE_VERSION}\0{where}\0{text}".encode()).hexdigest()
+    return folder / f"designopt-urdf-{h[:40]}.json"
+
+
+def _to_json(r: Robot) -> str:
+    import json
+
+    return json.dumps({"where": r.where, "name": r.name, "links": list(r.links),
+                       "joints": [list(vars(j).values()) for j in r.joints.values()]})  # fmt: skip
+
+
+def _from_json(text: str) -> Robot:
+    import json
+
+    d = json.loads(text)
+
+    def tup(x):
+        return None if x is None else tuple(x)
+
+    joints = {}
+    for name, typ, par, ch, xyz, rpy, axis, lim, mim in d["joints"]:
+        joints[name] = UJoint(name, typ, par, ch, tup(xyz), tup(rpy), tup(axis), tup(lim),
+                              tup(mim))  # fmt: skip
+    return Robot(d["where"], d["name"], joints, tuple(d["links"]))
+
+
 def parse(text: str, where: str) -> Robot:
     """Parse URDF text (yourdfpy, meshes off) and check what the kernel needs: a <robot>
     document with named links and joints, finite numbers, known links, no closed loop,
-    one root link (a tree)."""
+    one root link (a tree). What a file that passed made is kept in the cache folder
+    (keyed by the text and ``where``), so a warm command reads it back instead of
+    importing yourdfpy and trimesh (about 0.5 s) and parsing again."""
+    file = _parsed_file(text, where)
+    if file is not None:
+        try:
+            return _from_json(file.read_text(encoding="utf-8"))
+        except (OSError, ValueError, KeyError, TypeError):
+            pass  # none yet, or unreadable: parse
+    robot = _parse(text, where)
+    if file is not None:
+        import os
+
+        tmp = file.with_name(f"{file.name}.{os.getpid()}.tmp")
+        try:
+            file.parent.mkdir(parents=True, exist_ok=True)
+            tmp.write_text(_to_json(robot), encoding="utf-8")
+            os.replace(tmp, file)
+        except OSError:
+            tmp.unlink(missing_ok=True)
+    return robot
+
+
+def _parse(text: str, where: str) -> Robot:
     import yourdfpy
     from lxml import etree
 
