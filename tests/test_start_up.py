@@ -113,3 +113,46 @@ def test_another_text_or_place_is_another_entry_and_a_refused_file_is_not_kept(c
         with pytest.raises(ValueError, match="not watertight"):
             sdf.load_mesh(holed)
     assert len(list(cache.glob("designopt-mesh-*.npz"))) == 0
+
+
+def test_normalisation_bounds_are_kept_and_read_back(tmp_path, monkeypatch):
+    """A normalised objective's probe (``n_norm`` designs scored before a run or an eval)
+    is kept in the cache folder: a second build with the same settings and streams reads
+    the same bounds back without scoring a design; another seed or another setting is
+    another entry; a damaged entry is scored again."""
+    import jax.numpy as jnp
+
+    import designopt
+    from designopt.core import exported
+    from designopt.core.keys import streams
+    from designopt.problems import normalise
+    from designopt.studies import STUDIES
+
+    monkeypatch.setattr(exported, "folder", lambda: tmp_path)
+    over = {"study.indices.n_samples": 512, "study.objective.n_norm": 4}
+    cfg = designopt.load_config(ROOT / "configs/puma560.yaml", over)
+    st = STUDIES["serial"]
+
+    def bounds(c, seed=0):
+        return np.asarray(st.problem(c.study, streams(seed), jnp.float64).norm_bounds)
+
+    b0 = bounds(cfg)
+    files = sorted(tmp_path.glob("designopt-bounds-*.npy"))
+    assert len(files) == 1 and np.all(b0[:, 1] > b0[:, 0])
+    real = normalise.mc.box_samples
+
+    def refuse(*a, **k):
+        raise AssertionError("the probe scored designs again")
+
+    monkeypatch.setattr(normalise.mc, "box_samples", refuse)
+    assert np.array_equal(bounds(cfg), b0)  # read back, bit for bit
+    monkeypatch.setattr(normalise.mc, "box_samples", real)
+    b1 = bounds(cfg, seed=1)
+    other = designopt.load_config(ROOT / "configs/puma560.yaml",
+                                  over | {"study.indices.n_samples": 256})  # fmt: skip
+    b2 = bounds(other)
+    assert len(list(tmp_path.glob("designopt-bounds-*.npy"))) == 3
+    assert not np.array_equal(b1, b0) and not np.array_equal(b2, b0)
+    files[0].write_bytes(b"damaged")
+    assert np.array_equal(bounds(cfg), b0)  # scored again, and kept again
+    assert np.array_equal(np.load(files[0]), b0)

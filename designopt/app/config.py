@@ -7,7 +7,6 @@ unchanged."""
 from __future__ import annotations
 
 import functools
-import json
 import os
 import re
 import types
@@ -364,46 +363,16 @@ def check_study(cfg: Any, where: str) -> None:
 
 def _checked_marker(cfg: Any) -> Path | None:
     """The cache folder's marker of a study settings that passed ``Study.check``
-    (None without a cache folder): named by a hash of the settings (as JSON), of every
-    file they name (its path, size and modification time), of designopt's source, and of
-    JAX's version and precision."""
-    import hashlib
-
-    import jax
-
+    (None without a cache folder): named by ``core.exported.fingerprint`` of the settings
+    (their JSON, every file they name, designopt's source, JAX's version and precision)."""
     from designopt.core import exported
 
     folder = exported.folder()
     if folder is None:
         return None
-    dumped = cfg.study.model_dump(mode="json")
     base = Path(getattr(cfg.study, "config_dir", None) or ".")
-    files: list[str] = []
-
-    def walk(v: Any) -> None:
-        if isinstance(v, dict):
-            for x in v.values():
-                walk(x)
-        elif isinstance(v, list):
-            for x in v:
-                walk(x)
-        elif isinstance(v, str) and len(v) < 4096:
-            for p in (Path(v), base / v):
-                try:
-                    if p.is_file():
-                        st = p.stat()
-                        files.append(f"{p.resolve()}:{st.st_size}:{st.st_mtime_ns}")
-                        break
-                except OSError:
-                    pass
-
-    walk(dumped)
-    h = hashlib.sha256(json.dumps(dumped, sort_keys=True, default=str).encode())
-    for f in sorted(files):
-        h.update(f.encode())
-    h.update(exported.source_hash().encode())
-    h.update(f"{jax.__version__} {jax.config.jax_enable_x64}".encode())
-    return folder / f"designopt-checked-{h.hexdigest()[:40]}"
+    h = exported.fingerprint(cfg.study.model_dump(mode="json"), base)
+    return folder / f"designopt-checked-{h[:40]}"
 
 
 def check_optimizer(cfg: Any, where: str) -> None:

@@ -18,6 +18,7 @@ import os
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import jax
 
@@ -35,6 +36,43 @@ def source_hash() -> str:
             h.update(p.read_bytes())
         _SOURCE.append(h.hexdigest())
     return _SOURCE[0]
+
+
+def fingerprint(dumped: Any, base: Path | None = None) -> str:
+    """A hash of settings as JSON (``model_dump(mode="json")``) and of every file they name
+    (a string that is a path, as written or from ``base``: its resolved path, size and
+    modification time), of designopt's source, and of JAX's version and precision: what
+    identifies a result computed from the settings alone (a study's checks, its
+    normalisation bounds) between processes."""
+    import json
+
+    files: list[str] = []
+    base = Path(base) if base is not None else Path(".")
+
+    def walk(v: Any) -> None:
+        if isinstance(v, dict):
+            for x in v.values():
+                walk(x)
+        elif isinstance(v, list):
+            for x in v:
+                walk(x)
+        elif isinstance(v, str) and len(v) < 4096:
+            for p in (Path(v), base / v):
+                try:
+                    if p.is_file():
+                        st = p.stat()
+                        files.append(f"{p.resolve()}:{st.st_size}:{st.st_mtime_ns}")
+                        break
+                except OSError:
+                    pass
+
+    walk(dumped)
+    h = hashlib.sha256(json.dumps(dumped, sort_keys=True, default=str).encode())
+    for f in sorted(files):
+        h.update(f.encode())
+    h.update(source_hash().encode())
+    h.update(f"{jax.__version__} {jax.config.jax_enable_x64}".encode())
+    return h.hexdigest()
 
 
 def signature(key: str, args: tuple) -> str:

@@ -59,6 +59,7 @@ def probe_bounds(
     dtype: Any,
     staged: Any = None,
     constraints: Callable | None = None,
+    identity: str | None = None,
 ) -> np.ndarray:
     """(len(names), 2) min and max of the indices ``names`` over ``n_norm`` Halton designs
     of the box [lower, upper] (shifted by the ``normalisation`` stream), scored once by
@@ -69,9 +70,20 @@ def probe_bounds(
     n/a values (NaN: a ratio over too few items) are left out, and an index n/a at every
     design gets [0, 1]. ``staged`` (``Problem.staged``) and ``constraints``: the
     problem's two-stage scoring and constraints, which the probe then shares with the
-    run (``problems.evaluate.staged_scores``: the same programs)."""
-    Xn = mc.box_samples(keys["normalisation"], lower, upper, n_norm, "halton", dtype)
+    run (``problems.evaluate.staged_scores``: the same programs). ``identity``: what
+    identifies ``fn`` between processes (``core.exported.fingerprint`` of the study's
+    settings); with it and a cache folder, the bounds are kept there and a later process
+    with the same settings, arguments and params reads them back instead of scoring the
+    ``n_norm`` designs again (a warm ``eval`` or ``run``)."""
     shape = _SHAPE.get()
+    file = None
+    if identity is not None:
+        file = _bounds_file(identity, params, names, lower, upper, n_norm, keys, dtype, shape,
+                            staged is not None, constraints is not None)  # fmt: skip
+        b = _read_bounds(file, len(names))
+        if b is not None:
+            return b
+    Xn = mc.box_samples(keys["normalisation"], lower, upper, n_norm, "halton", dtype)
     if staged is not None:
         from designopt.problems.base import Problem
         from designopt.problems.evaluate import staged_scores
@@ -93,7 +105,66 @@ def probe_bounds(
     b = np.array([[float(np.nanmin(v)), float(np.nanmax(v))] if np.any(np.isfinite(v))
                   else [0.0, 1.0] for v in vals])  # fmt: skip  # n/a values (NaN) left out
     b[:, 1] = np.where(b[:, 1] > b[:, 0], b[:, 1], b[:, 0] + 1.0)
+    if file is not None:
+        _write_bounds(file, b)
     return b
+
+
+def _bytes(x: Any) -> bytes:
+    """An array's (or a PRNG key's) shape, dtype and bytes."""
+    if isinstance(x, jax.Array) and jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key):
+        x = jax.random.key_data(x)
+    a = np.asarray(x)
+    return f"{a.shape}{a.dtype}".encode() + a.tobytes()
+
+
+def _bounds_file(identity: str, params: Any, names: Sequence[str], lower: np.ndarray,
+                 upper: np.ndarray, n_norm: int, keys: Mapping[str, jax.Array], dtype: Any,
+                 shape: tuple[int, int] | None, staged: bool, constrained: bool) -> Any:  # fmt: skip
+    """The cache folder's file of the bounds for these arguments (None without a folder)."""
+    import hashlib
+
+    from designopt.core import exported
+
+    folder = exported.folder()
+    if folder is None:
+        return None
+    h = hashlib.sha256(f"{identity}|{tuple(names)}|{n_norm}|{jnp.dtype(dtype)}|{shape}|"
+                       f"{staged}|{constrained}".encode())  # fmt: skip
+    for x in (np.asarray(lower, np.float64), np.asarray(upper, np.float64),
+              keys["normalisation"], keys["samples"], *jax.tree_util.tree_leaves(params)):  # fmt: skip
+        h.update(_bytes(x))
+    return folder / f"designopt-bounds-{h.hexdigest()[:40]}.npy"
+
+
+def _read_bounds(file: Any, k: int) -> np.ndarray | None:
+    if file is None:
+        return None
+    try:
+        b = np.load(file, allow_pickle=False)
+    except Exception:  # noqa: BLE001  (none yet, truncated, foreign: score the designs)
+        return None
+    ok = b.shape == (k, 2) and b.dtype == np.float64 and np.all(np.isfinite(b))
+    return np.array(b) if ok and np.all(b[:, 1] > b[:, 0]) else None
+
+
+def _write_bounds(file: Any, b: np.ndarray) -> None:
+    """``b`` into ``file`` whole (a temporary file renamed over it), or nothing when the
+    folder cannot be written (the cache only saves time)."""
+    import os
+    import tempfile
+
+    tmp = None
+    try:
+        file.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=file.parent, prefix=".bounds-", suffix=".tmp")
+        with os.fdopen(fd, "wb") as f:
+            np.save(f, np.asarray(b, np.float64), allow_pickle=False)
+        os.replace(tmp, file)
+    except OSError:
+        if tmp is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
 
 
 def weighted_sum(

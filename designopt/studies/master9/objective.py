@@ -99,8 +99,11 @@ def problem(
         "weights": jnp.asarray(ind.weights3, dtype),
     }
     # normalisation bounds from a Halton sample of the design box (fixed during the run)
+    from designopt.core import exported
+
     bounds = normalise.probe_bounds(
-        fn, params, SUBOBJECTIVES, lower, upper, settings.n_norm, keys, dtype
+        fn, params, SUBOBJECTIVES, lower, upper, settings.n_norm, keys, dtype,
+        identity=exported.fingerprint(settings.model_dump(mode="json")),
     )
     params["bounds"] = jnp.asarray(bounds, dtype)
     info = {

@@ -234,8 +234,11 @@ def problem(s: SerialSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Pro
     b = np.asarray([[0.0, 1.0]] * len(weights))  # params["bounds"]: unit rows unless normalised
     if s.objective.get("normalize", False):
         n_norm = int(s.objective.get("n_norm", 64))
+        from designopt.core import exported
+
+        ident = exported.fingerprint(s.model_dump(mode="json"), getattr(s, "config_dir", None))
         b = normalise.probe_bounds(fn, params, tuple(weights), lower, upper, n_norm, keys, dtype,
-                                   staged=staged, constraints=cons)  # fmt: skip
+                                   staged=staged, constraints=cons, identity=ident)  # fmt: skip
         params["bounds"] = jnp.asarray(b, dtype)
         norm_bounds = {k: b[i].tolist() for i, k in enumerate(weights)}
     ind = s.indices
