@@ -7,7 +7,6 @@ unchanged."""
 from __future__ import annotations
 
 import functools
-import os
 import re
 import types
 from collections.abc import Mapping
@@ -351,14 +350,10 @@ def check_study(cfg: Any, where: str) -> None:
     except ValueError as e:
         key, sep, why = str(e).partition(": ")
         raise ConfigError(f"{where}: key 'study.{key}': {why}" if sep else f"{where}: {e}") from None
-    if marker is not None:
-        try:
-            marker.parent.mkdir(parents=True, exist_ok=True)
-            tmp = marker.with_suffix(f".{os.getpid()}.tmp")
-            tmp.write_text(cfg.study.name)
-            os.replace(tmp, marker)
-        except OSError:
-            pass  # a cache folder that cannot be written: checked again next time
+    if marker is not None:  # (a folder that cannot be written: checked again next time)
+        from designopt.core import exported
+
+        exported.write_cached(marker, cfg.study.name.encode())
 
 
 def _checked_marker(cfg: Any) -> Path | None:

@@ -13,6 +13,7 @@ written whole (a temporary file renamed), so parallel processes never read half 
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import tempfile
@@ -75,6 +76,23 @@ def fingerprint(dumped: Any, base: Path | None = None) -> str:
     return h.hexdigest()
 
 
+def write_cached(path: Path, data: bytes) -> None:
+    """``data`` into ``path`` in the cache folder whole (a temporary file beside it,
+    renamed over it, so a reader sees the old file or the new one, never half of one), or
+    nothing when the folder cannot be written: the cache only saves time."""
+    tmp = None
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        os.replace(tmp, path)
+    except OSError:
+        if tmp is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+
+
 def signature(key: str, args: tuple) -> str:
     """The text that identifies a program: ``key`` and the arguments' pytree, shapes and
     dtypes, the backend and the versions."""
@@ -116,14 +134,7 @@ def compiled(key: str, fn: Callable, args: tuple) -> Callable:
             except Exception:  # noqa: BLE001  (no flatbuffers, an unsupported op: plain jit)
                 exp = None
             else:
-                try:
-                    d.mkdir(parents=True, exist_ok=True)
-                    fd, tmp = tempfile.mkstemp(dir=d, prefix=".export-")
-                    with os.fdopen(fd, "wb") as f:
-                        f.write(data)
-                    os.replace(tmp, path)
-                except OSError:
-                    pass
+                write_cached(path, data)
         if exp is not None:
             call = jax.jit(exp.call)
     _CALLS[sig] = call

@@ -965,7 +965,7 @@ def _climb(ch: _Chain, xr: list, pt: list, Rt: list | None, L: jax.Array, mode: 
     def lm(qc, freeze=None):
         e, J, cz = resid(qc)
         E = 0.5 * _dot(e, e)
-        lam = opts.damping_e * E + jnp.maximum(opts.damping, CLIMB_DAMPING)
+        lam = opts.damping_e * E + max(opts.damping, CLIMB_DAMPING)
         dq = _lm_step(e, J, rev, L, lam, qc, lower, upper)
         new = _project([x + d for x, d in zip(qc, dq, strict=True)], lower, upper, rev)
         if freeze is None:

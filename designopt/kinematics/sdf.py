@@ -115,8 +115,18 @@ def load_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
 
 
 MESH_VERSION = 1
-"""Part of a checked mesh's cache key (:func:`load_mesh`): raise it when the checks or the
-repair change."""
+"""Part of a checked mesh's cache key (:func:`load_mesh`), with trimesh's version: raise it
+when the checks or the repair change."""
+
+
+def package_version(package: str) -> str:
+    """An installed package's version (from its metadata: the package is not imported)."""
+    from importlib import metadata
+
+    try:
+        return metadata.version(package)
+    except metadata.PackageNotFoundError:
+        return "-"
 
 
 @lru_cache(maxsize=32)
@@ -127,7 +137,7 @@ def _load(path: str, mtime_ns: int, size: int) -> tuple[np.ndarray, np.ndarray]:
     folder = cache_folder()
     file = key = None
     with contextlib.suppress(OSError):  # (a folder, unreadable: _checked says which)
-        key = f"{MESH_VERSION}:{_content_hash(path, mtime_ns, size)}"
+        key = f"{MESH_VERSION}:{package_version('trimesh')}:{_content_hash(path, mtime_ns, size)}"
     if folder is not None and key is not None:
         file = folder / f"designopt-mesh-{hashlib.sha256(key.encode()).hexdigest()[:40]}.npz"
         try:
@@ -465,24 +475,15 @@ def _write_grid(path: Path, key: str, g: MeshGrid) -> None:
 
 
 def _write_npz(path: Path, **arrays: np.ndarray) -> None:
-    """``arrays`` into ``path`` whole (a temporary file renamed over it), or nothing when
-    the folder cannot be written (the cache only saves time)."""
+    """``arrays`` into ``path`` whole, or nothing when the folder cannot be written
+    (``core.exported.write_cached``)."""
     import io
-    import tempfile
+
+    from designopt.core import exported
 
     buf = io.BytesIO()
     np.savez(buf, **arrays)
-    tmp = None
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".grid-", suffix=".tmp")
-        with os.fdopen(fd, "wb") as f:
-            f.write(buf.getvalue())
-        os.replace(tmp, path)
-    except OSError:
-        if tmp is not None:
-            with contextlib.suppress(OSError):
-                os.unlink(tmp)
+    exported.write_cached(path, buf.getvalue())
 
 
 def mesh_grid(path: str | os.PathLike, scale: float = 1.0, resolution: int = DEFAULT_RESOLUTION,

@@ -97,8 +97,8 @@ def _finite(where: str, what: str, v: Sequence[float]) -> tuple[float, ...]:
 
 
 PARSE_VERSION = 1
-"""Part of a parsed URDF's cache key (:func:`parse`): raise it when :func:`parse` changes
-what it makes of a file."""
+"""Part of a parsed URDF's cache key (:func:`parse`), with yourdfpy's and lxml's versions:
+raise it when :func:`parse` changes what it makes of a file."""
 
 
 def _parsed_file(text: str, where: str):
@@ -106,12 +106,13 @@ def _parsed_file(text: str, where: str):
     programs and mesh grids of ``kinematics.sdf.cache_folder``), or None without a cache."""
     import hashlib
 
-    from designopt.kinematics.sdf import cache_folder
+    from designopt.kinematics.sdf import cache_folder, package_version
 
     folder = cache_folder()
     if folder is None:
         return None
-    h = hashlib.sha256(f"{PARSE_VERSION}\0{where}\0{text}".encode()).hexdigest()
+    ver = f"{PARSE_VERSION} {package_version('yourdfpy')} {package_version('lxml')}"
+    h = hashlib.sha256(f"{ver}\0{where}\0{text}".encode()).hexdigest()
     return folder / f"designopt-urdf-{h[:40]}.json"
 
 
@@ -151,15 +152,9 @@ def parse(text: str, where: str) -> Robot:
             pass  # none yet, or unreadable: parse
     robot = _parse(text, where)
     if file is not None:
-        import os
+        from designopt.core import exported
 
-        tmp = file.with_name(f"{file.name}.{os.getpid()}.tmp")
-        try:
-            file.parent.mkdir(parents=True, exist_ok=True)
-            tmp.write_text(_to_json(robot), encoding="utf-8")
-            os.replace(tmp, file)
-        except OSError:
-            tmp.unlink(missing_ok=True)
+        exported.write_cached(file, _to_json(robot).encode("utf-8"))
     return robot
 
 

@@ -149,22 +149,15 @@ def _read_bounds(file: Any, k: int) -> np.ndarray | None:
 
 
 def _write_bounds(file: Any, b: np.ndarray) -> None:
-    """``b`` into ``file`` whole (a temporary file renamed over it), or nothing when the
-    folder cannot be written (the cache only saves time)."""
-    import os
-    import tempfile
+    """``b`` into ``file`` whole, or nothing when the folder cannot be written
+    (``core.exported.write_cached``)."""
+    import io
 
-    tmp = None
-    try:
-        file.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=file.parent, prefix=".bounds-", suffix=".tmp")
-        with os.fdopen(fd, "wb") as f:
-            np.save(f, np.asarray(b, np.float64), allow_pickle=False)
-        os.replace(tmp, file)
-    except OSError:
-        if tmp is not None:
-            with contextlib.suppress(OSError):
-                os.unlink(tmp)
+    from designopt.core import exported
+
+    buf = io.BytesIO()
+    np.save(buf, np.asarray(b, np.float64), allow_pickle=False)
+    exported.write_cached(file, buf.getvalue())
 
 
 def weighted_sum(
