@@ -74,3 +74,31 @@ def test_no_fork_draws_here(tmp_path: Path, monkeypatch) -> None:
     with canvas.parallel_saves(workers=2):
         out = _draw(tmp_path)
     assert all(p.exists() for p in out) and plt.get_fignums() == []
+
+
+
+def test_a_stuck_child_is_stopped_and_says_where(tmp_path: Path, monkeypatch, capsys) -> None:
+    """A child that sleeps (a deadlock: it uses no CPU) is stopped after CHILD_IDLE
+    seconds, not CHILD_TIMEOUT; its figure is drawn by the caller, and the warning
+    names the child's Python frames."""
+    import threading
+    import time
+
+    parent, real = os.getpid(), canvas._write
+
+    def wait_forever_for_a_lock(fig, png, pdf, dpi):
+        if os.getpid() != parent:
+            threading.Event().wait()
+        real(fig, png, pdf, dpi)
+
+    monkeypatch.setattr(canvas, "_write", wait_forever_for_a_lock)
+    monkeypatch.setattr(canvas, "CHILD_IDLE", 1.0)
+    t0 = time.monotonic()
+    with canvas.parallel_saves(workers=2):
+        out = _draw(tmp_path)
+    took = time.monotonic() - t0
+    err = capsys.readouterr().err
+    assert all(p.exists() for p in out) and plt.get_fignums() == []
+    assert took < 10.0, f"{took:.1f} s"
+    assert err.count("used no CPU for 1 s; stopped, and the figure drawn here") == 3, err
+    assert "in wait_forever_for_a_lock" in err, err

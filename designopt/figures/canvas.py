@@ -13,12 +13,15 @@ from __future__ import annotations
 
 import contextlib
 import contextvars
+import dataclasses
 import os
 import sys
+import tempfile
 import time
 import warnings
 from collections.abc import Iterator
 from pathlib import Path
+from typing import IO
 
 import matplotlib
 
@@ -36,13 +39,28 @@ CHILD_TIMEOUT = 60.0
 """Seconds a figure's child process may take before it is killed and the figure drawn in
 the calling process instead."""
 
+CHILD_IDLE = 5.0
+"""Seconds a figure's child may use no CPU at all, while the caller waits for it, before it
+counts as stuck (a drawing child computes all the time; a deadlocked one sleeps)."""
+
+
+@dataclasses.dataclass
+class _Child:
+    pid: int
+    fig: plt.Figure
+    png: Path
+    pdf: Path
+    dpi: int
+    start: float
+    stacks: IO[bytes]  # where the child writes its Python stack when asked (SIGUSR1)
+
 
 class _Children:
-    """Figures being written by forked children: (pid, figure, png, pdf, dpi, start)."""
+    """Figures being written by forked children."""
 
     def __init__(self, workers: int) -> None:
         self.workers = max(1, workers)
-        self.running: list[tuple[int, plt.Figure, Path, Path, int, float]] = []
+        self.running: list[_Child] = []
 
     def submit(self, fig: plt.Figure, png: Path, pdf: Path, dpi: int) -> None:
         import signal
@@ -50,8 +68,11 @@ class _Children:
         while len(self.running) >= self.workers:
             self._reap(self.running[0])
         # JAX (and Python ≥ 3.12) warn that a fork beside threads may deadlock a child that
-        # uses them; this one uses numpy and matplotlib only, JAX is idle meanwhile, and a
-        # child stuck anyway is killed after CHILD_TIMEOUT and its figure drawn here.
+        # uses them (a lock another thread held at the fork); this one uses numpy and
+        # matplotlib only (artists hold numpy data: matplotlib converts at creation). A
+        # child stuck anyway is stopped (CHILD_IDLE, CHILD_TIMEOUT), its figure drawn
+        # here, and a warning shows where it was stuck.
+        stacks = tempfile.TemporaryFile()
         # Signals are blocked across the fork, so none runs the caller's code in the child.
         block = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP}
         old = signal.pthread_sigmask(signal.SIG_BLOCK, block)
@@ -62,6 +83,7 @@ class _Children:
                 pid = os.fork()
         except OSError:  # no fork (memory, process limit): draw it here
             signal.pthread_sigmask(signal.SIG_SETMASK, old)
+            stacks.close()
             try:
                 _write(fig, png, pdf, dpi)
             finally:
@@ -70,50 +92,92 @@ class _Children:
         if pid == 0:  # the child: render, write, leave without running the caller's code
             code = 1
             try:
-                _child_setup(block)
+                _child_setup(block, stacks)
                 signal.pthread_sigmask(signal.SIG_SETMASK, old)
                 _write(fig, png, pdf, dpi)
                 code = 0
             finally:
                 os._exit(code)
         signal.pthread_sigmask(signal.SIG_SETMASK, old)
-        self.running.append((pid, fig, png, pdf, dpi, time.monotonic()))
+        self.running.append(_Child(pid, fig, png, pdf, dpi, time.monotonic(), stacks))
 
-    def _reap(self, job: tuple) -> None:
+    def _reap(self, job: _Child) -> None:
         """Wait for one child; a failed, killed or stuck one (or one that cannot be waited
         for): draw its figure here, so a disk fault raises its own OSError here."""
-        pid, fig, png, pdf, dpi, t0 = job
         status = None
+        cpu, idle_since = None, time.monotonic()
         try:
             while status is None:
                 try:
-                    done, st = os.waitpid(pid, os.WNOHANG)
+                    done, st = os.waitpid(job.pid, os.WNOHANG)
                 except ChildProcessError:  # already reaped elsewhere (SIGCHLD ignored)
-                    done, st = pid, -1
+                    done, st = job.pid, -1
+                now = time.monotonic()
+                used = _cpu_ticks(job.pid)
+                if used is None or used != cpu:
+                    cpu, idle_since = used, now
                 if done:
                     status = st
-                elif time.monotonic() - t0 > CHILD_TIMEOUT:
-                    _kill(pid)
+                elif now - job.start > CHILD_TIMEOUT or now - idle_since > CHILD_IDLE:
+                    why = (f"used no CPU for {CHILD_IDLE:g} s" if now - job.start <= CHILD_TIMEOUT
+                           else f"did not finish within {CHILD_TIMEOUT:g} s")  # fmt: skip
+                    stack = _stack(job)
+                    _kill(job.pid)
                     status = -1
+                    print(f"warning: {job.png.name}: its drawing process {why}; stopped, and "
+                          f"the figure drawn here{stack}", file=sys.stderr)
                 else:
                     time.sleep(0.005)
-            if status != 0 or not (png.exists() and pdf.exists()):
-                _write(fig, png, pdf, dpi)
+            if status != 0 or not (job.png.exists() and job.pdf.exists()):
+                _write(job.fig, job.png, job.pdf, job.dpi)
         finally:
             if status is None:  # interrupted while waiting
-                _kill(pid)
+                _kill(job.pid)
             self.running.remove(job)
-            plt.close(fig)
+            job.stacks.close()
+            plt.close(job.fig)
 
     def finish(self) -> None:
         while self.running:
             self._reap(self.running[0])
 
     def kill(self) -> None:
-        for pid, fig, *_ in self.running:
-            _kill(pid)
-            plt.close(fig)
+        for job in self.running:
+            _kill(job.pid)
+            job.stacks.close()
+            plt.close(job.fig)
         self.running.clear()
+
+
+def _cpu_ticks(pid: int) -> int | None:
+    """The CPU time (user + system, clock ticks) process ``pid`` has used (None where
+    /proc cannot say)."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            fields = f.read().rsplit(b")", 1)[1].split()
+        return int(fields[11]) + int(fields[12])  # utime, stime (fields 14 and 15)
+    except (OSError, IndexError, ValueError):
+        return None
+
+
+def _stack(job: _Child) -> str:
+    """The stuck child's Python stack (faulthandler's, on SIGUSR1), innermost frames
+    first, as lines to append to the warning ("" when it cannot be had)."""
+    import signal
+
+    try:
+        os.kill(job.pid, signal.SIGUSR1)
+        deadline = time.monotonic() + 1.0
+        while time.monotonic() < deadline:
+            job.stacks.seek(0)
+            text = job.stacks.read().decode(errors="replace")
+            if "File" in text and text.endswith("\n"):
+                break
+            time.sleep(0.02)
+    except OSError:
+        return ""
+    frames = [ln.strip() for ln in text.splitlines() if ln.strip().startswith("File")]
+    return "".join(f"\n  {f}" for f in frames[:8])
 
 
 def _kill(pid: int) -> None:
@@ -122,15 +186,20 @@ def _kill(pid: int) -> None:
         os.waitpid(pid, 0)
 
 
-def _child_setup(signals: set) -> None:
-    """In a figure's child: default signal handlers, no wake-up pipe of the caller's, and
-    (Linux) SIGKILL when the caller dies, so no child outlives it (or its output lock)."""
+def _child_setup(signals: set, stacks: IO[bytes]) -> None:
+    """In a figure's child: default signal handlers, no wake-up pipe of the caller's, its
+    Python stack written to ``stacks`` on SIGUSR1 (what the caller reports when the
+    child is stuck), and (Linux) SIGKILL when the caller dies, so no child outlives it
+    (or its output lock)."""
+    import faulthandler
     import signal
 
     with contextlib.suppress(ValueError, OSError):
         signal.set_wakeup_fd(-1)
     for sig in signals:
         signal.signal(sig, signal.SIG_DFL)
+    with contextlib.suppress(Exception):
+        faulthandler.register(signal.SIGUSR1, file=stacks, all_threads=True)
     with contextlib.suppress(Exception):
         import ctypes
 
