@@ -68,6 +68,40 @@ class Optimizer(_Strict):
     # the objective as a program of its own between ask and tell, or inside the runner's
     # scan; auto: app.optimise.separate_objective's rule (docs/configs.md)
     objective_program: Literal["auto", "separate", "fused"] = "auto"
+    fidelity: dict[str, float | int | str | bool] = {}
+    """Study settings the search scores with instead of the study's own (dotted keys as
+    ``--set`` takes them, each under ``study.``: e.g. ``{study.task.ik.n_best: 2}``, a
+    cheaper IK). Only the search uses them: every quoted score (the final design's or a
+    front's re-scoring, each run's best, ``eval``, ``scan``) is the study's own."""
+
+    @field_validator("fidelity", mode="before")
+    @classmethod
+    def _flat(cls, v: Any) -> Any:
+        """Nested mappings (``{study: {task: {ik: {n_best: 2}}}}``, or what ``--set
+        optimizer.fidelity.study.task.ik.n_best=2`` makes) as dotted keys."""
+        if not isinstance(v, Mapping):
+            return v
+        out: dict[str, Any] = {}
+
+        def walk(prefix: str, node: Mapping) -> None:
+            for k, x in node.items():
+                path = f"{prefix}.{k}" if prefix else str(k)
+                if isinstance(x, Mapping) and x:
+                    walk(path, x)
+                else:
+                    out[path] = x
+
+        walk("", v)
+        return out
+
+    @field_validator("fidelity")
+    @classmethod
+    def _study_keys(cls, v: dict[str, Any]) -> dict[str, Any]:
+        for k in v:
+            if not k.startswith("study.") or k in ("study.name", "study.") or ".." in k:
+                raise ValueError(f"{k}: a fidelity setting is a key of the study (study.…; "
+                                 "not its name), as --set takes it")  # fmt: skip
+        return v
 
 
 class Refine(_Strict):

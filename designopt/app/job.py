@@ -73,6 +73,22 @@ def build_problem(cfg: Any, keys: Mapping[str, jax.Array], where: str = "config"
     return problem
 
 
+def search_config(cfg: Any, where: str = "config") -> Any:
+    """``cfg`` with its ``optimizer.fidelity`` settings set (validated, the study's checks
+    included), or None when it has none. A key or value the study refuses: ConfigError
+    naming ``optimizer.fidelity``."""
+    from designopt.app import sweeps
+
+    fid = dict(cfg.optimizer.fidelity)
+    if not fid:
+        return None
+    try:
+        return sweeps.apply(cfg, fid, where)
+    except (ValueError, ConfigError) as e:
+        why = str(e).removeprefix(where + ": ")
+        raise ConfigError(f"{where}: key 'optimizer.fidelity': {why}") from None
+
+
 def base_attrs(kind: str, cfg: Any, text: str | None, keys: Mapping[str, jax.Array],
                where: str = "config") -> dict[str, Any]:  # fmt: skip
     """The root attrs of every archive: kind, study, the config as given (``text``; the
@@ -100,7 +116,9 @@ class Job:
     estimate: Estimate
     where: str = "config"
     text: str | None = None
+    search_cfg: Any = None  # cfg with optimizer.fidelity applied (None: cfg itself)
     _problem: Problem | None = field(default=None, repr=False)
+    _search: Problem | None = field(default=None, repr=False)
 
     @classmethod
     def build(cls, cfg: Any, where: str = "config", text: str | None = None, *,
@@ -112,7 +130,8 @@ class Job:
         dtype = dtype_of(cfg)
         est = estimate(cfg, study, n_designs=n_designs, members=members)
         est.check(where)
-        return cls(cfg, study, dtype, streams(cfg.seed), est, where, text)
+        return cls(cfg, study, dtype, streams(cfg.seed), est, where, text,
+                   search_config(cfg, where))  # fmt: skip
 
     @property
     def problem(self) -> Problem:
@@ -120,6 +139,16 @@ class Job:
         if self._problem is None:
             self._problem = build_problem(self.cfg, self.keys, self.where, self.dtype)
         return self._problem
+
+    @property
+    def search_problem(self) -> Problem:
+        """The problem the search scores with: the study's own, or (``optimizer.fidelity``)
+        the study's with those settings; the same normalisation probe stream either way."""
+        if self.search_cfg is None:
+            return self.problem
+        if self._search is None:
+            self._search = build_problem(self.search_cfg, self.keys, self.where, self.dtype)
+        return self._search
 
     def attrs(self, kind: str) -> dict[str, Any]:
         """The root attrs of this job's archive of ``kind``."""

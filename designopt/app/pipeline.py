@@ -121,7 +121,7 @@ class Single:
     record = RunRecord
 
     def problem(self, job: Job) -> Any:
-        return job.problem
+        return job.search_problem
 
     def ref_point(self, job: Job) -> Any:
         return None
@@ -145,7 +145,7 @@ class Single:
         return groups
 
     def check(self, job: Job, groups: dict[str, Any]) -> None:
-        na = tuple(job.problem.na_range)
+        na = tuple(job.search_problem.na_range)
         check_finite(groups["final"], job.where, "the final design", na=na)
         check_finite(groups["best_run"].get("final", {}), job.where,
                      "the final design on the search's samples", na=na)  # fmt: skip
@@ -168,7 +168,7 @@ class Front(Single):
     record = FrontRecord
 
     def problem(self, job: Job) -> Any:
-        return fronts.objective_problem(job.problem, job.cfg.study.pareto)
+        return fronts.objective_problem(job.search_problem, job.cfg.study.pareto)
 
     def ref_point(self, job: Job) -> Any:
         return fronts.reference(job.cfg)
@@ -320,13 +320,13 @@ def sweep(cfg: Any, text: str | None = None, where: str = "config", out: Path | 
             for k, mem in groups.items():
                 job = jobs[k]
                 opt_sets = [sw.split(m)[1] for _, m in mem]
-                res = optimise(job, job.problem, members=opt_sets, progress=bar)
+                res = optimise(job, job.search_problem, members=opt_sets, progress=bar)
                 for j, (i, m) in enumerate(mem):
                     mres = res.member(j)
-                    t = run_groups(job.cfg, job.problem, mres, job.dtype)
-                    na = tuple(job.problem.na_range)
+                    t = run_groups(job.cfg, job.search_problem, mres, job.dtype)
+                    na = tuple(job.search_problem.na_range)
                     check_finite(t["final"], where, f"sweep member {i} {m}", na=na)
-                    t = rescoring.final_groups(job, job.problem, mres, t)
+                    t = rescoring.final_groups(job, job.search_problem, mres, t)
                     check_finite(t["final"], where, f"sweep member {i} {m}", na=na)
                     warnings(job, t["final"])
                     t["attrs"] = {"overrides": m,
@@ -417,14 +417,15 @@ def compare(cfg: Any, designs: list[Mapping[str, float]], where: str = "config",
     import jax
 
     job = Job.build(cfg, where, n_designs=len(designs))
-    problem = job.problem
     base_cfg, base_keys = cfg, job.keys
-    n_used = int(problem.n_samples_used)
-    if fresh:
+    if fresh:  # the run's normalisation: its search's (optimizer.fidelity's settings)
         fr = rescoring.plan(job, "final")
-        search = problem
+        search = job.search_problem
         problem = rescoring.problem(job, "final", search)
         base_cfg, base_keys, n_used = fr.cfg, fr.keys, int(problem.n_samples_used or fr.n)
+    else:
+        problem = job.problem
+        n_used = int(problem.n_samples_used)
     for d in designs:
         bad = [k for k in d if k not in problem.names]
         if bad:

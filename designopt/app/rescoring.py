@@ -27,6 +27,7 @@ designs spread over more than FLAT of their box are the flat directions.
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -217,9 +218,12 @@ def runs_group(X: np.ndarray, vals: Mapping[str, np.ndarray], objectives: Sequen
 
 
 def optimism(search: Mapping[str, Any], fresh: Mapping[str, Any], keys: Sequence[str],
-             n_search: int, n_fresh: int, samples_key: str) -> list[str]:  # fmt: skip
+             n_search: int, n_fresh: int, samples_key: str,
+             fidelity: Mapping[str, Any] | None = None) -> list[str]:  # fmt: skip
     """A ``warning:`` line for each of ``keys`` (minimised: f) whose value on the search's
-    samples and on the fresh ones differ by more than Z √(se_search² + se_fresh²)."""
+    samples and on the fresh ones differ by more than Z √(se_search² + se_fresh²).
+    ``fidelity``: the settings the search scored with instead of the study's
+    (``optimizer.fidelity``), which the line then names as part of the gap."""
     out = []
     for k in keys:
         if k not in search or k not in fresh:
@@ -238,6 +242,11 @@ def optimism(search: Mapping[str, Any], fresh: Mapping[str, Any], keys: Sequence
             if a < b
             else "pessimistic: its samples were unkind to this design"
         )
+        if fidelity:
+            sets = ", ".join(f"{k}={v}" for k, v in fidelity.items())
+            how = (f"{'optimistic' if a < b else 'pessimistic'}: the search scored with "
+                   f"optimizer.fidelity ({sets}), so the gap holds what those settings "
+                   "change as well as its samples' luck")  # fmt: skip
         out.append(f"{k} = {b:.5g} ± {sb:.2g} on {n_fresh} fresh samples per design, "
                    f"{a:.5g} ± {sa:.2g} {SEARCH_LABEL} ({n_search}): {apart}; the "
                    f"search's value is {how}; the fresh value is quoted (more samples, "
@@ -270,15 +279,18 @@ def final_groups(job: Any, problem: Problem, res: Any, groups: dict[str, Any],
     vals = score(fresh, X)
     own = {k: v for k, v in fin.items() if k not in ("x", "attrs")}  # the search's values
     at = dict(fin.get("attrs", {}))
-    groups["best_run"]["final"] = own | {"attrs": {"samples": SEARCH_LABEL,
-                                                   "n_samples": int(problem.n_samples_used),
-                                                   "stage": at.get("stage", "optimizer")}}  # fmt: skip
+    fid = dict(job.cfg.optimizer.fidelity)
+    search_at = {"samples": SEARCH_LABEL, "n_samples": int(problem.n_samples_used),
+                 "stage": at.get("stage", "optimizer")}  # fmt: skip
+    if fid:  # the settings the search scored with (archived as JSON)
+        search_at["fidelity"] = json.dumps(fid)
+    groups["best_run"]["final"] = own | {"attrs": search_at}
     new = {k: v[-1] for k, v in vals.items()}
     at |= {"n_samples_used": int(fresh.n_samples_used or fr.n), "samples": "fresh",
            "stream": "final", "n_samples_search": int(problem.n_samples_used)}  # fmt: skip
     cost = job.study.cost(job.cfg.study)
     at["optimism"] = optimism(own, new, ["f"], int(problem.n_samples_used),
-                              at["n_samples_used"], cost.samples_key)  # fmt: skip
+                              at["n_samples_used"], cost.samples_key, fid)  # fmt: skip
     groups["final"] = new | {"x": x_final, "attrs": at}
     if runs:
         ref = int(groups["best_run"]["attrs"]["run_index"]) if ref is None else ref

@@ -118,8 +118,9 @@ class FrontRecord(Record):
             return []
         P = self.population_history
         what = "the final populations" if P is None else "the best front found so far"
+        fid = ", scored with optimizer.fidelity" if self.config.optimizer.fidelity else ""
         line = (f"search: hypervolume of {what} {np.median(H[:, -1]):.6g} (median of {len(H)} "
-                f"runs, the optimizer's samples)")  # fmt: skip
+                f"runs, the optimizer's samples{fid})")  # fmt: skip
         if P is not None:
             line += f"; of the final populations {np.median(np.atleast_2d(P)[:, -1]):.6g}"
         cut = self.groups["optimizer"].get("archive_pruned")

@@ -212,7 +212,8 @@ class RunRecord(Record):
         if self.fresh and "f" in srch:
             se = fin.get("f_se")
             lines.append(f"  f     = {value_text(self.f, se)}   (fresh samples, "
-                         f"{self.n_samples_used} per design; {SEARCH_LABEL} "
+                         f"{self.n_samples_used} per design; {SEARCH_LABEL}"
+                         f"{' with optimizer.fidelity' if cfg.optimizer.fidelity else ''} "
                          f"{value_text(srch['f'], srch.get('f_se'))}; {cfg.optimizer.name} "
                          f"converged at iteration {opt['converged_at'][best]})")  # fmt: skip
         else:

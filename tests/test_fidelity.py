@@ -1,0 +1,85 @@
+"""``optimizer.fidelity``: study settings the search scores with instead of the study's
+own (docs/configs.md, "Scores you can quote"). The search is the search of a config whose
+study has those settings, bit for bit; every quoted score is the study's own; a key that
+is not the study's, or that the study refuses, is one line naming ``optimizer.fidelity``."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from designopt.app import records
+from designopt.cli.commands import main
+from tests.test_final_rescoring import SIX_R, _planar, _write
+
+
+def test_the_search_uses_the_fidelity_settings_and_the_quoted_scores_the_studys(tmp_path, capsys):
+    """A planar 2R of 4096 samples searched on 512: its optimizer's history and design are
+    those of the same config with 512 samples in the study (and the same final stream
+    size); its final/ is re-scored on 4 × 4096 fresh samples, as the 4096-sample study
+    asks; ``eval`` scores with the study's 4096, ``eval --fresh`` gives final/."""
+    fid = tmp_path / "fid"
+    low = tmp_path / "low"
+    fid.mkdir()
+    low.mkdir()
+    p = _write(fid, _planar(**{"optimizer.fidelity": {"study.indices.n_samples": 512}}))
+    q = _write(low, _planar(**{"study.indices.n_samples": 512, "final.n_samples": 4 * 4096}))
+    capsys.readouterr()
+    assert main(["run", p, "--quiet", "--no-figures"]) == 0
+    out = capsys.readouterr().out
+    assert main(["run", q, "--quiet", "--no-figures"]) == 0
+    capsys.readouterr()
+    a, b = records.load(fid / "r.h5"), records.load(low / "r.h5")
+    for k in ("best_x", "best_f", "history"):
+        np.testing.assert_array_equal(a["optimizer"][k], b["optimizer"][k])
+    assert a.n_samples_search == 512 and a.n_samples_used == 4 * 4096
+    at = a["best_run"]["final"]["attrs"]
+    assert at["fidelity"] == {"study.indices.n_samples": 512}  # JSON in the file
+    for k in ("f", "gci", "gci_se", "volume"):
+        assert float(a.final[k]) == float(b.final[k]), k  # the same fresh stream and size
+        assert float(a.search[k]) == float(b.search[k]), k
+    assert "on the search's samples with optimizer.fidelity" in out
+    x = a.x
+    design = ["--design", f"l1={x['l1']!r}", "--design", f"l2={x['l2']!r}"]
+    assert main(["eval", p, *design, "--fresh", "--json"]) == 0
+    ev = json.loads(capsys.readouterr().out)
+    assert ev["gci"] == pytest.approx(float(a.final["gci"]), rel=1e-12)
+    assert main(["eval", p, *design, "--json"]) == 0  # the study's own 4096 samples
+    ev = json.loads(capsys.readouterr().out)
+    assert main(["eval", q, *design, "--set", "study.indices.n_samples=4096", "--json"]) == 0
+    want = json.loads(capsys.readouterr().out)
+    assert ev["gci"] == want["gci"] and ev["gci"] != pytest.approx(float(a.search["gci"]), rel=1e-9)
+
+
+@pytest.mark.parametrize("key, says", [
+    ("optimizer.fidelity.optimizer.n_iters=2", "a fidelity setting is a key of the study"),
+    ("optimizer.fidelity.study.indices.n_smaples=2", "'study.indices.n_smaples': unknown key"),
+    ("optimizer.fidelity.study.indices.n_samples=0", "'study.indices.n_samples'"),
+])  # fmt: skip
+def test_a_bad_fidelity_key_is_one_line_naming_it(tmp_path, capsys, key, says):
+    p = _write(tmp_path, _planar())
+    capsys.readouterr()
+    assert main(["run", p, "--set", key, "--quiet"]) == 2
+    out, err = capsys.readouterr()
+    assert err.startswith("designopt: error: ") and err.count("\n") == 1, err
+    assert "key 'optimizer.fidelity" in err and says in err, err
+    assert "Traceback" not in out + err and not (tmp_path / "r.h5").exists()
+
+
+def test_the_optimism_warning_names_the_fidelity(tmp_path, capsys):
+    """The 6R arm whose every design has the same GCI, its study at 4096 samples, searched
+    on 8 (``optimizer.fidelity``): the search's value is optimistic, and the line says
+    the search scored with other settings."""
+    raw = SIX_R | {"study": SIX_R["study"] | {"indices": SIX_R["study"]["indices"]
+                                               | {"n_samples": 4096}}}  # fmt: skip
+    raw = raw | {"optimizer": raw["optimizer"] | {"fidelity": {"study.indices.n_samples": 8}}}
+    p = _write(tmp_path, raw)
+    capsys.readouterr()
+    assert main(["run", p, "--quiet", "--no-figures"]) == 0
+    out = capsys.readouterr().out
+    warn = [ln for ln in out.splitlines() if ln.strip().startswith("warning: f = ")]
+    assert len(warn) == 1, out
+    assert "optimistic: the search scored with optimizer.fidelity (study.indices.n_samples=8)" \
+        in warn[0] and "on the search's samples (8)" in warn[0], warn[0]  # fmt: skip
