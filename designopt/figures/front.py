@@ -374,8 +374,10 @@ def hypervolume(rec: FrontRecord, folder: Path, units: Mapping[str, str]) -> lis
     if pop is not None:
         ax.plot(it, np.median(np.atleast_2d(pop), 0), color="tab:orange", ls=":", lw=1.4,
                 gid="population", label="median of the populations alone")  # fmt: skip
+    fid = dict(rec.config.optimizer.fidelity)
     ax.axhline(rec.hypervolume, color="tab:blue", ls="--", lw=1.0,
-               label="front pooled over the runs, re-scored")  # fmt: skip
+               label="front pooled over the runs, re-scored"
+               + (" (the study's own settings)" if fid else ""))  # fmt: skip
     own = "each run's feasible population" if pop is None else "each run's best front so far"
     ax.plot([], [], color="0.6", lw=0.7, label=own)
     ax.set_xlabel(style.label("iteration", style.DIMENSIONLESS))
@@ -384,6 +386,8 @@ def hypervolume(rec: FrontRecord, folder: Path, units: Mapping[str, str]) -> lis
     ax.legend(fontsize=7, loc="lower right")
     ref = ", ".join(f"{k} = {v:.4g}" for k, v in zip(obj, rec.reference, strict=True))
     what = "the best front found so far" if pop is not None else "the populations"
-    fig.suptitle(f"Hypervolume of {', '.join(obj)} ({rec.study}), {what}\nreference point: {ref}",
-                 fontsize=9)  # fmt: skip
+    how = ("; the search scored with " + ", ".join(f"{k} = {v}" for k, v in fid.items())
+           if fid else "")  # optimizer.fidelity
+    fig.suptitle(f"Hypervolume of {', '.join(obj)} ({rec.study}), {what}\nreference point: {ref}"
+                 f"{how}", fontsize=9)  # fmt: skip
     return save(fig, folder, "hypervolume")
