@@ -12,7 +12,9 @@ import pytest
 
 from designopt.app import records
 from designopt.cli.commands import main
+from designopt.io import archive
 from tests.test_final_rescoring import SIX_R, _planar, _write
+from tests.test_html_report import page
 
 
 def test_the_search_uses_the_fidelity_settings_and_the_quoted_scores_the_studys(tmp_path, capsys):
@@ -41,6 +43,8 @@ def test_the_search_uses_the_fidelity_settings_and_the_quoted_scores_the_studys(
         assert float(a.final[k]) == float(b.final[k]), k  # the same fresh stream and size
         assert float(a.search[k]) == float(b.search[k]), k
     assert "on the search's samples with optimizer.fidelity" in out
+    html = page(archive.read(fid / "r.h5"))  # the HTML report says so beside the table
+    assert "the search scored with optimizer.fidelity (study.indices.n_samples = 512)" in html
     x = a.x
     design = ["--design", f"l1={x['l1']!r}", "--design", f"l2={x['l2']!r}"]
     assert main(["eval", p, *design, "--fresh", "--json"]) == 0

@@ -204,6 +204,12 @@ def _final_tables(tree: Mapping[str, Any], units: dict[str, str]) -> str:
         head.append(f"{SEARCH_LABEL} ({n} per design)")
         cap += ("; the search's own values of the design are biased by its choice among designs "
                 "scored on the same samples")  # fmt: skip
+        fid = srch.get("attrs", {}).get("fidelity")
+        if fid:  # optimizer.fidelity: the search scored with other study settings
+            fid = json.loads(fid) if isinstance(fid, str) else dict(fid)
+            cap += ("; the search scored with optimizer.fidelity ("
+                    + ", ".join(f"{k} = {v}" for k, v in fid.items()) + "), the quoted values "
+                    "with the study's own settings")  # fmt: skip
     parts.append("<h3>Final indices (± 1 SE)</h3>" + (f"<p class='note'>{esc(cap)}</p>" if cap else "")
                  + _table([*head, "unit"], rows))  # fmt: skip
     return "".join(parts)
