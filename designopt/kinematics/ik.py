@@ -549,7 +549,8 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
           score: Callable[[jax.Array], jax.Array] | None = None,
           accept: Callable[[jax.Array, jax.Array, jax.Array], jax.Array] | None = None,
           t0: jax.Array | int = 0, rep: jax.Array | None = None,
-          hopeless: jax.Array | None = None) -> IKResult:  # fmt: skip
+          hopeless: jax.Array | None = None, n_keep: jax.Array | None = None
+          ) -> IKResult:  # fmt: skip
     """IK of the same T targets (p_t (T, 3), R_t (T, 3, 3) or None) for M designs
     X (M, D), or of each design's own T targets (p_t (M, T, 3), R_t (M, T, 3, 3)): every
     field has leading axes (M, T). The database draws and the seeds' hashes are shared
@@ -575,7 +576,11 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
     input): items that no solution can serve (``accept`` refuses every one, or the caller
     rejects every one: a target out of an instrument's insertion range, its shaft through
     the anatomy): they get one seed, not all of them, and their joints are that seed's
-    end (a failure's joints either way)."""
+    end (a failure's joints either way). ``n_keep`` (an int array input, 1 ≤ ``n_keep``
+    ≤ ``opts.n_best``): the distinct solutions a target's solver looks for, when fewer
+    than the ``opts.n_best`` solution slots the program holds, so that one compiled
+    program serves every count up to it (its slots beyond ``n_keep`` stay unused; the
+    result is the one ``opts.n_best = n_keep`` gives)."""
     _check(mode, R_t, opts)
     X = jnp.asarray(X)
     per_design = p_t.ndim == 3
@@ -665,7 +670,9 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         qc, _, ok, Em = jax.lax.fori_loop(0, opts.block, body, c0)
         return qc, ok, Em
 
-    nb = opts.n_best
+    nb = opts.n_best  # solution slots (the program's shapes)
+    # distinct solutions sought: the slots, or the runtime count n_keep (loop bounds)
+    nk = nb if n_keep is None or nb == 1 else jnp.clip(jnp.asarray(n_keep, jnp.int32), 1, nb)
     B0 = opts.slots if opts.slots > 0 else max(1024, min(4096, I // 4))
     B = min(I, B0)
     C = _phases(B)[1] if len(_phases(B)) > 1 else B  # slots per block call
@@ -735,7 +742,7 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
                     jnp.abs(sc_new - ss) <= DUPLICATE_SCORE * jnp.maximum(1.0, jnp.abs(ss)))
                 return dup | ((c < n_conv) & near_)
 
-            dup = ok & jax.lax.fori_loop(0, nb, same, dup)
+            dup = ok & jax.lax.fori_loop(0, nk, same, dup)
             ok = ok & ~dup
         refused = jnp.zeros_like(ok)
         if accept is not None:  # asked of the converged slots that bring a new solution
@@ -764,7 +771,7 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         nc = nc.at[jnp.where(active & ok, i, I)].add(1, mode="drop")
         n_try = n_try.at[jnp.where(active, i, I)].max(a + 1, mode="drop")
         n_ref = n_ref.at[jnp.where(active & refused, i, I)].add(1, mode="drop")
-        more = (ok & (n_conv + 1 < nb)) | dup  # n_best asks for another (new) solution
+        more = (ok & (n_conv + 1 < nk)) | dup  # n_best asks for another (new) solution
         retry = active & (give_up | more) & ~last
         free = active & (ok | give_up | dup)
         # an item whose seed was dropped goes to the back of the queue with its next seed
@@ -888,7 +895,7 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
     z = jnp.zeros((M, T), dtype)
     best0 = IKResult(jnp.zeros((M, T, n), dtype), z > 0, z, z, z, jnp.zeros((M, T), jnp.int32),
                      z > 0, tries, refusals)
-    best, _ = jax.lax.fori_loop(0, nb, pick, (best0, jnp.full((M, T), -jnp.inf, dtype)))
+    best, _ = jax.lax.fori_loop(0, nk, pick, (best0, jnp.full((M, T), -jnp.inf, dtype)))
     return _materialised(copied(best))
 
 

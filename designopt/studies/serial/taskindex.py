@@ -76,6 +76,8 @@ def scene_params(s: SerialSettings, dtype: Any, mech: Mechanism | None = None) -
     inner = [o for o in obst if getattr(o, "inside", False)]
     out = {"scene_obstacles": obstacle_params(outer, dtype),
            "scene_insertion": jnp.asarray(np.asarray(s.insertions(), np.float64), dtype)}  # fmt: skip
+    if s.task is not None:  # the distinct IK solutions sought (best_slots: one program)
+        out["ik_n_best"] = jnp.asarray(s.task.ik.n_best, jnp.int32)
     if inner:  # the anatomy: checked against the instrument beyond the port plane
         out["scene_inside"] = obstacle_params(inner, dtype)
     band = None if s.task is None else s.task.instrument_angle
@@ -98,11 +100,27 @@ def counts_of(s: SerialSettings, mech: Mechanism, per: dict[str, jax.Array],
     return counts(per, jax.random.fold_in(params["sample_key"], 2))
 
 
+BEST_SLOTS = 8
+"""Solution slots of the IK program for any ``study.task.ik.n_best`` from 2 to this
+(:func:`best_slots`): the count itself is an input (``params["ik_n_best"]``,
+``ik.solve``'s ``n_keep``), so settings that differ only in it (a search that ranks by
+the best of 2 under ``optimizer.fidelity``, a re-scoring by the best of 8) run one
+compiled program."""
+
+
+def best_slots(n_best: int) -> int:
+    """The IK program's solution slots for ``n_best``: 1 for 1 (the first solution: no
+    comparison in the program), else at least :data:`BEST_SLOTS`."""
+    return 1 if n_best == 1 else max(int(n_best), BEST_SLOTS)
+
+
 def options(s: SerialSettings) -> ik.IKOptions:
     """The IK settings of ``study.task.ik`` as solver options (every field: the schema's
-    defaults are the solver's, but for ``n_best`` = 2 where the solver's is 1)."""
+    defaults are the solver's, but for ``n_best`` = 2 where the solver's is 1), with
+    ``n_best`` the program's slots (:func:`best_slots`; the count sought is an input)."""
     o = s.task.ik  # type: ignore[union-attr]
-    return ik.IKOptions(**{k: getattr(o, k) for k in ik.IKOptions._fields})
+    return ik.IKOptions(**{k: getattr(o, k) for k in ik.IKOptions._fields}
+                        | {"n_best": best_slots(o.n_best)})  # fmt: skip
 
 
 def mode(s: SerialSettings) -> ik.Mode:
@@ -311,7 +329,7 @@ def chunk_values(mech: Mechanism, s: SerialSettings, params: dict[str, Any], ful
                                      ~hopeless, A, M, C)  # fmt: skip
             hopeless = hopeless | blocked
     res = ik.solve(mech.model, X, p_ik, R_ik, lo, hi, key, md, opts, score, accept, t0, rep,
-                   hopeless)  # fmt: skip
+                   hopeless, sc_p.get("ik_n_best"))  # fmt: skip
     J = jac(res.q)
     inv_k, man = inv_cond(J * sc[:, None], ind.norm, ind.normalized, with_volume=True)
     ok, conv = res.success, res.converged
@@ -587,6 +605,7 @@ def structure_key(s: SerialSettings) -> str:
     d.pop("pareto", None)
     task = d.get("task")
     if task is not None:
+        task["ik"]["n_best"] = best_slots(s.task.ik.n_best)  # the count is an input
         reg = s.task.region  # type: ignore[union-attr]
         task["region"] = (f"points:{len(reg.xyz())}" if isinstance(reg, Points)
                           else str(task["region"].get("shape")))  # fmt: skip
