@@ -774,3 +774,9 @@ def _node(raw: Any, path: list[str]) -> Any:
         else:
             return None
     return node
+
+
+def resolved_yaml(cfg: Any) -> str:
+    """A validated config as YAML (every default filled in: the archive's
+    ``config_resolved_yaml``)."""
+    return yaml.safe_dump(cfg.model_dump(mode="json", by_alias=True), sort_keys=False)

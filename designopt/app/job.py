@@ -13,8 +13,8 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
-import yaml
 
+from designopt.app.config import resolved_yaml
 from designopt.app.preflight import Estimate, estimate
 from designopt.core.errors import ConfigError
 from designopt.core.keys import key_data, streams
@@ -32,10 +32,6 @@ def dtype_of(cfg: Any) -> np.dtype:
             "jax.config.update('jax_enable_x64', True) before using designopt from Python"
         )
     return jnp.dtype(cfg.precision)
-
-
-def resolved_yaml(cfg: Any) -> str:
-    return yaml.safe_dump(cfg.model_dump(mode="json", by_alias=True), sort_keys=False)
 
 
 _PROBLEMS: dict[tuple, Problem] = {}

@@ -129,6 +129,6 @@ def groups(cfg: Any, where: str) -> tuple[dict[str, list[tuple[int, dict]]], dic
 
 def resolved(cfg: Any, overrides: dict[str, Any]) -> str:
     """The resolved YAML of one member's config."""
-    from designopt.app.job import resolved_yaml
+    from designopt.app.config import resolved_yaml
 
     return resolved_yaml(apply(cfg, overrides))
