@@ -36,6 +36,7 @@ arm-against-arm checks.
 
 from __future__ import annotations
 
+import contextlib
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -147,8 +148,13 @@ def geometry(s: SerialSettings, mech: Mechanism) -> Geometry | None:
         return None
     key = s.model_dump_json()
     if key not in _GEOMETRY:
-        try:  # at set-up: the jitted helpers run as compiled programs
-            _GEOMETRY[key] = _geometry(s, mech)
+        try:  # at set-up: the jitted helpers run as compiled programs, in float64 whatever
+            # JAX's mode (the CLI validates a config, and so runs the study's checks that
+            # ask for it first, before it turns 64-bit mode on: in float32 a link of zero
+            # length, e.g. a Panda's between joints 5 and 6, measured ~1e-8 and was kept,
+            # and a later process that skipped the checks dropped it)
+            with contextlib.nullcontext() if jax.config.jax_enable_x64 else jax.enable_x64(True):
+                _GEOMETRY[key] = _geometry(s, mech)
         except (jax.errors.TracerArrayConversionError, jax.errors.ConcretizationTypeError):
             # first asked while a program is traced: evaluated op by op (some fifty
             # one-op programs, hence not the first choice)
