@@ -61,6 +61,9 @@ def test_the_search_uses_the_fidelity_settings_and_the_quoted_scores_the_studys(
     ("optimizer.fidelity.optimizer.n_iters=2", "a fidelity setting is a key of the study"),
     ("optimizer.fidelity.study.indices.n_smaples=2", "'study.indices.n_smaples': unknown key"),
     ("optimizer.fidelity.study.indices.n_samples=0", "'study.indices.n_samples'"),
+    ("optimizer.fidelity.study.indices.n_samples=inf", "'study.indices.n_samples' takes whole"),
+    ("optimizer.fidelity.study.indices.n_samples=2.5", "'study.indices.n_samples' takes whole"),
+    ("optimizer.fidelity.study.indices.n_samples=1e300", "(of at most 63 bits), got 1e300"),
 ])  # fmt: skip
 def test_a_bad_fidelity_key_is_one_line_naming_it(tmp_path, capsys, key, says):
     p = _write(tmp_path, _planar())

@@ -12,6 +12,7 @@ share one problem and run as one vmapped batch.
 from __future__ import annotations
 
 import itertools
+import math
 from typing import Any
 
 from designopt.studies import get
@@ -87,9 +88,13 @@ def apply(cfg: Any, overrides: dict[str, Any], where: str = "config", checks: bo
             node = node.get(p) if isinstance(node, dict) and isinstance(node.get(p), dict) else {}
         old = node.get(path.split(".")[-1])
         if isinstance(old, int) and not isinstance(old, bool):
-            if float(v) != int(v):
-                raise ValueError(f"'{path}' takes whole numbers, got {v}")
-            v = int(v)
+            try:
+                f = float(v)
+            except (TypeError, ValueError):
+                f = math.nan
+            if not math.isfinite(f) or f != int(f) or abs(f) >= 2**63:  # "2.5", "inf", "x"
+                raise ValueError(f"'{path}' takes whole numbers (of at most 63 bits), got {v}")
+            v = int(f)
         set_key(d, path, v, where)
     return validate(d, where, checks=checks)
 

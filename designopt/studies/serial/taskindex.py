@@ -329,7 +329,7 @@ def chunk_values(mech: Mechanism, s: SerialSettings, params: dict[str, Any], ful
                                      ~hopeless, A, M, C)  # fmt: skip
             hopeless = hopeless | blocked
     res = ik.solve(mech.model, X, p_ik, R_ik, lo, hi, key, md, opts, score, accept, t0, rep,
-                   hopeless, sc_p.get("ik_n_best"))  # fmt: skip
+                   hopeless, sc_p["ik_n_best"] if "ik_n_best" in sc_p else s.task.ik.n_best)  # type: ignore[union-attr]  # fmt: skip
     J = jac(res.q)
     inv_k, man = inv_cond(J * sc[:, None], ind.norm, ind.normalized, with_volume=True)
     ok, conv = res.success, res.converged
