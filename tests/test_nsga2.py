@@ -34,7 +34,13 @@ def _check_front(r, P):
         f0 = fr.f[i][fr.rank[i] == 0]
         assert not pa.dominance_matrix_np(f0, fr.v[i][fr.rank[i] == 0]).any()
         F, _ = P.evaluate(jnp.asarray(fr.x[i]))
-        np.testing.assert_allclose(np.asarray(F), fr.f[i], rtol=1e-12)
+        # evaluated again in another program, where XLA may contract a product and a sum
+        # into one rounding (an FMA) or not: an objective that is a difference of terms
+        # (SRN's f2 = 9·x1 − (x2 − 1)² near 0, terms ~20) moves by ulps of its terms,
+        # not of itself, so the bound is relative to each objective's scale in the
+        # population (a seed-5563 run: |Δ| 4.4e-16 at f2 = −2.3e-4, 2e-12 of f2)
+        scale = np.max(np.abs(fr.f[i]), axis=0)
+        assert np.all(np.abs(np.asarray(F) - fr.f[i]) <= 1e-12 * scale)
         feas = fr.v[i] == 0
         if P.n_objectives <= 3:
             assert r.history_population[i, -1] == pytest.approx(
