@@ -7,11 +7,13 @@ from __future__ import annotations
 
 import json
 
+import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 
-from designopt.app import records
+from designopt.app import records, reporting
 from designopt.cli.commands import main
+from designopt.figures import canvas
 from designopt.io import archive
 from tests.test_final_rescoring import SIX_R, _planar, _write
 from tests.test_html_report import page
@@ -45,6 +47,16 @@ def test_the_search_uses_the_fidelity_settings_and_the_quoted_scores_the_studys(
     assert "on the search's samples with optimizer.fidelity" in out
     html = page(archive.read(fid / "r.h5"))  # the HTML report says so beside the table
     assert "the search scored with optimizer.fidelity (study.indices.n_samples = 512)" in html
+    assert a.fidelity == {"study.indices.n_samples": 512} and b.fidelity == {}
+    canvas.RECORD = []  # the convergence figure (the best run: the search's values) says so
+    try:
+        reporting.draw_figures(fid / "r.h5", a)
+        (fig,) = [f for n, f in canvas.RECORD if n == "convergence"]
+        title = fig._suptitle.get_text()
+    finally:
+        canvas.RECORD = None
+        plt.close("all")
+    assert title.endswith("\nthe search scored with study.indices.n_samples = 512"), title
     x = a.x
     design = ["--design", f"l1={x['l1']!r}", "--design", f"l2={x['l2']!r}"]
     assert main(["eval", p, *design, "--fresh", "--json"]) == 0

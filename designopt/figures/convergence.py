@@ -12,13 +12,16 @@ COLUMNS = 4
 
 
 def convergence(best_run: dict, indices: list[str], folder: Path, title: str,
-                units: Mapping[str, str] | None = None, rates: Mapping[str, float | None] | None = None
-                ) -> list[Path]:  # fmt: skip
+                units: Mapping[str, str] | None = None, rates: Mapping[str, float | None] | None = None,
+                fidelity: Mapping[str, object] | None = None) -> list[Path]:  # fmt: skip
     """One panel per index along the best run, in a grid of at most :data:`COLUMNS`
     columns (``best_run/<index>`` of a run archive), with
     a ± 2 SE band where ``<index>_se`` exists; ``units`` labels the axes; ``rates`` names
     the success rates (clipped to [0, 1], Wilson band; value: the number of trials, or None
-    to infer it from the SE). Saved as ``convergence``."""
+    to infer it from the SE); ``fidelity``: the study settings the search scored with
+    instead of the study's own (``optimizer.fidelity``, :attr:`RunRecord.fidelity`),
+    named under the title, since the best run's values are the search's. Saved as
+    ``convergence``."""
     from designopt.figures import style  # matplotlib: imported when a figure is drawn
     from designopt.figures.canvas import save
 
@@ -40,6 +43,9 @@ def convergence(best_run: dict, indices: list[str], folder: Path, title: str,
         ax.set_xlabel(style.label("iteration", style.DIMENSIONLESS))
         ax.set_ylabel(style.label(k, style.unit_of(k, units)))
         ax.grid(alpha=0.3)
-    fig.suptitle(f"{title} (band: ± 2 SE; rates: Wilson interval)" if rates
-                 else f"{title} (band: ± 2 SE)", fontsize=10)  # fmt: skip
+    head = (f"{title} (band: ± 2 SE; rates: Wilson interval)" if rates
+            else f"{title} (band: ± 2 SE)")  # fmt: skip
+    if fidelity:  # the search's values are at other settings than the final design's
+        head += "\nthe search scored with " + ", ".join(f"{k} = {v}" for k, v in fidelity.items())
+    fig.suptitle(head, fontsize=10)
     return save(fig, folder, "convergence")

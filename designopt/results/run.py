@@ -124,6 +124,13 @@ class RunRecord(Record):
         return np.asarray(self.groups["optimizer"]["history"])
 
     @property
+    def fidelity(self) -> dict[str, Any]:
+        """The study settings the search scored with instead of the study's own
+        (``optimizer.fidelity``; {} when it used the study's): the best run's values and
+        ``best_run/final`` are at these settings, ``final`` at the study's."""
+        return dict(self.config.optimizer.fidelity)
+
+    @property
     def history_x(self) -> np.ndarray:
         """Each run's best design per iteration (runs, T+1, D)."""
         return np.asarray(self.groups["optimizer"]["history_x"])

@@ -99,7 +99,8 @@ def draw_run(rec: RunRecord, folder: Path) -> list[Path]:
     units = {k: "-" for k in ("f", "gci", *RATES)}
     out = convergence(rec.best_run, ["f", "gci", "ik_success"], folder,
                       "da Vinci arm: objective, GCI and IK success along the best run",
-                      units=units, rates={"ik_success": s.indices.n_ik})  # fmt: skip
+                      units=units, rates={"ik_success": s.indices.n_ik},
+                      fidelity=rec.fidelity)  # fmt: skip
     desc = ", ".join(f"{n} = {v:.3g}" for n, v in zip(names, x, strict=True))
     out += workspace(s, params, x, folder, f"final design ({desc}): jaw points around H")
     marks = {"Table 1": TABLE1["l_IJ"]}

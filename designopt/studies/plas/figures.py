@@ -59,7 +59,8 @@ def draw_run(rec: RunRecord, folder: Path, resolution: int = N_GRID) -> list[Pat
 
     br = rec.best_run
     inds = [k for k in ("f", "vel_rel", "pos_mean") if k in br]
-    out += convergence(br, inds, folder, "Best run", units=INDEX_UNITS)
+    out += convergence(br, inds, folder, "Best run", units=INDEX_UNITS,
+                       fidelity=rec.fidelity)
 
     designs = np.stack([np.array([m.BUILT[k] for k in m.MASTER_KEYS]), _master(s, names, x)])
     labels = ["built master (a2' = 138, d6 = 60)",

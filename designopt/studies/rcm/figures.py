@@ -176,7 +176,7 @@ def draw_run(rec: RunRecord, folder: Path) -> list[Path]:
     out: list[Path] = []
     br = rec.best_run
     out += convergence(br, [k for k in ("f", "eta", "reach") if k in br], folder, "Best run",
-                       units=_units(s), rates={"reach": None})  # fmt: skip
+                       units=_units(s), rates={"reach": None}, fidelity=rec.fidelity)  # fmt: skip
     out += draw_eta(s, keys, des["a"], {"final": des["c"], "built": 250.0}, folder)
     out += draw_maps(s, [("c = 230, a = 120", 120.0, 230.0), ("built (120, 250)", 120.0, 250.0),
                          (f"final ({des['a']:.1f}, {des['c']:.1f})", des["a"], des["c"])], folder)  # fmt: skip

@@ -121,7 +121,7 @@ def draw_run(rec: RunRecord, folder: Path, resolution: int = MAP_RESOLUTION) -> 
     task = s.indices.measure == "task"
     rates = {"reach": float(taskindex.n_targets(s))} if task else None  # trials: the targets
     out += convergence(br, ["f", *s.index_names()], folder, "Best run: objective and indices",
-                       units=STUDY_UNITS(s), rates=rates)  # fmt: skip
+                       units=STUDY_UNITS(s), rates=rates, fidelity=rec.fidelity)  # fmt: skip
     if task:  # 1/k over a joint slice says little about a task
         sol = task_solution(rec)  # one solution for the task, workspace and robot figures
         if has_ports(s):  # an instrument held in a port: the targets, not random joints

@@ -203,7 +203,7 @@ def draw_run(rec: RunRecord, folder: Path) -> list[Path]:
     out: list[Path] = []
     br = rec.best_run
     out += convergence(br, [k for k in ("f", "gci", "reach") if k in br], folder, "Best run",
-                       units=units(s), rates={"reach": None})  # fmt: skip
+                       units=units(s), rates={"reach": None}, fidelity=rec.fidelity)  # fmt: skip
     out += draw_maps(s, rec.keys(), x, folder)
     out += draw_cone(s, x, folder)
     return out
