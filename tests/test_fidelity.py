@@ -6,6 +6,7 @@ is not the study's, or that the study refuses, is one line naming ``optimizer.fi
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import matplotlib.pyplot as plt
 import numpy as np
@@ -17,6 +18,8 @@ from designopt.figures import canvas
 from designopt.io import archive
 from tests.test_final_rescoring import SIX_R, _planar, _write
 from tests.test_html_report import page
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_the_search_uses_the_fidelity_settings_and_the_quoted_scores_the_studys(tmp_path, capsys):
@@ -102,3 +105,36 @@ def test_the_optimism_warning_names_the_fidelity(tmp_path, capsys):
     assert len(warn) == 1, out
     assert "optimistic: the search scored with optimizer.fidelity (study.indices.n_samples=8)" \
         in warn[0] and "on the search's samples (8)" in warn[0], warn[0]  # fmt: skip
+
+
+def test_a_task_runs_reach_band_counts_the_searchs_targets(tmp_path, capsys):
+    """A task study (configs/planar2r_task.yaml, 2,048 targets) searched on 64: the
+    convergence figure's reach (the search's values) has the Wilson band of 64 trials,
+    the search's targets, not of the study's 2,048 (a band √32 too narrow)."""
+    import jax
+
+    from designopt.figures import style
+
+    jax.config.update("jax_enable_x64", True)  # the task's IK (the CLI turns it on itself)
+    out = tmp_path / "t.h5"
+    args = ["run", str(ROOT / "configs" / "planar2r_task.yaml"), "--quiet", "--no-figures",
+            "--set", "optimizer.fidelity.study.indices.n_samples=64", "--set",
+            "optimizer.n_iters=2", "--set", "optimizer.n_particles=4", "--set",
+            "final.n_samples=256", "--out", str(out)]  # fmt: skip
+    assert main(args) == 0
+    capsys.readouterr()
+    rec = records.load(out)
+    assert rec.n_samples_search == 64 and rec.fidelity == {"study.indices.n_samples": 64}
+    canvas.RECORD = []
+    try:
+        reporting.draw_figures(out, rec)
+        (fig,) = [f for n, f in canvas.RECORD if n == "convergence"]
+        (ax,) = [a for a in fig.axes if a.get_ylabel().startswith("reach")]
+        band = ax.collections[0].get_paths()[0].vertices[:, 1]
+    finally:
+        canvas.RECORD = None
+        plt.close("all")
+    p = np.clip(rec.best_run["reach"], 0.0, 1.0)
+    lo, hi = style.wilson(p, 64.0)
+    assert band.min() == pytest.approx(lo.min(), abs=1e-12)
+    assert band.min() < style.wilson(p, 2048.0)[0].min() - 1e-3  # the study's count is not it

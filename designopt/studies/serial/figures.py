@@ -119,7 +119,9 @@ def draw_run(rec: RunRecord, folder: Path, resolution: int = MAP_RESOLUTION) -> 
     }
     out = []
     task = s.indices.measure == "task"
-    rates = {"reach": float(taskindex.n_targets(s))} if task else None  # trials: the targets
+    # trials: the targets the search scored each design on (optimizer.fidelity may set
+    # another count than the study's: n_samples_search), the study's own in older archives
+    rates = {"reach": float(rec.n_samples_search or taskindex.n_targets(s))} if task else None
     out += convergence(br, ["f", *s.index_names()], folder, "Best run: objective and indices",
                        units=STUDY_UNITS(s), rates=rates, fidelity=rec.fidelity)  # fmt: skip
     if task:  # 1/k over a joint slice says little about a task
