@@ -183,15 +183,17 @@ def _dot3(x: Array, pts: Array) -> Array:
     return sum(x[:, k, None] * pts[None, :, k] for k in range(x.shape[1]))
 
 
-def _best(score: Array, rank: int) -> Array:
-    """Index of the ``rank``-th largest score along the last axis."""
-    if rank == 0:
+def _best(score: Array, rank: int | Array, ranks: int = 1) -> Array:
+    """Index of the ``rank``-th largest score along the last axis (``rank`` an int, or a
+    traced int below ``ranks``)."""
+    if isinstance(rank, int) and rank == 0:
         return jnp.argmax(score, -1)
-    return jax.lax.top_k(score, rank + 1)[1][..., rank]
+    top = jax.lax.top_k(score, rank + 1 if isinstance(rank, int) else ranks)[1]
+    return top[..., rank]
 
 
-def seed(X: Array, db: Database, T: Array, rank: int = 0, wrist_point: bool = True,
-         full_wrist: bool = False) -> Array:  # fmt: skip
+def seed(X: Array, db: Database, T: Array, rank: int | Array = 0, wrist_point: bool = True,
+         full_wrist: bool = False, ranks: int = 1) -> Array:  # fmt: skip
     """Joint seeds (B, 6) for target poses T (B, 4, 4), nearest FK samples factor by
     factor: the shaft direction of the (q1, q2) grid closest to the direction from H to
     the target (the ``rank``-th closest), the q3 sample closest to its distance, then the
@@ -204,6 +206,7 @@ def seed(X: Array, db: Database, T: Array, rank: int = 0, wrist_point: bool = Tr
     within a few mm of H (q3 ≲ l_IJ) get seeds tens of degrees off.
     ``full_wrist``: match the whole wrist rotation on the joint (q4, q5, q6) grid instead
     (near q5 = ±90° the tool axis hardly fixes q4, and q6's range then matters).
+    ``rank`` may be traced (an int array below ``ranks``): one program for every rank.
     """
     p, a = T[:, :3, 3], T[:, :3, 2]
     d = p - mech.rcm_point(X)
@@ -213,7 +216,7 @@ def seed(X: Array, db: Database, T: Array, rank: int = 0, wrist_point: bool = Tr
         d = d - X[3] * v / jnp.where(nv > 0, nv, 1.0)
     r = jnp.linalg.norm(d, axis=-1)
     r = jnp.where(r > 0, r, 1.0)
-    q12 = db.qa[_best(_dot3(d / r[:, None], db.sa), rank)]
+    q12 = db.qa[_best(_dot3(d / r[:, None], db.sa), rank, ranks)]
     q3 = db.q3[jnp.argmin(jnp.abs(r[:, None] - db.q3[None, :]), -1)]
     q123 = jnp.concatenate([q12, q3[:, None]], -1)
     W = _mtm(_rot3(X, q123), T[:, :3, :3])  # target rotation in frame 3
@@ -368,24 +371,28 @@ def _pass(X, T, q0, lo, hi, o: Options, max_iter: int) -> Result:
     return Result(q, ok, it, pe, re)
 
 
-def _rescue(X, T, r: Result, start, lo, hi, o: Options, iters: int, frac: int) -> Result:
-    """Lanes that failed start again from ``start(T_sub, q_sub)`` for ``iters``
+def _rescue(X, T, r: Result, start, lo, hi, o: Options, iters: int, frac: int,
+            stages: int = 1) -> Result:  # fmt: skip
+    """Lanes that failed start again from ``start(T_sub, q_sub, stage)`` for ``iters``
     iterations, gathered into buffers of B // ``frac`` lanes (so a batch with few
-    failures costs little and one with none costs nothing)."""
+    failures costs little and one with none costs nothing). ``stages`` passes, one after
+    the other, each over the lanes still failing after the last (``stage`` 0, 1, ...: a
+    traced int): one loop, so the solver's step is compiled once for all of them (as
+    separate loops it was compiled once per pass)."""
     B = T.shape[0]
     K = min(B, max(64, B // frac))
     oi = o._replace(max_iter=iters)
 
     def cond(c):
-        res, todo = c
+        res, todo, stage = c
         return jnp.any(todo)
 
     def body(c):
-        res, todo = c
+        res, todo, stage = c
         (idx,) = jnp.nonzero(todo, size=K, fill_value=B)
         ic = jnp.minimum(idx, B - 1)
         Tk = T[ic]
-        qn, itn = _lm_chunk(X, Tk, start(Tk, res.q[ic]), lo, hi, oi)
+        qn, itn = _lm_chunk(X, Tk, start(Tk, res.q[ic], stage), lo, hi, oi)
         okn, pen, ren = _evaluate(X, Tk, qn, lo, hi, o)
         tgt = jnp.where(okn, idx, B)  # out of range: dropped
 
@@ -395,9 +402,12 @@ def _rescue(X, T, r: Result, start, lo, hi, o: Options, iters: int, frac: int) -
         res = Result(put(res.q, qn), put(res.success, okn),
                      res.iterations.at[idx].add(itn, mode="drop"), put(res.pos_err, pen),
                      put(res.rot_err, ren))  # fmt: skip
-        return res, todo.at[idx].set(False, mode="drop")
+        todo = todo.at[idx].set(False, mode="drop")
+        # this pass done: the next one over the lanes still failing
+        nxt = ~jnp.any(todo) & (stage + 1 < stages)
+        return res, jnp.where(nxt, ~res.success, todo), stage + nxt.astype(stage.dtype)
 
-    out, _ = jax.lax.while_loop(cond, body, (r, ~r.success))
+    out, _, _ = jax.lax.while_loop(cond, body, (r, ~r.success, jnp.asarray(0, jnp.int32)))
     return out
 
 
@@ -435,7 +445,7 @@ def solve(
     return _rescues(X, db, T, r, lo, hi, o)
 
 
-def _keep(Tk: Array, qk: Array) -> Array:
+def _keep(Tk: Array, qk: Array, stage: Array) -> Array:
     return qk
 
 
@@ -443,14 +453,13 @@ def _rescues(X, db, T, r: Result, lo, hi, o: Options) -> Result:
     """The rescue passes for lanes that failed: continue (few, then many iterations),
     then restart from the full-wrist seed and from the next database samples."""
     r = _rescue(X, T, r, _keep, lo, hi, o, o.continue_iter, 16)
-    r = _rescue(X, T, r, _keep, lo, hi, o, o.max_iter, 256)
-    r = _rescue(
-        X, T, r, lambda Tk, qk: seed(X, db, Tk, full_wrist=True), lo, hi, o, o.max_iter, 256
-    )
-    for rank in range(1, o.retries + 1):
-        r = _rescue(X, T, r, lambda Tk, qk, k=rank: seed(X, db, Tk, k, full_wrist=True), lo, hi,
-                    o, o.max_iter, 256)  # fmt: skip
-    return r
+
+    def start(Tk, qk, stage):  # stage 0: go on; then the database's seeds of rank 0, 1, ...
+        seeded = seed(X, db, Tk, jnp.maximum(stage - 1, 0), full_wrist=True,
+                      ranks=o.retries + 1)  # fmt: skip
+        return jnp.where(stage == 0, qk, seeded)
+
+    return _rescue(X, T, r, start, lo, hi, o, o.max_iter, 256, stages=o.retries + 2)
 
 
 def solve_trajectory(X: Array, db: Database, T: Array, q_start: Array | None = None,
