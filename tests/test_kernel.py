@@ -2,6 +2,7 @@
 the Robotics Toolbox; inv_cond against numpy; the reference's DHParams batching (#16 item 5).
 The autodiff references (4×4 products, jax.jacfwd) are in tests/kinref.py."""
 
+import math
 import subprocess
 import sys
 
@@ -18,6 +19,20 @@ from designopt.kinematics.kernel import dh_model, et_model
 from designopt.studies.master9 import mechanism as m9
 
 HP = np.pi / 2
+FOLD = 1e-12
+"""rad: the kernel takes a constant angle this close to a multiple of π/2 as that exact
+quarter turn (a signed permutation; ``kernel._Walk.trig``, docs/kinematics.md)."""
+
+
+def snapped(angle: float) -> float:
+    """A drawn constant angle as the kernel reads it: within :data:`FOLD` of a quarter
+    turn, the quarter turn. The property tests draw through this, so that their autodiff
+    reference computes what the kernel is meant to (hypothesis likes angles like 4.6e-13
+    rad, which the kernel folds to 0 by design); the rule itself, and the bound it keeps,
+    are tested in :func:`test_a_constant_angle_within_the_fold_is_the_quarter_turn`."""
+    r = math.remainder(angle, HP)
+    return angle - r if abs(r) < FOLD else angle
+
 
 # ------------------------------------------------------------------ helpers
 
@@ -69,10 +84,10 @@ def dh_chains(draw):
     fl = st.floats(-2.0, 2.0, allow_nan=False, allow_subnormal=False)
     ang = st.floats(-np.pi, np.pi, allow_nan=False, allow_subnormal=False)
     table = {
-        "alpha": [draw(ang) for _ in range(n)],
+        "alpha": [snapped(draw(ang)) for _ in range(n)],
         "a": [draw(fl) for _ in range(n)],
         "d": [draw(fl) for _ in range(n)],
-        "theta": [draw(ang) for _ in range(n)],
+        "theta": [snapped(draw(ang)) for _ in range(n)],
     }
     is_var = {k: [draw(st.booleans()) for _ in range(n)] for k in table}
     coupled = draw(st.booleans())
@@ -134,6 +149,38 @@ def test_random_dh_chains_match_autodiff_in_both_paths(spec):
         np.testing.assert_allclose(p, Tref[..., :3, 3], rtol=1e-12, atol=1e-12)
 
 
+def test_a_constant_angle_within_the_fold_is_the_quarter_turn():
+    """The chain hypothesis found on 2026-11-29 (modified DH, 8 joints, the last
+    prismatic, coupled joints, a twist of 4.6e-13 rad, everything else 0): the kernel
+    gives exactly what it gives for a twist of 0, and the exact chain differs from that
+    by no more than the twist moves it. To first order, a twist δ ≤ FOLD rotates the rest
+    of the chain by δ about its frame: R's entries move by ≤ δ, a position by ≤ δ × its
+    lever r, a chain column z × (p_n − p_i) by ≤ δ·r (z turned) + 2δ·r (both ends
+    moved), and a coupled joint's column, a sum of chain columns with coefficients in
+    {−1, 0, 1}, by ≤ n times that; r ≤ the reach, bounded here by the largest |p| and
+    column norm. (Measured: |ΔJ| = 1.44e-11 = 5.2 δ·r; the bound 3·8·FOLD·r = 1.45e-10.)"""
+    tiny = 4.599405195003031e-13
+    types = ("R",) * 7 + ("P",)
+    zero = [0.0] * 8
+    spec = (8, "modified", types, {"alpha": zero[:7] + [tiny], "a": zero, "d": zero,
+                                   "theta": zero},
+            {k: [False] * 8 for k in ("alpha", "a", "d", "theta")}, True, 0)  # fmt: skip
+    model, X, q, fk, params = _build_random(*spec)
+    model0, *_ = _build_random(*spec[:3], spec[3] | {"alpha": zero}, *spec[4:])
+    R, p, J = model.fk_jacobian(X, q)
+    R0, p0, J0 = model0.fk_jacobian(X, q)
+    for a, b in ((R, R0), (p, p0), (J, J0)):
+        assert np.array_equal(np.asarray(a), np.asarray(b))
+    Jref = np.asarray(ref_jacobian(fk, jnp.asarray(q), params))
+    Tref = np.asarray(jax.vmap(lambda x: fk(x, jax.tree_util.tree_map(lambda v: v[0, 0], params)))(
+        jnp.asarray(q)))  # fmt: skip
+    reach = max(1.0, np.max(np.linalg.norm(Tref[:, :3, 3], axis=-1)),
+                np.max(np.linalg.norm(Jref[..., :3, :], axis=-2)))  # fmt: skip
+    assert 0 < np.max(np.abs(J - Jref)) <= 3 * 8 * FOLD * reach
+    assert np.max(np.abs(p - Tref[:, :3, 3])) <= FOLD * reach
+    assert np.max(np.abs(R - Tref[:, :3, :3])) <= FOLD
+
+
 @st.composite
 def et_chains(draw):
     n_el = draw(st.integers(1, 8))
@@ -148,6 +195,8 @@ def et_chains(draw):
             param = f"p{i}"
             names.append(param)
         const = draw(st.floats(-1.5, 1.5, allow_nan=False, allow_subnormal=False))
+        if kind[0] == "R":
+            const = snapped(const)
         scale = draw(st.sampled_from([1.0, -1.0, 0.5]))
         els.append(ET(kind, joint, param, const, scale))
     return tuple(els), tuple(names), draw(st.integers(0, 2**31 - 1))
