@@ -64,6 +64,11 @@ A target is solved when its position error is ≤ ``tol_pos``·L and its orienta
 (with XLA's own sin and cos); unreachable targets are reported as failures, never as
 successes. The n_best solution slots are checked in a loop (one copy of the check and
 the score in the program) and the result's fields are materialised once.
+
+Neighbours (``neighbours`` > 0). The best solution moves continuously with the target: a
+second pass seeds every target with the kept solutions of its nearest reached
+neighbours (among its run of 16 targets), so a branch that one target's seeds found
+serves the targets around it; the better of the two passes' solutions is kept.
 """
 
 from __future__ import annotations
@@ -105,6 +110,7 @@ class IKOptions(NamedTuple):
     slots: int = 0  # items in flight (0: min(M·T, clip(M·T/4, 1024, 4096)))
     n_best: int = 1  # distinct converged seeds compared per target (1: the first found)
     climb: int = 0  # null-space ascent steps of the score from each kept solution (0: none)
+    neighbours: int = 0  # a second pass from the kept solutions of this many neighbours
 
 
 DEFAULTS = IKOptions()
@@ -541,6 +547,8 @@ def _check(mode: Mode, R_t, opts: IKOptions) -> None:
         raise ValueError("IKOptions: iters, block, n_db, window and n_best must be ≥ 1")
     if opts.climb < 0:
         raise ValueError("IKOptions: climb must be ≥ 0")
+    if not 0 <= opts.neighbours < NEIGHBOUR_GROUP:
+        raise ValueError(f"IKOptions: neighbours must be in [0, {NEIGHBOUR_GROUP - 1}]")
 
 
 def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | None,
@@ -580,7 +588,12 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
     ≤ ``opts.n_best``): the distinct solutions a target's solver looks for, when fewer
     than the ``opts.n_best`` solution slots the program holds, so that one compiled
     program serves every count up to it (its slots beyond ``n_keep`` stay unused; the
-    result is the one ``opts.n_best = n_keep`` gives)."""
+    result is the one ``opts.n_best = n_keep`` gives). ``opts.neighbours`` = k > 0: a
+    second pass over the items (a loop over the same program), each seeded with the kept
+    joints of its k nearest reached targets of the same design among its run of
+    :data:`NEIGHBOUR_GROUP` (:func:`_neighbour_seeds`); its solution replaces the first
+    pass's where it scores higher. A task solved in chunks that are multiples of the run
+    (``t0`` too) gets the values of one piece."""
     _check(mode, R_t, opts)
     X = jnp.asarray(X)
     per_design = p_t.ndim == 3
@@ -610,6 +623,7 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
     else:
         near = jnp.zeros((M, T, 1), jnp.int32)
     attempts = max(n_near + opts.n_random * opts.rounds, 1)
+    K_nb = opts.neighbours  # seeds of the neighbour pass (0: no such pass)
     salt = jax.random.bits(k_hash, (), jnp.uint32)
     t_base = jnp.asarray(t0).astype(jnp.uint32)  # the chunk's first target in the task
     xT = X.T  # (D, M)
@@ -634,7 +648,12 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
              ^ (a.astype(jnp.uint32) + salt) * jnp.uint32(2246822519))  # fmt: skip
         h = h ^ (h >> 15)
         a_rand = (h % jnp.uint32(opts.n_db)).astype(jnp.int32)
-        return q_sorted[m, jnp.where(a < n_near, a_near, a_rand)].T
+        q = q_sorted[m, jnp.where(a < n_near, a_near, a_rand)].T
+        if not K_nb:
+            return q
+        # a neighbour pass: seed a is the kept joints of the item's a-th nearest neighbour
+        given = ctx["S"][m, t, jnp.clip(a, 0, K_nb - 1)].T
+        return jnp.where(ctx["pass"] > 0, given, q)
 
     def block(i, qc):
         """``opts.block`` steps from qc (frozen where converged) for items i. Returns
@@ -756,7 +775,7 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         stalled = ~(Em < opts.stall * Eb)
         Eb = jnp.minimum(Eb, Em)
         give_up = ~ok & ~dup & ((it >= iters) | stalled | refused)
-        last = a + 1 >= attempts
+        last = a + 1 >= (attempts if not K_nb else jnp.where(ctx["pass"] > 0, K_nb, attempts))
         if hopeless is not None:  # one seed only: no solution can be kept
             last = last | one_seed[ic]
         # converged joints go to the item's next solution slot (of n_best); a dropped
@@ -789,114 +808,191 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         q = jnp.where(take[None], seed(i, a), q)
         return i, a, it, Eb, q, head, tail, qi, qa, q_out, a_out, E_out, nc, n_try, n_ref, sc_out
 
-    one_seed = None if hopeless is None else jnp.broadcast_to(hopeless, (M, T)).reshape(I)
-    # the queue: the representatives' items, in order (all of them without ``rep``)
-    if rep is None:
-        order, n_items = jnp.arange(I, dtype=jnp.int32), jnp.asarray(I, jnp.int32)
-    else:
-        solved = jnp.repeat(jnp.asarray(rep, jnp.int32) == jnp.arange(M, dtype=jnp.int32), T)
-        order = jnp.argsort(~solved, stable=True).astype(jnp.int32)
-        n_items = jnp.sum(solved, dtype=jnp.int32)
-    k0 = jnp.arange(Bp, dtype=jnp.int32)
-    i = jnp.where(k0 < jnp.minimum(B, n_items), order[jnp.minimum(k0, I - 1)], I)
-    a = jnp.zeros_like(i)
-    s = (i, a, a, jnp.full(i.shape, jnp.inf, dtype), seed(i, a),
-         jnp.minimum(jnp.asarray(B, jnp.int32), n_items), n_items,
-         order, jnp.zeros((I,), jnp.int32),
-         jnp.zeros((n, nb * I), dtype), jnp.zeros((nb * I,), jnp.int32),
-         jnp.full((I,), jnp.inf, dtype), jnp.zeros((I,), jnp.int32),
-         jnp.zeros((I,), jnp.int32), jnp.zeros((I,), jnp.int32),
-         jnp.zeros((nb * I if nb > 1 else 1,), dtype))  # fmt: skip
-
-    s = jax.lax.while_loop(lambda s: jnp.any(s[0] < I), lambda s: round_(compact(s)), s)
-    q_out, a_out, n_conv = s[9], s[10], s[12].reshape(M, T)
-    tries, refusals = s[13].reshape(M, T), s[14].reshape(M, T)
-
-    # the returned joints, checked afresh with XLA's sin and cos; of several converged
-    # solutions, the one of highest score, each first climbed along its self-motion
-    xc = [jnp.repeat(X[:, k], T) for k in range(ch.D)]
-    tx = ch.trig_x(xc)
-    n_conv_f = s[12]
-    solved = (jnp.ones((I,), bool) if rep is None else
-              jnp.repeat(jnp.asarray(rep, jnp.int32) == jnp.arange(M, dtype=jnp.int32), T))  # fmt: skip
-
-    def arr(x):
-        return jnp.broadcast_to(jnp.asarray(x, dtype), (I,))
-
-
-    def climb(r, q0):
-        """Rows r (items, (k,)) from their converged joints q0 (k, n) up the score along
-        the null space of the target's rows (:func:`_climb`): the climbed joints where
-        they are converged, within the limits, accepted and better; else q0."""
-        m, t = split(r)
-        xr = [xT[k, m] for k in range(ch.D)]
-        tc = tcol(r, t)
-        pt = [ptT[j, tc] for j in range(3)]
-        Rt = None
-        if RtT is not None:
-            Rt = [[RtT[3 * a + b, tc] if b in cols else 0.0 for b in range(3)] for a in range(3)]
-        return _climb(ch, xr, pt, Rt, L[m], mode, rev, lower, upper, opts,
-                      lambda q: score_rows(m, t, q),
-                      None if accept is None else (lambda q: accept(m, t, q)), q0)  # fmt: skip
-
-    def result(c):
-        """The solutions of slot c (of n_best), climbed, checked afresh, and scored."""
-        qc = [jax.lax.dynamic_slice_in_dim(q_out[j], c * I, I) for j in range(n)]
-        climbed = None
-        if opts.climb > 0:  # a representative's converged (and accepted) solutions
-            climbed = (c < n_conv_f) & solved
-            qf = jnp.stack(qc, -1)
-            qn = on_rows(lambda r: climb(r, qf[r]), climbed, min(I, CLIMB_ROWS))
-            qf = jnp.where(climbed[:, None], qn, qf)
-            qc = [qf[:, j] for j in range(n)]
-        R, p, J = ch.fk(xc, qc, ch.trig_q(qc, exact=True, one=one), tx, (0, 1, 2))
-        Ra = jnp.stack([jnp.stack([arr(x) for x in row], -1) for row in R], -2)
-        pa = jnp.stack([arr(x) for x in p], -1).reshape(M, T, 3)
-        Ja = jnp.stack([jnp.stack([arr(x) for x in row], -1) for row in J], -2)
-        pe, re = errors(pa, Ra.reshape(M, T, 3, 3), p_t if per_design else p_t[None],
-                        None if R_t is None else R_t if per_design else R_t[None], mode)  # fmt: skip
-        q = jnp.stack(qc, -1).reshape(M, T, n)
-        inside = jnp.all((q >= lower) & (q <= upper), -1)
-        conv = (pe <= opts.tol_pos * L[:, None]) & (re <= opts.tol_rot) & inside
-        ok = conv
-        if accept is not None:  # (a climbed row's joints were accepted by the climb)
-            qf, cf = q.reshape(I, n), conv.reshape(I)
-            need = cf if climbed is None else cf & ~climbed
-            acc = on_rows(lambda r: accept(r // T, r % T, qf[r]), need, min(I, CHECK_ROWS))
-            ok = conv & (acc if climbed is None else acc | climbed).reshape(M, T)
-        ik_ = inv_cond(Ja.reshape(M, T, 3, n), "2")
-        a_c = jax.lax.dynamic_slice_in_dim(a_out, c * I, I).reshape(M, T)
-        return IKResult(q, ok, pe, re, ik_, a_c, conv, tries, refusals)
-
     def copied(r: IKResult) -> IKResult:  # every design's fields from its representative's
         return r if rep is None else IKResult(*(x[jnp.asarray(rep, jnp.int32)] for x in r))
 
-    if nb == 1:
-        return _materialised(copied(result(0)))
+    one_seed = None if hopeless is None else jnp.broadcast_to(hopeless, (M, T)).reshape(I)
+    ctx: dict = {"pass": 0, "S": None}  # the pass being traced (:func:`attempt`), read by seed
 
-    def pick(c, carry):
-        """Slot c's solutions replace the best so far where they score higher (slot 0's
-        always: a target's solution when none converged is there)."""
-        best, sc_best = carry
-        r = result(c)
-        ok = r.success & ((c == 0) | (c < n_conv))
-        if score is None:
-            val = r.inv_k
+    def attempt(pass_, S):
+        """One pass of the queue over the items (pass 0: the database seeds; a
+        neighbour pass: the seeds ``S`` (M, T, K, n)) and the pick of each item's
+        best solution: (its fields, its score (−inf where none is accepted))."""
+        ctx["pass"], ctx["S"] = pass_, S
+        # the queue: the representatives' items, in order (all of them without ``rep``);
+        # a neighbour pass leaves out the hopeless ones
+        if rep is None and not K_nb:
+            order, n_items = jnp.arange(I, dtype=jnp.int32), jnp.asarray(I, jnp.int32)
         else:
-            qf = r.q.reshape(I, n)
-            val = on_rows(lambda rr: score(rr // T, rr % T, qf[rr]), ok.reshape(I),
-                          min(I, CHECK_ROWS)).reshape(M, T)  # fmt: skip
-        sc = jnp.where(ok, jnp.nan_to_num(val, nan=-jnp.inf), -jnp.inf)
-        take = jax.lax.optimization_barrier((c == 0) | (sc > sc_best))
-        best = IKResult(*(jnp.where(take.reshape(take.shape + (1,) * (x.ndim - 2)), y, x)
-                          for x, y in zip(best, r, strict=True)))  # fmt: skip
-        return best, jnp.where(take, sc, sc_best)
+            solved = (jnp.ones((I,), bool) if rep is None else jnp.repeat(
+                jnp.asarray(rep, jnp.int32) == jnp.arange(M, dtype=jnp.int32), T))  # fmt: skip
+            if K_nb and one_seed is not None:
+                solved = solved & ~((pass_ > 0) & one_seed)
+            order = jnp.argsort(~solved, stable=True).astype(jnp.int32)
+            n_items = jnp.sum(solved, dtype=jnp.int32)
+        k0 = jnp.arange(Bp, dtype=jnp.int32)
+        i = jnp.where(k0 < jnp.minimum(B, n_items), order[jnp.minimum(k0, I - 1)], I)
+        a = jnp.zeros_like(i)
+        s = (i, a, a, jnp.full(i.shape, jnp.inf, dtype), seed(i, a),
+             jnp.minimum(jnp.asarray(B, jnp.int32), n_items), n_items,
+             order, jnp.zeros((I,), jnp.int32),
+             jnp.zeros((n, nb * I), dtype), jnp.zeros((nb * I,), jnp.int32),
+             jnp.full((I,), jnp.inf, dtype), jnp.zeros((I,), jnp.int32),
+             jnp.zeros((I,), jnp.int32), jnp.zeros((I,), jnp.int32),
+             jnp.zeros((nb * I if nb > 1 else 1,), dtype))  # fmt: skip
 
-    z = jnp.zeros((M, T), dtype)
-    best0 = IKResult(jnp.zeros((M, T, n), dtype), z > 0, z, z, z, jnp.zeros((M, T), jnp.int32),
-                     z > 0, tries, refusals)
-    best, _ = jax.lax.fori_loop(0, nk, pick, (best0, jnp.full((M, T), -jnp.inf, dtype)))
+        s = jax.lax.while_loop(lambda s: jnp.any(s[0] < I), lambda s: round_(compact(s)), s)
+        q_out, a_out, n_conv = s[9], s[10], s[12].reshape(M, T)
+        tries, refusals = s[13].reshape(M, T), s[14].reshape(M, T)
+
+        # the returned joints, checked afresh with XLA's sin and cos; of several converged
+        # solutions, the one of highest score, each first climbed along its self-motion
+        xc = [jnp.repeat(X[:, k], T) for k in range(ch.D)]
+        tx = ch.trig_x(xc)
+        n_conv_f = s[12]
+        solved = (jnp.ones((I,), bool) if rep is None else
+                  jnp.repeat(jnp.asarray(rep, jnp.int32) == jnp.arange(M, dtype=jnp.int32), T))  # fmt: skip
+
+        def arr(x):
+            return jnp.broadcast_to(jnp.asarray(x, dtype), (I,))
+
+
+        def climb(r, q0):
+            """Rows r (items, (k,)) from their converged joints q0 (k, n) up the score along
+            the null space of the target's rows (:func:`_climb`): the climbed joints where
+            they are converged, within the limits, accepted and better; else q0."""
+            m, t = split(r)
+            xr = [xT[k, m] for k in range(ch.D)]
+            tc = tcol(r, t)
+            pt = [ptT[j, tc] for j in range(3)]
+            Rt = None
+            if RtT is not None:
+                Rt = [[RtT[3 * a + b, tc] if b in cols else 0.0 for b in range(3)] for a in range(3)]
+            return _climb(ch, xr, pt, Rt, L[m], mode, rev, lower, upper, opts,
+                          lambda q: score_rows(m, t, q),
+                          None if accept is None else (lambda q: accept(m, t, q)), q0)  # fmt: skip
+
+        def result(c):
+            """The solutions of slot c (of n_best), climbed, checked afresh, and scored."""
+            qc = [jax.lax.dynamic_slice_in_dim(q_out[j], c * I, I) for j in range(n)]
+            climbed = None
+            if opts.climb > 0:  # a representative's converged (and accepted) solutions
+                climbed = (c < n_conv_f) & solved
+                qf = jnp.stack(qc, -1)
+                qn = on_rows(lambda r: climb(r, qf[r]), climbed, min(I, CLIMB_ROWS))
+                qf = jnp.where(climbed[:, None], qn, qf)
+                qc = [qf[:, j] for j in range(n)]
+            R, p, J = ch.fk(xc, qc, ch.trig_q(qc, exact=True, one=one), tx, (0, 1, 2))
+            Ra = jnp.stack([jnp.stack([arr(x) for x in row], -1) for row in R], -2)
+            pa = jnp.stack([arr(x) for x in p], -1).reshape(M, T, 3)
+            Ja = jnp.stack([jnp.stack([arr(x) for x in row], -1) for row in J], -2)
+            pe, re = errors(pa, Ra.reshape(M, T, 3, 3), p_t if per_design else p_t[None],
+                            None if R_t is None else R_t if per_design else R_t[None], mode)  # fmt: skip
+            q = jnp.stack(qc, -1).reshape(M, T, n)
+            inside = jnp.all((q >= lower) & (q <= upper), -1)
+            conv = (pe <= opts.tol_pos * L[:, None]) & (re <= opts.tol_rot) & inside
+            ok = conv
+            if accept is not None:  # (a climbed row's joints were accepted by the climb)
+                qf, cf = q.reshape(I, n), conv.reshape(I)
+                need = cf if climbed is None else cf & ~climbed
+                acc = on_rows(lambda r: accept(r // T, r % T, qf[r]), need, min(I, CHECK_ROWS))
+                ok = conv & (acc if climbed is None else acc | climbed).reshape(M, T)
+            ik_ = inv_cond(Ja.reshape(M, T, 3, n), "2")
+            a_c = jax.lax.dynamic_slice_in_dim(a_out, c * I, I).reshape(M, T)
+            return IKResult(q, ok, pe, re, ik_, a_c, conv, tries, refusals)
+
+        if nb == 1 and not K_nb:
+            return result(0), None
+
+        def pick(c, carry):
+            """Slot c's solutions replace the best so far where they score higher (slot 0's
+            always: a target's solution when none converged is there)."""
+            best, sc_best = carry
+            r = result(c)
+            ok = r.success & ((c == 0) | (c < n_conv))
+            if score is None:
+                val = r.inv_k
+            else:
+                qf = r.q.reshape(I, n)
+                val = on_rows(lambda rr: score(rr // T, rr % T, qf[rr]), ok.reshape(I),
+                              min(I, CHECK_ROWS)).reshape(M, T)  # fmt: skip
+            sc = jnp.where(ok, jnp.nan_to_num(val, nan=-jnp.inf), -jnp.inf)
+            take = jax.lax.optimization_barrier((c == 0) | (sc > sc_best))
+            best = IKResult(*(jnp.where(take.reshape(take.shape + (1,) * (x.ndim - 2)), y, x)
+                              for x, y in zip(best, r, strict=True)))  # fmt: skip
+            return best, jnp.where(take, sc, sc_best)
+
+        z = jnp.zeros((M, T), dtype)
+        best0 = IKResult(jnp.zeros((M, T, n), dtype), z > 0, z, z, z, jnp.zeros((M, T), jnp.int32),
+                         z > 0, tries, refusals)
+        return jax.lax.fori_loop(0, nk, pick, (best0, jnp.full((M, T), -jnp.inf, dtype)))
+
+    if not K_nb:
+        return _materialised(copied(attempt(0, None)[0]))
+
+    def passes(k, carry):
+        """Pass k (0: the database seeds, 1: the neighbours' solutions): its solutions
+        replace the best so far where they score higher."""
+        best, sc = carry
+        b, sc_k = attempt(k, _neighbour_seeds(p_t, best.q, best.success, t0, K_nb))
+        take = jax.lax.optimization_barrier((k == 0) | (sc_k > sc))
+        tried = (b.tries + best.tries, b.refused + best.refused)
+        best = IKResult(*(jnp.where(take.reshape(take.shape + (1,) * (x.ndim - 2)), y, x)
+                          for x, y in zip(best[:7], b[:7], strict=True)), *tried)  # fmt: skip
+        return best, jnp.where(take, sc_k, sc)
+
+    zi = jnp.zeros((M, T), jnp.int32)
+    zf = zi.astype(dtype)
+    best0 = IKResult(jnp.zeros((M, T, n), dtype), zi > 0, zf, zf, zf, zi, zi > 0, zi, zi)
+    best, _ = jax.lax.fori_loop(0, 2, passes, (best0, jnp.full((M, T), -jnp.inf, dtype)))
     return _materialised(copied(best))
+
+
+NEIGHBOUR_GROUP = 16
+"""Targets per neighbourhood of the neighbour pass (``IKOptions.neighbours``): a target's
+neighbours are found among the targets of its group, the task's targets ``t0 + t`` cut
+into runs of this many from the first, so a task solved in chunks that are multiples of
+it (or in one piece) gets the values of one piece."""
+
+
+def _neighbour_seeds(p_t: jax.Array, q: jax.Array, ok: jax.Array, t0: jax.Array | int,
+                     k: int) -> jax.Array:
+    """The seeds of the neighbour pass (M, T, k, n): for each target of each design, the
+    kept joints ``q`` (M, T, n) of its k nearest reached (``ok`` (M, T)) targets of its
+    group (:data:`NEIGHBOUR_GROUP`; targets ``p_t`` (T, 3) or (M, T, 3), ``t0`` the first
+    one's index in the task). Of targets at one point only the first counts (a padded
+    chunk's copies of its last target are none); a target with fewer than k such
+    neighbours gets its own joints in the free places."""
+    M, T, n = q.shape
+    G = NEIGHBOUR_GROUP
+    P = jnp.broadcast_to(p_t, (M, T, 3))
+    t = jnp.arange(T, dtype=jnp.int32)
+    # the groups: positions in the task t0 + t, cut at multiples of G (t0 % G of the first
+    # group lie before this chunk)
+    off = jnp.asarray(t0, jnp.int32) % G
+    Tg = -(-(T + G - 1) // G) * G  # room for the offset
+    slot = t + off  # each target's place in the padded run of groups
+    pad = lambda x, fill: jnp.full((M, Tg, *x.shape[2:]), fill, x.dtype).at[:, slot].set(x)  # noqa: E731
+    Pg = pad(P, jnp.nan).reshape(M, Tg // G, G, 3)
+    okg = pad(ok, False).reshape(M, Tg // G, G)
+    d2 = jnp.sum((Pg[:, :, :, None] - Pg[:, :, None]) ** 2, -1)  # (M, g, G, G)
+    same = jnp.all(Pg[:, :, :, None] == Pg[:, :, None], -1)
+    lower = jnp.arange(G)[:, None] > jnp.arange(G)[None, :]  # [u, w]: w before u
+    first = ~jnp.any(same & lower, -1)  # (M, g, G): no earlier target at its point
+    cand = okg[:, :, None, :] & first[:, :, None, :] & ~same
+    d2 = jnp.where(cand, d2, jnp.inf)
+    neg, idx = jax.lax.top_k(-d2, min(k, G - 1))  # (M, g, G, k)
+    got = jnp.isfinite(neg)
+    idx = idx.reshape(M, Tg, -1)[:, slot]  # (M, T, k): places in the padded run
+    got = got.reshape(M, Tg, -1)[:, slot]
+    at = ((slot // G) * G)[None, :, None] + idx  # (M, T, k): the neighbours' places
+    kk = idx.shape[-1]
+    S = jnp.take_along_axis(pad(q, 0.0), at.reshape(M, T * kk)[..., None], axis=1)
+    S = S.reshape(M, T, kk, n)
+    S = jnp.where(got[..., None], S, q[:, :, None])
+    if kk < k:
+        S = jnp.concatenate([S, jnp.repeat(q[:, :, None], k - kk, 2)], 2)
+    return S
 
 
 CLIMB_ROWS = 256

@@ -279,7 +279,9 @@ class TaskIK(Section):
     seeds per target (nearest database entries spread over the arm's branches, then
     random draws), distinct converged solutions compared (``n_best``: the best by
     ``best``, the study's 1/k (``dexterity``) or the ``clearance``, is kept), the
-    null-space climb of that score from each (``climb`` steps; 0: none), tolerances (position ×
+    null-space climb of that score from each (``climb`` steps; 0: none), a second pass
+    seeded with the kept solutions of each target's nearest neighbours (``neighbours``:
+    how many; 0: none), tolerances (position ×
     the reach scale, orientation in rad), the damping (λ = damping_e·E + damping), and
     the scheduling (stall factor, Z-order window, steps per block, slots in flight)."""
 
@@ -290,6 +292,7 @@ class TaskIK(Section):
     n_random: int = Field(6, ge=0, le=64)
     n_best: int = Field(2, ge=1, le=64)
     climb: int = Field(0, ge=0, le=200)
+    neighbours: int = Field(0, ge=0, le=15)
     best: Literal["dexterity", "clearance"] = "dexterity"
     tol_pos: float = Field(1e-9, gt=0, le=1)
     tol_rot: float = Field(1e-9, gt=0, le=1)
@@ -521,6 +524,16 @@ class SerialSettings(StudySettings):
                 raise ValueError(f"indices.sampler: measure 'task' draws its targets "
                                  f"uniformly in the task region; '{ind.sampler}' is for the "
                                  "joint and cartesian measures (give sampler: uniform)")  # fmt: skip
+            from designopt.kinematics.ik import NEIGHBOUR_GROUP as G
+            from designopt.kinematics.task import Points
+
+            reg = self.task.region
+            N = len(reg.xyz()) if isinstance(reg, Points) else ind.n_samples
+            if self.task.ik.neighbours and "chunk" in ind.model_fields_set \
+                    and ind.chunk % G and ind.chunk < N:  # fmt: skip
+                raise ValueError(f"indices.chunk: with task.ik.neighbours the targets are "
+                                 f"solved in chunks of a multiple of {G} (a target's "
+                                 f"neighbours are found in its run of {G}), got {ind.chunk}")  # fmt: skip
             if self.task.ik.best == "clearance" and self.collision is None:
                 raise ValueError("task.ik.best: 'clearance' keeps the solution farthest from "
                                  "the obstacles: give study.collision, or best: dexterity")  # fmt: skip

@@ -1,0 +1,151 @@
+"""The IK's neighbour pass (``study.task.ik.neighbours``, ``IKOptions.neighbours``): a
+second pass seeded with the kept solutions of each target's nearest reached neighbours.
+
+- The seeds against a NumPy reference: the k nearest reached targets of the target's run
+  of ``NEIGHBOUR_GROUP`` task targets (t0 + t cut at multiples of it), the first of
+  targets at one point only, the target's own joints where fewer than k exist.
+- A task solved in chunks of 16 (the last one padded with copies of the last target, as
+  ``taskindex.chunked_targets`` pads) gets the joints and successes of one piece, bit for
+  bit.
+- The pass keeps a solution only where it scores higher: never a lower 1/k, never a lost
+  target, and somewhere a higher one.
+- The schema refuses chunks that would cut a run of neighbours, and too many neighbours.
+(The acceptance on the UR5 through a port, against a closed form, is in
+tests/test_best_solution.py.)"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from designopt.kinematics import ik
+from designopt.kinematics.kernel import dh_model
+
+jax.config.update("jax_enable_x64", True)
+
+G = ik.NEIGHBOUR_GROUP
+PI = math.pi
+SIX_R = dh_model("standard", "RRRRRR", [PI / 2, 0, -PI / 2, PI / 2, -PI / 2, 0],
+                 ["a1", "a2", "a3", 0, 0, 0], ["d1", 0, "d3", "d4", 0, "d6"], [0] * 6)  # fmt: skip
+PUMA = np.array([0.0, 0.4318, 0.0203, 0.0, 0.15005, 0.4318, 0.05])
+LO6 = np.radians([-160, -110, -135, -266, -100, -266.0])
+
+
+def _reference_seeds(P, q, ok, t0, k):
+    """For each design m and target t: the joints of the k nearest reached targets u ≠ t of
+    t's run ((t0 + u) // G == (t0 + t) // G), at a point no earlier target of the run
+    holds and not at t's own point, nearest first; t's own joints after them."""
+    M, T, n = q.shape
+    S = np.empty((M, T, k, n))
+    for m in range(M):
+        for t in range(T):
+            cands = []
+            for u in range(T):
+                if (t0 + u) // G != (t0 + t) // G or not ok[m, u]:
+                    continue
+                if np.all(P[m, u] == P[m, t]):
+                    continue
+                if any(np.all(P[m, w] == P[m, u]) and (t0 + w) // G == (t0 + u) // G
+                       for w in range(u)):  # fmt: skip
+                    continue
+                cands.append((np.sum((P[m, u] - P[m, t]) ** 2), u))
+            cands.sort()
+            rows = [q[m, u] for _, u in cands[:k]]
+            rows += [q[m, t]] * (k - len(rows))
+            S[m, t] = np.stack(rows)
+    return S
+
+
+@pytest.mark.parametrize("t0, T, k", [(0, 50, 4), (16, 16, 4), (5, 37, 3), (0, 7, 15)])
+def test_the_seeds_are_the_nearest_reached_neighbours_of_the_run(t0, T, k):
+    rng = np.random.default_rng(t0 + T)
+    M, n = 2, 3
+    P = rng.uniform(-1, 1, (M, T, 3))
+    P[0, 3] = P[0, 1]  # a target at another's point (a padded chunk's copies are such)
+    P[1, -3:] = P[1, -4]
+    q = rng.normal(size=(M, T, n))
+    ok = rng.uniform(size=(M, T)) < 0.7
+    got = np.asarray(ik._neighbour_seeds(jnp.asarray(P), jnp.asarray(q), jnp.asarray(ok),
+                                         jnp.asarray(t0), k))  # fmt: skip
+    want = _reference_seeds(P, q, ok, t0, k)
+    # ties in distance are measure-zero with random points: the order is the reference's
+    np.testing.assert_array_equal(got, want)
+    # shared targets (T, 3) are every design's
+    got1 = np.asarray(ik._neighbour_seeds(jnp.asarray(P[0]), jnp.asarray(q), jnp.asarray(ok),
+                                          t0, k))  # fmt: skip
+    np.testing.assert_array_equal(got1, _reference_seeds(np.stack([P[0]] * M), q, ok, t0, k))
+
+
+OPTS = ik.IKOptions(n_best=4, neighbours=4, slots=64, rounds=2)
+N = 50
+
+
+@functools.cache
+def _solver(opts: ik.IKOptions):
+    def solve(X, p, t0):
+        return ik.solve(SIX_R, X, p, None, jnp.asarray(LO6), jnp.asarray(-LO6),
+                        jax.random.key(5), "position", opts, t0=t0)  # fmt: skip
+
+    return jax.jit(solve)
+
+
+def _targets():
+    rng = np.random.default_rng(3)
+    q = rng.uniform(LO6, -LO6, (N, 6))
+    _, p = SIX_R.fk(jnp.asarray(PUMA), jnp.asarray(q))
+    p = np.array(p)
+    p[::7] *= 3.0  # some out of reach: failures, and no one's neighbour
+    return p
+
+
+def test_chunks_of_a_run_give_the_values_of_one_piece():
+    X = jnp.asarray(np.stack([PUMA, PUMA * [1, 1.2, 1, 1, 1, 0.9, 1]]))
+    p = _targets()
+    whole = _solver(OPTS)(X, jnp.asarray(p), 0)
+    C = G
+    n_chunks = -(-N // C)
+    pp = np.concatenate([p, np.repeat(p[-1:], n_chunks * C - N, 0)])
+    parts = [_solver(OPTS)(X, jnp.asarray(pp[c * C:(c + 1) * C]), c * C) for c in range(n_chunks)]
+    q = np.concatenate([np.asarray(r.q) for r in parts], 1)[:, :N]
+    ok = np.concatenate([np.asarray(r.success) for r in parts], 1)[:, :N]
+    np.testing.assert_array_equal(ok, np.asarray(whole.success))
+    np.testing.assert_array_equal(q, np.asarray(whole.q))
+    assert 0.5 < ok.mean() < 1.0
+
+
+def test_the_pass_keeps_only_better_solutions():
+    """With the same key, the neighbour pass changes a target's solution only to one of
+    higher 1/k (the default score): every target the plain solve reaches is reached,
+    none at a lower 1/k, and the pass found better ones at some targets; the kept
+    solutions are solutions (FK on the target)."""
+    X = jnp.asarray(PUMA[None])
+    p = _targets()
+    plain = _solver(OPTS._replace(neighbours=0))(X, jnp.asarray(p), 0)
+    nb = _solver(OPTS)(X, jnp.asarray(p), 0)
+    ok0, ok1 = np.asarray(plain.success), np.asarray(nb.success)
+    assert np.all(ok1[ok0])
+    v0, v1 = np.asarray(plain.inv_k), np.asarray(nb.inv_k)
+    assert np.all(v1[ok0] >= v0[ok0] - 1e-12)
+    assert np.sum(v1[ok0] > v0[ok0] + 1e-6) >= 1
+    _, pf = SIX_R.fk(jnp.asarray(PUMA), nb.q[0])
+    assert np.max(np.linalg.norm(np.asarray(pf) - p, axis=-1)[ok1[0]]) < 1e-8
+    # the profile counts both passes' seeds
+    assert np.all(np.asarray(nb.tries) >= np.asarray(plain.tries))
+
+
+def test_the_schema_refuses_a_chunk_that_cuts_a_run(tmp_path):
+    import designopt
+    from designopt.core.errors import ConfigError
+
+    base = "tests/data/ur5_port.yaml"
+    with pytest.raises(ConfigError, match=r"indices\.chunk.*multiple of 16"):
+        designopt.load_config(base, {"study.indices.chunk": 40})
+    designopt.load_config(base, {"study.indices.chunk": 32})
+    designopt.load_config(base, {"study.indices.chunk": 40, "study.task.ik.neighbours": 0})
+    with pytest.raises(ConfigError, match="neighbours"):
+        designopt.load_config(base, {"study.task.ik.neighbours": 16})
