@@ -235,15 +235,15 @@ def test_the_tools_solutions_are_solutions_the_oracle_never_loses_to(name):
         assert r["beat_by"] <= 1e-6, r
 
 
-WITHIN = {"ur5_straight": 0.99, "ur5_short_arm": 0.99, "ur5_tilted_25": 0.90, "planar3r": 0.99}
+WITHIN = {"ur5_straight": 0.99, "ur5_short_arm": 0.99, "ur5_tilted_25": 0.92, "planar3r": 0.99}
 """The share of reached targets whose kept 1/k is within 1e-4 of the oracle's best, as
 measured with the cases' ``ik:`` settings (2026-11-30, tests/data/ur5_port.yaml: ``n_best:
-8, climb: 12, neighbours: 4``: 100/100, 100/100, 92.0/91.2 % at seeds 0/1;
+8, climb: 12, neighbours: 4``: 100/100, 100/100, 94.4/92.8 % at seeds 0/1;
 planar3r_task.yaml, ``n_best: 8, climb: 12``: 100/99.2 %). Without the neighbour pass the
-UR5 cases were 98.3/100, 100/100 and 65.6/69.6 %. Issue #52 asks 99 %; the tilted
-instrument falls short: at its last short targets the kept solution is on another branch
-than the best, or stops below its arc's maximum at the edge of a collision
-(docs/task.md)."""
+UR5 cases were 98.3/100, 100/100 and 65.6/69.6 % (68.0/71.2 % with the climb's bisection
+towards a collision's edge). Issue #52 asks 99 %; the tilted instrument falls short: at
+its 7-9 short targets the kept solution is on another branch than the best, and no seed,
+the neighbours' included, converges onto the best one's free stretch (docs/task.md)."""
 
 
 @pytest.mark.parametrize("name", [*UR5_CASES, "planar3r"])
