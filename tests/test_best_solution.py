@@ -237,7 +237,7 @@ def test_the_tools_solutions_are_solutions_the_oracle_never_loses_to(name):
 
 WITHIN = {"ur5_straight": 0.99, "ur5_short_arm": 0.99, "ur5_tilted_25": 0.92, "planar3r": 0.99}
 """The share of reached targets whose kept 1/k is within 1e-4 of the oracle's best, as
-measured with the cases' ``ik:`` settings (2026-11-30, tests/data/ur5_port.yaml: ``n_best:
+measured with the cases' ``ik:`` settings (2026-11-29, tests/data/ur5_port.yaml: ``n_best:
 8, climb: 12, neighbours: 4``: 100/100, 100/100, 94.4/92.8 % at seeds 0/1;
 planar3r_task.yaml, ``n_best: 8, climb: 12``: 100/99.2 %). Without the neighbour pass the
 UR5 cases were 98.3/100, 100/100 and 65.6/69.6 % (68.0/71.2 % with the climb's bisection

@@ -40,9 +40,11 @@ LO6 = np.radians([-160, -110, -135, -266, -100, -266.0])
 def _reference_seeds(P, q, ok, t0, k):
     """For each design m and target t: the joints of the k nearest reached targets u ≠ t of
     t's run ((t0 + u) // G == (t0 + t) // G), at a point no earlier target of the run
-    holds and not at t's own point, nearest first; t's own joints after them."""
+    holds and not at t's own point, nearest first; t's own joints after them. Also
+    whether t has any such neighbour."""
     M, T, n = q.shape
     S = np.empty((M, T, k, n))
+    has = np.zeros((M, T), bool)
     for m in range(M):
         for t in range(T):
             cands = []
@@ -57,9 +59,10 @@ def _reference_seeds(P, q, ok, t0, k):
                 cands.append((np.sum((P[m, u] - P[m, t]) ** 2), u))
             cands.sort()
             rows = [q[m, u] for _, u in cands[:k]]
+            has[m, t] = bool(rows)
             rows += [q[m, t]] * (k - len(rows))
             S[m, t] = np.stack(rows)
-    return S
+    return S, has
 
 
 @pytest.mark.parametrize("t0, T, k", [(0, 50, 4), (16, 16, 4), (5, 37, 3), (0, 7, 15)])
@@ -71,15 +74,18 @@ def test_the_seeds_are_the_nearest_reached_neighbours_of_the_run(t0, T, k):
     P[1, -3:] = P[1, -4]
     q = rng.normal(size=(M, T, n))
     ok = rng.uniform(size=(M, T)) < 0.7
-    got = np.asarray(ik._neighbour_seeds(jnp.asarray(P), jnp.asarray(q), jnp.asarray(ok),
-                                         jnp.asarray(t0), k))  # fmt: skip
-    want = _reference_seeds(P, q, ok, t0, k)
+    ok[0, : 16 - t0 % 16] = False  # the first run of design 0: none reached
+    got, has = ik._neighbour_seeds(jnp.asarray(P), jnp.asarray(q), jnp.asarray(ok),
+                                   jnp.asarray(t0), k)  # fmt: skip
+    want, want_has = _reference_seeds(P, q, ok, t0, k)
     # ties in distance are measure-zero with random points: the order is the reference's
-    np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(np.asarray(got), want)
+    np.testing.assert_array_equal(np.asarray(has), want_has)
+    assert 0 < want_has.mean() < 1
     # shared targets (T, 3) are every design's
-    got1 = np.asarray(ik._neighbour_seeds(jnp.asarray(P[0]), jnp.asarray(q), jnp.asarray(ok),
-                                          t0, k))  # fmt: skip
-    np.testing.assert_array_equal(got1, _reference_seeds(np.stack([P[0]] * M), q, ok, t0, k))
+    got1, _ = ik._neighbour_seeds(jnp.asarray(P[0]), jnp.asarray(q), jnp.asarray(ok), t0, k)
+    np.testing.assert_array_equal(np.asarray(got1),
+                                  _reference_seeds(np.stack([P[0]] * M), q, ok, t0, k)[0])  # fmt: skip
 
 
 OPTS = ik.IKOptions(n_best=4, neighbours=4, slots=64, rounds=2)
@@ -117,6 +123,14 @@ def test_chunks_of_a_run_give_the_values_of_one_piece():
     np.testing.assert_array_equal(ok, np.asarray(whole.success))
     np.testing.assert_array_equal(q, np.asarray(whole.q))
     assert 0.5 < ok.mean() < 1.0
+    # each design's own targets (M, T, 3): the second's a permutation of the first's
+    P = np.stack([p, p[np.random.default_rng(4).permutation(N)]])
+    PP = np.concatenate([P, np.repeat(P[:, -1:], n_chunks * C - N, 1)], 1)
+    whole = _solver(OPTS)(X, jnp.asarray(P), 0)
+    parts = [_solver(OPTS)(X, jnp.asarray(PP[:, c * C:(c + 1) * C]), c * C)
+             for c in range(n_chunks)]  # fmt: skip
+    np.testing.assert_array_equal(np.concatenate([np.asarray(r.q) for r in parts], 1)[:, :N],
+                                  np.asarray(whole.q))  # fmt: skip
 
 
 def test_the_pass_keeps_only_better_solutions():
@@ -135,8 +149,14 @@ def test_the_pass_keeps_only_better_solutions():
     assert np.sum(v1[ok0] > v0[ok0] + 1e-6) >= 1
     _, pf = SIX_R.fk(jnp.asarray(PUMA), nb.q[0])
     assert np.max(np.linalg.norm(np.asarray(pf) - p, axis=-1)[ok1[0]]) < 1e-8
-    # the profile counts both passes' seeds
-    assert np.all(np.asarray(nb.tries) >= np.asarray(plain.tries))
+    # the profile counts both passes' seeds: the second pass tried at most k more, at
+    # the targets with a reached neighbour
+    extra = np.asarray(nb.tries) - np.asarray(plain.tries)
+    assert np.all((extra >= 0) & (extra <= OPTS.neighbours)) and np.any(extra > 0)
+    # a seed counts after the first pass's where the second pass's solution is kept
+    attempts = OPTS.n_nearest + OPTS.n_random * OPTS.rounds
+    better = np.asarray(nb.inv_k) > np.asarray(plain.inv_k) + 1e-6
+    assert np.all(np.asarray(nb.seed)[better] >= attempts)
 
 
 def test_the_schema_refuses_a_chunk_that_cuts_a_run(tmp_path):
@@ -150,6 +170,25 @@ def test_the_schema_refuses_a_chunk_that_cuts_a_run(tmp_path):
     designopt.load_config(base, {"study.indices.chunk": 40, "study.task.ik.neighbours": 0})
     with pytest.raises(ConfigError, match="neighbours"):
         designopt.load_config(base, {"study.task.ik.neighbours": 16})
+
+
+def test_the_chunk_holds_whole_runs():
+    """With neighbours the chunk is rounded up to a multiple of 16, also when it is the
+    whole task (1000 targets: 1008), so that a re-scoring on more targets, which keeps
+    the run's chunk, starts every chunk at a multiple of 16 too."""
+    import designopt
+    from designopt.studies.serial import taskindex
+
+    cfg = "configs/puma560_task.yaml"
+    nb = {"study.task.ik.neighbours": 4}
+
+    def chunk(over):
+        return taskindex.chunk(designopt.load_config(cfg, over).study)
+
+    assert chunk({"study.indices.n_samples": 1000}) == 1000
+    assert chunk(nb | {"study.indices.n_samples": 1000}) == 1008
+    assert chunk(nb | {"study.indices.n_samples": 5000}) == 1024
+    assert chunk(nb | {"study.indices.n_samples": 30, "study.indices.chunk": 40}) == 32
 
 
 # ------------------------------------------------------------------ the climb at an edge
@@ -166,7 +205,7 @@ def test_the_climb_reaches_a_maximum_at_a_collisions_edge():
     refuse: the kept 1/k is the closed form's best under that bound (both elbow
     branches, the redundant angle swept and refined, tests/reference) within 1e-4 at
     ≥ 97 % of the targets and never above it, also at ≥ 95 % of those where the bound
-    cuts the unconstrained maximum off (82 of 96). Measured 2026-11-30: 99.0 % and
+    cuts the unconstrained maximum off (82 of 96). Measured 2026-11-29: 99.0 % and
     98.8 %; before the climb bisected towards the edge (a step into it only shrank the
     next one 4×, and the climb stopped short of it) 42.7 %."""
     from reference import ur5_closed_form as cf

@@ -120,7 +120,8 @@ class IKResult(NamedTuple):
     """Per target: joints (active), success, position error (model units), orientation
     error (rad; 0 for ``position``), 1/k (2-norm, position block) at the joints, and the
     seed they come from (0 = the nearest database entry; for a failure, the seed that
-    came closest). With an ``accept`` predicate, ``success`` also asks that it accepts the
+    came closest; a neighbour pass's seed r, the r-th nearest neighbour's solution, is
+    counted after the first pass's seeds). With an ``accept`` predicate, ``success`` also asks that it accepts the
     joints, and ``converged`` says whether they are within tolerance and limits alone."""
 
     q: jax.Array
@@ -814,10 +815,11 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
     one_seed = None if hopeless is None else jnp.broadcast_to(hopeless, (M, T)).reshape(I)
     ctx: dict = {"pass": 0, "S": None}  # the pass being traced (:func:`attempt`), read by seed
 
-    def attempt(pass_, S):
+    def attempt(pass_, S, has=None):
         """One pass of the queue over the items (pass 0: the database seeds; a
-        neighbour pass: the seeds ``S`` (M, T, K, n)) and the pick of each item's
-        best solution: (its fields, its score (−inf where none is accepted))."""
+        neighbour pass: the seeds ``S`` (M, T, K, n), for the items with a reached
+        neighbour, ``has`` (M, T)) and the pick of each item's best solution: (its
+        fields, its score (−inf where none is accepted))."""
         ctx["pass"], ctx["S"] = pass_, S
         # the queue: the representatives' items, in order (all of them without ``rep``);
         # a neighbour pass leaves out the hopeless ones
@@ -826,8 +828,9 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         else:
             solved = (jnp.ones((I,), bool) if rep is None else jnp.repeat(
                 jnp.asarray(rep, jnp.int32) == jnp.arange(M, dtype=jnp.int32), T))  # fmt: skip
-            if K_nb and one_seed is not None:
-                solved = solved & ~((pass_ > 0) & one_seed)
+            if K_nb:
+                out = ~has.reshape(I) if one_seed is None else ~has.reshape(I) | one_seed
+                solved = solved & ~((pass_ > 0) & out)
             order = jnp.argsort(~solved, stable=True).astype(jnp.int32)
             n_items = jnp.sum(solved, dtype=jnp.int32)
         k0 = jnp.arange(Bp, dtype=jnp.int32)
@@ -934,9 +937,11 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         """Pass k (0: the database seeds, 1: the neighbours' solutions): its solutions
         replace the best so far where they score higher."""
         best, sc = carry
-        b, sc_k = attempt(k, _neighbour_seeds(p_t, best.q, best.success, t0, K_nb))
+        S, has = _neighbour_seeds(p_t, best.q, best.success, t0, K_nb)
+        b, sc_k = attempt(k, S, has)
         take = jax.lax.optimization_barrier((k == 0) | (sc_k > sc))
         tried = (b.tries + best.tries, b.refused + best.refused)
+        b = b._replace(seed=b.seed + jnp.where(k > 0, attempts, 0))  # after pass 0's
         best = IKResult(*(jnp.where(take.reshape(take.shape + (1,) * (x.ndim - 2)), y, x)
                           for x, y in zip(best[:7], b[:7], strict=True)), *tried)  # fmt: skip
         return best, jnp.where(take, sc_k, sc)
@@ -956,13 +961,15 @@ it (or in one piece) gets the values of one piece."""
 
 
 def _neighbour_seeds(p_t: jax.Array, q: jax.Array, ok: jax.Array, t0: jax.Array | int,
-                     k: int) -> jax.Array:
+                     k: int) -> tuple[jax.Array, jax.Array]:
     """The seeds of the neighbour pass (M, T, k, n): for each target of each design, the
     kept joints ``q`` (M, T, n) of its k nearest reached (``ok`` (M, T)) targets of its
     group (:data:`NEIGHBOUR_GROUP`; targets ``p_t`` (T, 3) or (M, T, 3), ``t0`` the first
-    one's index in the task). Of targets at one point only the first counts (a padded
-    chunk's copies of its last target are none); a target with fewer than k such
-    neighbours gets its own joints in the free places."""
+    one's index in the task; the distance between tip positions: targets that differ in
+    their tool axes alone are at one point). Of targets at one point only the first
+    counts (a padded chunk's copies of its last target are none); a target with fewer
+    than k such neighbours gets its own joints in the free places. Also (M, T): whether
+    a target has any."""
     M, T, n = q.shape
     G = NEIGHBOUR_GROUP
     P = jnp.broadcast_to(p_t, (M, T, 3))
@@ -992,7 +999,7 @@ def _neighbour_seeds(p_t: jax.Array, q: jax.Array, ok: jax.Array, t0: jax.Array 
     S = jnp.where(got[..., None], S, q[:, :, None])
     if kk < k:
         S = jnp.concatenate([S, jnp.repeat(q[:, :, None], k - kk, 2)], 2)
-    return S
+    return S, jnp.any(got, -1)
 
 
 CLIMB_ROWS = 256
@@ -1123,7 +1130,10 @@ def _climb(ch: _Chain, xr: list, pt: list, Rt: list | None, L: jax.Array, mode: 
         al = jnp.where(i == 0, al, jnp.where(up, jnp.clip(bb, 1e-6, 1e3),
                                              jnp.where(hit, al, al / 4)))  # fmt: skip
         move = h * nd
-        rem = jnp.where(hit, move, jnp.where(up & (i > 0), rem - move, rem))
+        # the edge bounds the way ahead only: a step that turns the direction frees it
+        ahead = jnp.sum(dt * d, -1) > 0.5 * jnp.linalg.norm(dt, axis=-1) * jnp.linalg.norm(d, axis=-1)
+        rem = jnp.where(hit, move, jnp.where(up & (i > 0), jnp.where(ahead, rem - move, jnp.inf),
+                                             rem))  # fmt: skip
         return (jnp.where(up[:, None], qta, qa), jnp.where(up, st, s),
                 jnp.where(up[:, None], dt, d), al, jnp.where(i == 0, st, s0), rem)  # fmt: skip
 

@@ -149,10 +149,16 @@ its run's chunk, so a run of 256 targets and its re-scoring on 1,024 share a pro
 
 def chunk(s: SerialSettings) -> int:
     """Targets per chunk: ``indices.chunk`` when given, else :data:`CHUNK` (at most the
-    task's count). The chunks' seeds are those of one piece (``ik.solve``'s ``t0``), so
+    task's count; with ``task.ik.neighbours`` rounded up to a multiple of
+    ``ik.NEIGHBOUR_GROUP``). The chunks' seeds are those of one piece (``ik.solve``'s ``t0``), so
     the chunk changes no value, only the programs' shapes and memory."""
     ind = s.indices
-    return min(ind.chunk if "chunk" in ind.model_fields_set else CHUNK, n_targets(s))
+    c = min(ind.chunk if "chunk" in ind.model_fields_set else CHUNK, n_targets(s))
+    if s.task.ik.neighbours:  # type: ignore[union-attr]  # whole runs of neighbours: a
+        # chunk of the whole task rounded up (its padding is no one's neighbour), so that
+        # a re-scoring on more targets, which keeps the chunk, cuts no run either
+        c = -(-c // ik.NEIGHBOUR_GROUP) * ik.NEIGHBOUR_GROUP
+    return c
 
 
 def targets(s: SerialSettings, key: jax.Array, dtype: Any) -> dict[str, jax.Array]:
