@@ -121,8 +121,8 @@ class IKResult(NamedTuple):
     error (rad; 0 for ``position``), 1/k (2-norm, position block) at the joints, and the
     seed they come from (0 = the nearest database entry; for a failure, the seed that
     came closest; a neighbour pass's seed r, the r-th nearest neighbour's solution, is
-    counted after the first pass's seeds). With an ``accept`` predicate, ``success`` also asks that it accepts the
-    joints, and ``converged`` says whether they are within tolerance and limits alone."""
+    counted after the first pass's seeds). With an ``accept`` predicate, ``success``
+    also asks that it accepts the joints, and ``converged`` says whether they are within tolerance and limits alone."""
 
     q: jax.Array
     success: jax.Array
@@ -813,6 +813,8 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         return r if rep is None else IKResult(*(x[jnp.asarray(rep, jnp.int32)] for x in r))
 
     one_seed = None if hopeless is None else jnp.broadcast_to(hopeless, (M, T)).reshape(I)
+    solved = (jnp.ones((I,), bool) if rep is None else
+              jnp.repeat(jnp.asarray(rep, jnp.int32) == jnp.arange(M, dtype=jnp.int32), T))  # fmt: skip
     ctx: dict = {"pass": 0, "S": None}  # the pass being traced (:func:`attempt`), read by seed
 
     def attempt(pass_, S, has=None):
@@ -826,13 +828,12 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         if rep is None and not K_nb:
             order, n_items = jnp.arange(I, dtype=jnp.int32), jnp.asarray(I, jnp.int32)
         else:
-            solved = (jnp.ones((I,), bool) if rep is None else jnp.repeat(
-                jnp.asarray(rep, jnp.int32) == jnp.arange(M, dtype=jnp.int32), T))  # fmt: skip
+            queued = solved
             if K_nb:
                 out = ~has.reshape(I) if one_seed is None else ~has.reshape(I) | one_seed
-                solved = solved & ~((pass_ > 0) & out)
-            order = jnp.argsort(~solved, stable=True).astype(jnp.int32)
-            n_items = jnp.sum(solved, dtype=jnp.int32)
+                queued = solved & ~((pass_ > 0) & out)
+            order = jnp.argsort(~queued, stable=True).astype(jnp.int32)
+            n_items = jnp.sum(queued, dtype=jnp.int32)
         k0 = jnp.arange(Bp, dtype=jnp.int32)
         i = jnp.where(k0 < jnp.minimum(B, n_items), order[jnp.minimum(k0, I - 1)], I)
         a = jnp.zeros_like(i)
@@ -853,12 +854,9 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
         xc = [jnp.repeat(X[:, k], T) for k in range(ch.D)]
         tx = ch.trig_x(xc)
         n_conv_f = s[12]
-        solved = (jnp.ones((I,), bool) if rep is None else
-                  jnp.repeat(jnp.asarray(rep, jnp.int32) == jnp.arange(M, dtype=jnp.int32), T))  # fmt: skip
 
         def arr(x):
             return jnp.broadcast_to(jnp.asarray(x, dtype), (I,))
-
 
         def climb(r, q0):
             """Rows r (items, (k,)) from their converged joints q0 (k, n) up the score along

@@ -26,7 +26,8 @@ from pydantic import (
 from designopt.core import validation
 from designopt.core.errors import ConfigError
 from designopt.kinematics.collision import Collision
-from designopt.kinematics.task import Task
+from designopt.kinematics.ik import NEIGHBOUR_GROUP
+from designopt.kinematics.task import Points, Task
 from designopt.kinematics.wall import BodyWall
 from designopt.studies.base import Section, StudySettings, check_replicates
 
@@ -524,9 +525,7 @@ class SerialSettings(StudySettings):
                 raise ValueError(f"indices.sampler: measure 'task' draws its targets "
                                  f"uniformly in the task region; '{ind.sampler}' is for the "
                                  "joint and cartesian measures (give sampler: uniform)")  # fmt: skip
-            from designopt.kinematics.ik import NEIGHBOUR_GROUP as G
-            from designopt.kinematics.task import Points
-
+            G = NEIGHBOUR_GROUP
             reg = self.task.region
             N = len(reg.xyz()) if isinstance(reg, Points) else ind.n_samples
             if self.task.ik.neighbours and "chunk" in ind.model_fields_set \
