@@ -340,7 +340,11 @@ HERE = f"{SELF}::test_documented_command_runs"
 RESUME = f"{SELF}::test_max_minutes_stops_cleanly_and_the_printed_command_resumes"
 PIPELINE_RESUME = "test_pipeline.py::test_interrupted_run_is_marked_incomplete_and_resume_matches"
 PIPELINE_RUN = "test_pipeline.py::test_run_with_refine_matches_schema_and_draws_figures"
+PLANNING_AGREE = ("designopt run configs/port_placement.yaml --set optimizer.n_runs=3 --set "
+                  "optimizer.n_particles=64 --set optimizer.n_iters=16 --set refine.method=compass")
 ELSEWHERE: dict[str, list[str]] = {
+    PLANNING_AGREE: ["test_compass.py::test_a_fronts_runs_are_polished_by_their_scaled_"
+                     "distance_on_the_search_samples"],
     "designopt eval configs/planar2r.yaml --design l1=1 --design l2=0.5 --json":
         ["test_bad_inputs.py::test_design_forms_agree_and_still_go_through_parse_design"],
     "designopt studies": ["test_serial.py::test_scan_and_eval_commands"],
@@ -410,7 +414,8 @@ OTHER_CONFIG = {  # ELSEWHERE commands whose tests run the form on a config of t
     c: "device counts are set before JAX starts: a child process each, on a tiny config"
     for c in ELSEWHERE
     if "--devices" in c
-}
+} | {PLANNING_AGREE: "minutes on the planning case (three runs of 64 × 16, then the polish): "
+                     "the form, the runs and the polish set by --set, on a small front"}
 
 BENCH = "a benchmark script: minutes of timed repeats on the full sizes, no pass/fail"
 SKIP: dict[str, str] = {

@@ -105,12 +105,17 @@ class Optimizer(_Strict):
 
 
 class Refine(_Strict):
-    """Optional gradient polish after PSO (optax), projected onto the design box."""
+    """Optional polish after the search, on the search's own samples: a gradient polish
+    (optax ``adam`` or ``sgd``, projected onto the design box) or a derivative-free
+    ``compass`` search (``designopt.optim.compass``; a front's runs: their recommended
+    designs)."""
 
-    method: Literal["adam", "sgd"] = "adam"
-    steps: int = Field(100, ge=1)
+    method: Literal["adam", "sgd", "compass"] = "adam"
+    steps: int = Field(100, ge=1)  # gradient steps; compass: at most this many iterations
     learning_rate: float = Field(0.01, gt=0)  # step size in units of the box width
     n_best: int = Field(1, ge=1)  # polish the best design of the n_best best runs
+    step: float = Field(0.08, gt=0, le=0.5)  # compass: the first poll's step, box widths
+    tol: float = Field(0.002, gt=0, le=0.5)  # compass: stops when its step falls below
 
 
 class Sweep(_Strict):
@@ -452,6 +457,10 @@ def check_front(cfg: Any, where: str) -> None:
         raise ConfigError(f"{where}: key 'optimizer.name': '{name}' is single-objective; a "
                           "front (study.objective.pareto) needs a multi-objective "
                           "optimizer: nsga2")  # fmt: skip
+    if cfg.refine is not None and cfg.refine.method != "compass":
+        raise ConfigError(f"{where}: key 'refine.method': '{cfg.refine.method}' is a gradient "
+                          "polish of one objective; a front (study.objective.pareto) is "
+                          "polished by 'compass' (each run's recommended design)")  # fmt: skip
     ref = cfg.front.reference
     if ref is not None and len(ref) != len(front):
         raise ConfigError(f"{where}: key 'front.reference': {len(ref)} values for "

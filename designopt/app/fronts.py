@@ -13,8 +13,12 @@ maximised (F = ±index, all minimised for the optimizer). A multi-objective opti
 3. pairs of designs whose order in some objective is within 2 standard errors are marked
    ambiguous: which of the two is better there is not resolved by the samples;
 4. with ``optimizer.n_runs`` ≥ 2, each run's recommended design (the compromise of its
-   own non-dominated final population: ``app.rescoring.front_runs``) is re-scored in the
+   own non-dominated final population: ``app.rescoring.front_picks``) is re-scored in the
    same call, on the same stream, and the runs' agreement archived (``runs``).
+
+With ``refine: {method: compass}`` each run's recommended design is first polished on
+the search's samples (``app.polishing.front``); the polished designs are the runs'
+recommendations and join the front's candidates.
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ from typing import Any
 import jax.numpy as jnp
 import numpy as np
 
+from designopt.app import polishing
 from designopt.app import rescoring as rs
 from designopt.app.config import linear, senses
 from designopt.problems.base import Problem, na_worst
@@ -153,13 +158,27 @@ def groups(job: Any, problem: Problem, res: Any) -> dict[str, Any]:
     keep = candidates(res)
     X = np.asarray(pop.x, np.float64).reshape(-1, D)[keep]
     F_opt = np.asarray(pop.f, np.float64).reshape(-1, m)[keep]
+    R = int(np.shape(pop.x)[0])
+    X_runs, scale = rs.front_picks(res) if R >= 2 or cfg.refine is not None else (None, None)
+    pick = "each run's recommended design: the compromise of its own non-dominated final population"
+    polished = None
+    if cfg.refine is not None:  # each run's recommended design polished (compass)
+        pol, F_pol, polished = polishing.front(problem, X_runs, scale, names, sg, cfg.refine)
+        X_runs = pol.x
+        pick += ", polished by a compass search on the search's samples (refine)"
+        V = np.asarray(pop.v, np.float64).reshape(-1)
+        ok = pol.v <= 0
+        if np.all(V[keep] <= 0) and ok.any():  # the feasible polished designs join the front
+            Xc, Fc = np.concatenate([X, pol.x[ok]]), np.concatenate([F_opt, F_pol[ok]])
+            nd = np.flatnonzero(pareto.non_dominated(Fc))
+            _, first = np.unique(Xc[nd], axis=0, return_index=True)
+            nd = nd[np.sort(first)]
+            X, F_opt, keep = Xc[nd], Fc[nd], nd
     X = X[thin(F_opt, cfg.front.max_points)]
     c, fresh, n_samples = rescoring(job)
     rescore = rs.problem(job, "front")
-    R = int(np.shape(pop.x)[0])
     n_front = len(X)
     if R >= 2:  # each run's recommended design, scored in the same call on the same stream
-        X_runs = rs.front_runs(res)
         X = np.concatenate([X, X_runs])
     vals = score(rescore, X)
     for k, w in weights(front, problem.names).items():  # exact: no samples behind them
@@ -204,8 +223,10 @@ def groups(job: Any, problem: Problem, res: Any) -> dict[str, Any]:
                     "units": linear_units(front, job.study.units(cfg.study))}}  # fmt: skip
     with_placement(fr, placement(job.study, cfg.study, X), None)  # ports, bases: (n, ...)
     out = {"optimizer": opt, "front": fr, "problem": problem_group(problem)}
+    if polished is not None:
+        out["refine"] = polished
     if runs is not None:
-        out["runs"] = runs_group(job, problem, runs[0], runs[1], names, sg, F, na)
+        out["runs"] = runs_group(job, problem, runs[0], runs[1], names, sg, F, na, pick)
     if job.study.targets is not None and len(X):  # every front design at every target
         # the re-scoring's targets and seeds: their means are the front's indices
         tg = job.study.targets(c.study, X, fresh, job.dtype)
@@ -215,16 +236,13 @@ def groups(job: Any, problem: Problem, res: Any) -> dict[str, Any]:
 
 
 def runs_group(job: Any, problem: Problem, vals: dict[str, np.ndarray], X: np.ndarray,
-               names: list[str], sg: np.ndarray, F_front: np.ndarray,
-               na: Any) -> dict[str, Any]:  # fmt: skip
+               names: list[str], sg: np.ndarray, F_front: np.ndarray, na: Any,
+               pick: str) -> dict[str, Any]:  # fmt: skip
     """The ``runs`` group of a front run: each run's recommended design on the front's
     fresh stream, compared with the reference run: the run whose design is the compromise
     of the re-scored ones (scaled by the re-scored front's ideal and nadir)."""
     vals = {k: v for k, v in vals.items() if k not in ("f", "f_se")}  # the weighted f: moot
-    F = np.stack([vals[k] for k in names], -1)
-    Fs = np.stack([np.asarray(na_worst(jnp.asarray(F[:, j]), *na[k], g > 0)) if k in na
-                   else F[:, j] for j, (k, g) in enumerate(zip(names, sg, strict=True))],
-                  -1) * sg  # fmt: skip  # minimised, n/a at its worst
+    Fs = polishing.minimised(vals, names, sg, na)  # minimised, n/a at its worst
     Ff = F_front * sg
     scale = np.stack(
         [np.nanmin(np.concatenate([Ff, Fs]), 0), np.nanmax(np.concatenate([Ff, Fs]), 0)]
@@ -233,5 +251,4 @@ def runs_group(job: Any, problem: Problem, vals: dict[str, np.ndarray], X: np.nd
     fr = rs.plan(job, "front")
     return rs.runs_group(X, vals, names, list(senses(job.cfg.study.pareto).values()),
                                 ref, problem.lower, problem.upper, problem.names, fr,
-                                "each run's recommended design: the compromise of its own "
-                                "non-dominated final population")  # fmt: skip
+                                pick)  # fmt: skip

@@ -184,7 +184,8 @@ class Front(Single):
 
     def scoring(self, job: Job) -> str:
         n = rescoring.plan(job, "front").n
-        return f"re-scoring the front on {n} fresh samples per design"
+        polish = "polishing each run's recommended design, " if job.cfg.refine else ""
+        return f"{polish}re-scoring the front on {n} fresh samples per design"
 
 
 # ------------------------------------------------------------------------------ run

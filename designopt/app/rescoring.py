@@ -271,11 +271,14 @@ def final_groups(job: Any, problem: Problem, res: Any, groups: dict[str, Any],
     x_final = np.asarray(fin["x"], np.float64)
     R = int(np.shape(res.best_x)[0])
     runs = R >= 2
-    X = (
-        np.concatenate([np.asarray(res.best_x, np.float64), x_final[None]])
-        if runs
-        else x_final[None]
-    )
+    best = np.array(res.best_x, np.float64)
+    pick = "each run's best design (optimizer/best_x)"
+    pol = groups.get("refine")
+    if runs and pol is not None and pol["attrs"].get("method") == "compass":
+        # the polished designs stand for their runs (a compass step is never worse)
+        best[np.asarray(pol["run_index"], np.int64)] = pol["x"]
+        pick += ", polished by a compass search on the search's samples (refine)"
+    X = np.concatenate([best, x_final[None]]) if runs else x_final[None]
     vals = score(fresh, X)
     own = {k: v for k, v in fin.items() if k not in ("x", "attrs")}  # the search's values
     at = dict(fin.get("attrs", {}))
@@ -296,7 +299,7 @@ def final_groups(job: Any, problem: Problem, res: Any, groups: dict[str, Any],
         ref = int(groups["best_run"]["attrs"]["run_index"]) if ref is None else ref
         groups["runs"] = runs_group(X[:R], {k: v[:R] for k, v in vals.items()}, ["f"], ["min"],
                                     ref, problem.lower, problem.upper, problem.names, fr,
-                                    "each run's best design (optimizer/best_x)")  # fmt: skip
+                                    pick)  # fmt: skip
         groups["runs"]["attrs"]["n_samples"] = at["n_samples_used"]
     return groups
 
@@ -306,12 +309,13 @@ def problem_for(job: Any, like: Problem) -> Problem:
     return problem(job, "final", like)
 
 
-def front_runs(res: Any) -> np.ndarray:
+def front_picks(res: Any) -> tuple[np.ndarray, np.ndarray]:
     """Each run's recommended design of a front run (``optimizer.n_runs`` ≥ 2): the
     compromise (:func:`compromise`) of the run's own non-dominated final population
     (among its feasible designs when it has any, else its least violating, as the pooled
     front picks), its objectives on the search's samples scaled by the ideal and nadir of
-    all runs' non-dominated sets together. Returns X (R, D)."""
+    all runs' non-dominated sets together. Returns (X (R, D), that scale (2, m):
+    ideal and nadir, minimised)."""
     from designopt.numerics import pareto
 
     pop = res.front
@@ -328,4 +332,4 @@ def front_runs(res: Any) -> np.ndarray:
     allF = np.concatenate([F[r, nd[r]] for r in range(R)])
     scale = np.stack([np.nanmin(allF, 0), np.nanmax(allF, 0)])
     rows = np.array([nd[r][compromise(F[r, nd[r]], scale)] for r in range(R)])
-    return Xp[np.arange(R), rows]
+    return Xp[np.arange(R), rows], scale

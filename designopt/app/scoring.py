@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from designopt.app import polishing
 from designopt.core.errors import ConfigError
 from designopt.problems.base import Problem
 from designopt.problems.evaluate import score
@@ -72,12 +73,16 @@ def run_groups(cfg: Any, problem: Problem, res: Any, dtype: Any) -> dict[str, An
     if cfg.refine is not None:
         r = cfg.refine
         order = np.argsort(res.best_f)[: r.n_best]
-        rr = refine(problem, res.best_x[order], r.steps, r.learning_rate, r.method,
-                    dtype=dtype)  # fmt: skip
+        if r.method == "compass":  # derivative-free, feasible first (app.polishing)
+            rr = polishing.runs(problem, res.best_x[order], r)
+            how = {"step": r.step, "tol": r.tol, "max_iterations": r.steps}
+        else:
+            rr = refine(problem, res.best_x[order], r.steps, r.learning_rate, r.method,
+                        dtype=dtype)  # fmt: skip
+            how = {"steps": r.steps, "learning_rate": r.learning_rate}
         tree["refine"] = {
             "run_index": order, "x0": rr.x0, "f0": rr.f0, "x": rr.x, "f": rr.f,
-            "history": rr.history, "gain": rr.gain,
-            "attrs": {"method": r.method, "steps": r.steps, "learning_rate": r.learning_rate},
+            "history": rr.history, "gain": rr.gain, "attrs": {"method": r.method, **how},
         }  # fmt: skip
         i = int(np.argmin(rr.f))
         keeps_feasible = problem.constraints is None or float(

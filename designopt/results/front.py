@@ -7,7 +7,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from designopt.results.base import Record, names, runs_lines
+from designopt.results.base import SEARCH_LABEL, Record, names, runs_lines
 
 SHOWN = 12
 """Front designs printed by the summary (the archive holds them all)."""
@@ -207,6 +207,14 @@ class FrontRecord(Record):
             for i in rows:
                 lines.append(f"  #{i}: {per[i][0].strip()}")
                 lines += [f"      {ln.strip()}" for ln in per[i][1:]]
+        pol = self.groups.get("refine")
+        if pol is not None and "d0" in pol:  # refine: {method: compass}
+            at = pol["attrs"]
+            d0, d = (", ".join(f"{x:.4g}" for x in np.atleast_1d(pol[k])) for k in ("d0", "d"))
+            lines.append(f"polish: {at.get('designs', 'designs')}, by a compass search "
+                         f"{SEARCH_LABEL}: distance to the ideal point (objectives scaled to "
+                         f"[0, 1]) {d0} → {d} ({int(at['iterations'])} iterations, "
+                         f"{int(at['evaluations'])} designs scored)")  # fmt: skip
         lines += runs_lines(self.runs, self.names, self.units())
         return lines
 

@@ -228,7 +228,10 @@ class RunRecord(Record):
                          f"converged at iteration {opt['converged_at'][best]})")  # fmt: skip
         if "refine" in self.groups:
             r = self.groups["refine"]
-            lines.append(f"  polish ({r['attrs']['method']}, {r['attrs']['steps']} steps) "
+            at = r["attrs"]
+            n = (f"{at['steps']} steps" if "steps" in at
+                 else f"{np.shape(r['history'])[-1] - 1} iterations")  # fmt: skip
+            lines.append(f"  polish ({at['method']}, {n}, {SEARCH_LABEL}) "
                          f"gained Δf = {np.max(r['gain']):.2e}")  # fmt: skip
         for k in self.hint("summary", ()):
             se = fin.get(k + "_se")

@@ -74,8 +74,10 @@ def _run_sections(tree: Mapping[str, Any], ids: _Ids, units: dict[str, str],
                 for i, a, b in zip(np.atleast_1d(r.get("run_index", np.arange(len(np.atleast_1d(r["f0"]))))),
                                    np.atleast_1d(_f(r["f0"])), np.atleast_1d(_f(r["f"])), strict=False)]  # fmt: skip
         at = r.get("attrs", {})
-        cap = ", ".join(f"{k} {_s(at[k])}" for k in ("method", "steps", "learning_rate") if k in at)
-        out.append(PageSection("refine", "Gradient polish", [f"<p class='note'>{esc(cap)}</p>"
+        cap = ", ".join(f"{k} {_s(at[k])}" for k in ("method", "steps", "learning_rate", "step",
+                                                      "tol", "max_iterations") if k in at)  # fmt: skip
+        title = "Compass polish" if at.get("method") == "compass" else "Gradient polish"
+        out.append(PageSection("refine", title, [f"<p class='note'>{esc(cap)}</p>"
                            + _table(["run", "f before", "f after", "gain"], rows)]))  # fmt: skip
     if "teleop" in tree:
         out += _teleop(tree["teleop"], ids)
