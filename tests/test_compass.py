@@ -110,6 +110,13 @@ def test_a_fronts_runs_are_polished_by_their_scaled_distance_on_the_search_sampl
     span = np.where(nadir != ideal, nadir - ideal, 1.0)
     dist = np.sqrt(np.sum(((F - ideal) / span) ** 2, -1))
     assert np.allclose(dist, np.concatenate([d0, d]), rtol=1e-9, atol=1e-12)
+    # the report's section: the same distances
+    from designopt.figures.html.page import sections
+    from designopt.io import archive
+
+    sec = {s.id: s for s in sections(archive.read(tmp_path / "f.h5"))}["refine"]
+    html = "".join(i for i in sec.items if isinstance(i, str))
+    assert sec.title == "Compass polish" and all(f"{v:.6g}" in html for v in (*d0, *d))
     # each polished design joined the front's candidates: it is on the front, or a front
     # design dominates it on the search's samples
     fv = designopt.evaluate(cfg, [dict(l1=a, l2=b) for a, b in front_x])

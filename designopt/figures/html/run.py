@@ -68,17 +68,24 @@ def _run_sections(tree: Mapping[str, Any], ids: _Ids, units: dict[str, str],
         out.append(PageSection("final", "Final design", [_final_tables(tree, units)]))
     if isinstance(tree.get("runs"), Mapping) and "agree" in tree["runs"]:
         out.append(_runs(tree, units))
-    if "refine" in tree and "f0" in tree["refine"]:
-        r = tree["refine"]
+    r = tree.get("refine")
+    if isinstance(r, Mapping) and ("f0" in r or "d0" in r):
+        k0, k1, what = ("f0", "f", "f") if "f0" in r else ("d0", "d", "distance to the ideal")
+        n = len(np.atleast_1d(r[k0]))
         rows = [(int(i), f"{a:.6g}", f"{b:.6g}", f"{a - b:.3g}")
-                for i, a, b in zip(np.atleast_1d(r.get("run_index", np.arange(len(np.atleast_1d(r["f0"]))))),
-                                   np.atleast_1d(_f(r["f0"])), np.atleast_1d(_f(r["f"])), strict=False)]  # fmt: skip
+                for i, a, b in zip(np.atleast_1d(r.get("run_index", np.arange(n))),
+                                   np.atleast_1d(_f(r[k0])), np.atleast_1d(_f(r[k1])), strict=False)]  # fmt: skip
         at = r.get("attrs", {})
         cap = ", ".join(f"{k} {_s(at[k])}" for k in ("method", "steps", "learning_rate", "step",
-                                                      "tol", "max_iterations") if k in at)  # fmt: skip
-        title = "Compass polish" if at.get("method") == "compass" else "Gradient polish"
+                                                      "first_step", "tol", "max_iterations",
+                                                      "iterations", "evaluations") if k in at)  # fmt: skip
+        if "d0" in r:
+            cap += (f"; each run's recommended design, {SEARCH_LABEL}, by its distance to the "
+                    "ideal point (objectives scaled to [0, 1] by the runs' non-dominated final "
+                    "populations)")  # fmt: skip
+        title = "Compass polish" if _s(at.get("method", "")) == "compass" else "Gradient polish"
         out.append(PageSection("refine", title, [f"<p class='note'>{esc(cap)}</p>"
-                           + _table(["run", "f before", "f after", "gain"], rows)]))  # fmt: skip
+                           + _table(["run", f"{what} before", f"{what} after", "gain"], rows)]))  # fmt: skip
     if "teleop" in tree:
         out += _teleop(tree["teleop"], ids)
     ck = tree.get("checkpoint")
