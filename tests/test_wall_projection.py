@@ -33,6 +33,19 @@ def _posed(w: kw.MeshWall) -> trimesh.Trimesh:
     return m
 
 
+def _closest(m: trimesh.Trimesh, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The exact closest points of the mesh to points p (n, 3) and their distances, by
+    trimesh's closest point on every one of its triangles. (trimesh.proximity.closest_point
+    looks at candidate triangles only, and misses the nearest one now and then for points
+    inside: 2 of 3,000 points inside the posed wall below, 1e-4 m off, 2026-11-29.)"""
+    T = m.triangles
+    q = np.empty_like(p)
+    for i, x in enumerate(p):  # the oracle: brute force over the triangles
+        c = trimesh.triangles.closest_point(T, np.broadcast_to(x, T.shape[:1] + (3,)))
+        q[i] = c[np.argmin(np.linalg.norm(c - x, axis=1))]
+    return q, np.linalg.norm(q - p, axis=1)
+
+
 def _settings():
     """The shipped planning case with the abdomen's mesh as its body wall (the issue's
     case), validated by the study's settings model."""
@@ -62,7 +75,7 @@ def test_designed_ports_are_the_exact_closest_points_over_the_design_box():
     w = s.task.body_wall
     m = _posed(w)
     for a in range(2):
-        q, dist, _ = trimesh.proximity.closest_point(m, named[a])
+        q, dist = _closest(m, named[a])
         assert dist.min() > 0.11  # every named point lies well above the skin (off the grid)
         size = float(np.linalg.norm(np.ptp(m.vertices, axis=0)))
         err = np.linalg.norm(got[a] - q, axis=1)
@@ -79,11 +92,11 @@ def test_a_posed_scaled_wall_from_far_away_and_from_inside():
     rng = np.random.default_rng(0)
     far = rng.normal(size=(40, 3))
     far = 0.4 + 1.6 * far / np.linalg.norm(far, axis=1, keepdims=True) * rng.uniform(1, 2, (40, 1))
-    inside = trimesh.sample.volume_mesh(m, 200)[:40]
+    inside = trimesh.sample.volume_mesh(m, 200, seed=0)[:40]
     near = m.vertices[rng.choice(len(m.vertices), 40)] + rng.normal(scale=0.004, size=(40, 3))
     p = np.concatenate([far, inside, near])
     got = np.asarray(kw.project("mesh", kw.wall_params(w), jnp.asarray(p)))
-    q, dist, _ = trimesh.proximity.closest_point(m, p)
+    q, dist = _closest(m, p)
     size = float(np.linalg.norm(np.ptp(m.vertices, axis=0)))
     assert np.linalg.norm(got - q, axis=1).max() <= kw.MESH_BOUND * size
     np.testing.assert_allclose(np.asarray(kw.distance("mesh", kw.wall_params(w), jnp.asarray(p))),
@@ -138,6 +151,6 @@ def test_float32_lands_within_float32_rounding():
     w = kw.MeshWall(shape="mesh", file=str(ABDOMEN), resolution=32)
     p = np.c_[np.random.default_rng(2).uniform(-0.15, 0.15, (30, 2)), np.full(30, 0.3)]
     got = np.asarray(kw.project("mesh", kw.wall_params(w, jnp.float32), jnp.asarray(p, jnp.float32)))
-    q, _, _ = trimesh.proximity.closest_point(_posed(w), p)
+    q, _ = _closest(_posed(w), p)
     assert got.dtype == np.float32
     assert np.linalg.norm(got - q, axis=1).max() < 2e-6
