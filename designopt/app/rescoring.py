@@ -310,7 +310,7 @@ def problem_for(job: Any, like: Problem) -> Problem:
 
 
 def front_picks(res: Any) -> tuple[np.ndarray, np.ndarray]:
-    """Each run's recommended design of a front run (``optimizer.n_runs`` ≥ 2): the
+    """Each run's recommended design of a front run (one or more runs): the
     compromise (:func:`compromise`) of the run's own non-dominated final population
     (among its feasible designs when it has any, else its least violating, as the pooled
     front picks), its objectives on the search's samples scaled by the ideal and nadir of

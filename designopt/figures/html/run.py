@@ -79,6 +79,8 @@ def _run_sections(tree: Mapping[str, Any], ids: _Ids, units: dict[str, str],
         cap = ", ".join(f"{k} {_s(at[k])}" for k in ("method", "steps", "learning_rate", "step",
                                                       "first_step", "tol", "max_iterations",
                                                       "iterations", "evaluations") if k in at)  # fmt: skip
+        if any(k in at for k in ("step", "first_step", "tol")):
+            cap += " (steps: shares of each variable's box width)"
         if "d0" in r:
             cap += (f"; each run's recommended design, {SEARCH_LABEL}, by its distance to the "
                     "ideal point (objectives scaled to [0, 1] by the runs' non-dominated final "
