@@ -45,12 +45,29 @@ def _violation(vals: dict[str, np.ndarray], n: int) -> np.ndarray:
     return np.asarray(vals.get("violation", np.zeros(n)), np.float64)
 
 
+def _batch(X0: np.ndarray, problem: Problem) -> int:
+    """The scoring batch of a polish: every start's 2D polls."""
+    return int(np.atleast_2d(X0).shape[0] * 2 * problem.dim)
+
+
+def _scored(problem: Problem, X: np.ndarray, B: int) -> dict[str, np.ndarray]:
+    """``score`` of designs X (n ≤ B, D) padded to B rows with copies of the last one, so
+    that every call of a polish (the starts, the polls of however many starts are still
+    moving) runs one compiled shape; a task's scoring solves a copy once (its IK's
+    representatives). The values of the n designs."""
+    n = len(X)
+    Xp = np.concatenate([X, np.repeat(X[-1:], B - n, 0)]) if n < B else X
+    return {k: np.asarray(v)[:n] for k, v in score(problem, Xp, batch=B).items()}
+
+
 def runs(problem: Problem, X0: np.ndarray, r: Any) -> RefineResult:
     """Designs X0 (n, D) of a weighted or constrained run polished on ``problem``'s
     samples by f, feasible first (``refine`` settings ``r``)."""
 
+    B = _batch(X0, problem)
+
     def evaluate(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        v = score(problem, X)
+        v = _scored(problem, X, B)
         return _violation(v, len(X)), np.asarray(v["f"], np.float64)
 
     c = compass(evaluate, X0, problem.lower, problem.upper, r.step, r.tol, r.steps)
@@ -68,13 +85,15 @@ def front(problem: Problem, X0: np.ndarray, scale: np.ndarray, names: Sequence[s
     span = np.where(hi > lo, hi - lo, 1.0)
     na = problem.na_range
 
+    B = _batch(X0, problem)
+
     def evaluate(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        v = score(problem, X)
+        v = _scored(problem, X, B)
         F = minimised(v, names, sg, na)
         return _violation(v, len(X)), np.sqrt(np.sum(((F - lo) / span) ** 2, -1))
 
     c = compass(evaluate, X0, problem.lower, problem.upper, r.step, r.tol, r.steps)
-    F = minimised(score(problem, c.x), names, sg, na)
+    F = minimised(_scored(problem, c.x, B), names, sg, na)
     group = {"x0": c.x0, "x": c.x, "d0": c.f0, "d": c.f, "violation0": c.v0, "violation": c.v,
              "history": c.history, "step": c.step, "ideal": lo * sg, "nadir": hi * sg,
              "attrs": {"method": "compass", "designs": "each run's recommended design",
