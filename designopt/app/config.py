@@ -53,26 +53,70 @@ class Constraints(_Strict):
     """How optimizers treat a study's constraints g ≤ 0: Deb's feasibility rules
     (default; docs/optimizers.md) or a quadratic penalty f + weight·Σ max(g, 0)²."""
 
-    method: Literal["deb", "penalty"] = "deb"
-    weight: float = Field(1000.0, gt=0, allow_inf_nan=False)
+    method: Literal["deb", "penalty"] = Field(
+        "deb",
+        description="How every optimizer treats the study's constraints g ≤ 0: `deb` (Deb's "
+        "feasibility rules: feasible beats infeasible, then the smaller total "
+        "violation Σ max(g, 0)) or `penalty` (f + weight·Σ max(g, 0)²).",
+    )
+    weight: float = Field(
+        1000.0,
+        gt=0,
+        allow_inf_nan=False,
+        description="The penalty weight μ of `method: penalty` (an array parameter: changing it "
+        "recompiles nothing).",
+    )
 
 
 class Optimizer(_Strict):
-    name: str = "ptpso"
-    n_particles: int = Field(50, ge=2)
-    n_iters: int = Field(40, ge=1)
-    n_runs: int = Field(1, ge=1)
-    bounds: Literal["clip", "reflect", "reinit"] = "clip"
-    settings: dict[str, float | str] = {}
-    constraints: Constraints = Constraints()
+    name: str = Field(
+        "ptpso",
+        description="The optimizer: an entry of the optimizer registry (e.g. `ptpso`, `cmaes`, "
+        "`nsga2` for a Pareto front; docs/optimizers.md lists them).",
+    )
+    n_particles: int = Field(
+        50,
+        ge=2,
+        description="Swarm or population size: designs scored per iteration (samples are shared by "
+        "the swarm).",
+    )
+    n_iters: int = Field(40, ge=1, description="Iterations (generations) of every run.")
+    n_runs: int = Field(
+        1,
+        ge=1,
+        description="Independent runs, vmapped together; with 2 or more, each run's best design is "
+        "re-scored and the summary says whether the runs agree.",
+    )
+    bounds: Literal["clip", "reflect", "reinit"] = Field(
+        "clip",
+        description="What happens to a design that leaves the box: `clip` to the bound, `reflect` "
+        "off it, or `reinit` (drawn again uniformly in the box).",
+    )
+    settings: dict[str, float | str] = Field(
+        {},
+        description="The optimizer's own settings {name: value} (docs/optimizers.md lists each "
+        "optimizer's); an unknown setting is an error.",
+    )
+    constraints: Constraints = Field(
+        Constraints(),
+        description="How the study's constraints are handled (Deb's rules or a penalty).",
+    )
     # the objective as a program of its own between ask and tell, or inside the runner's
     # scan; auto: app.optimise.separate_objective's rule (docs/configs.md)
-    objective_program: Literal["auto", "separate", "fused"] = "auto"
-    fidelity: dict[str, float | int | str | bool] = {}
-    """Study settings the search scores with instead of the study's own (dotted keys as
-    ``--set`` takes them, each under ``study.``: e.g. ``{study.task.ik.n_best: 2}``, a
-    cheaper IK). Only the search uses them: every quoted score (the final design's or a
-    front's re-scoring, each run's best, ``eval``, ``scan``) is the study's own."""
+    objective_program: Literal["auto", "separate", "fused"] = Field(
+        "auto",
+        description="`separate`: the objective is a program of its own between each iteration's "
+        "ask and tell; `fused`: compiled inside the runner's chunked scan; `auto`: "
+        "separate up to 5000 iterations, fused beyond. The same search either way, "
+        "equal up to rounding.",
+    )
+    fidelity: dict[str, float | int | str | bool] = Field(
+        {},
+        description="Study settings the search scores with instead of the study's own, as `--set` "
+        "keys under `study.` (or nested), e.g. `{study.task.ik.n_best: 2}` for a "
+        "cheaper IK. Only the search uses them: every quoted score (final design, "
+        "front, `eval`, `scan`) is the study's own.",
+    )
 
     @field_validator("fidelity", mode="before")
     @classmethod
@@ -110,19 +154,59 @@ class Refine(_Strict):
     ``compass`` search (``designopt.optim.compass``; a front's runs: their recommended
     designs)."""
 
-    method: Literal["adam", "sgd", "compass"] = "adam"
-    steps: int = Field(100, ge=1)  # gradient steps; compass: at most this many iterations
-    learning_rate: float = Field(0.01, gt=0)  # step size in units of the box width
-    n_best: int = Field(1, ge=1)  # polish the best design of the n_best best runs
-    step: float = Field(0.08, gt=0, le=0.5)  # compass: the first poll's step, box widths
-    tol: float = Field(0.002, gt=0, le=0.5)  # compass: stops when its step falls below
+    method: Literal["adam", "sgd", "compass"] = Field(
+        "adam",
+        description="The polish after the search, on the search's own samples (no `refine` "
+        "section: no polish): optax gradient descent `adam` or `sgd`, or `compass`, a "
+        "derivative-free compass search (the only polish of a Pareto front).",
+    )
+    steps: int = Field(
+        100,
+        ge=1,
+        description="Gradient polish steps (one scan, all polished designs vmapped); `compass`: at "
+        "most this many iterations.",
+    )
+    learning_rate: float = Field(
+        0.01,
+        gt=0,
+        description="Gradient step size in units of the box width (designs are mapped to [0, 1]^D "
+        "and projected back after each step).",
+    )
+    n_best: int = Field(
+        1,
+        ge=1,
+        description="Polish the best designs of the n_best best runs (a front: every run's "
+        "recommended design).",
+    )
+    step: float = Field(
+        0.08,
+        gt=0,
+        le=0.5,
+        description="`compass`: the first polls' step along each variable, as a share of its box "
+        "width.",
+    )
+    tol: float = Field(
+        0.002,
+        gt=0,
+        le=0.5,
+        description="`compass`: a design stops when its step falls below this share of the box "
+        "width.",
+    )
 
 
 class Sweep(_Strict):
     """Variations of numeric keys: ``grid`` (Cartesian product) or ``list`` (zipped)."""
 
-    mode: Literal["grid", "list"] = "grid"
-    vary: dict[str, list[float]]
+    mode: Literal["grid", "list"] = Field(
+        "grid",
+        description="`grid`: the Cartesian product of the values; `list`: equal-length lists "
+        "zipped (`designopt sweep` only).",
+    )
+    vary: dict[str, list[float]] = Field(
+        description="{dotted key: [values]}: the numeric keys each member changes, with short "
+        "forms such as `optimizer.<setting>` and the study's own (docs/configs.md, "
+        "Sweeps).",
+    )
 
     @field_validator("vary")
     @classmethod
@@ -138,9 +222,13 @@ class Sweep(_Strict):
 class Range(_Strict):
     """An evenly spaced list of values: ``{from: a, to: b, num: n}`` (both ends included)."""
 
-    start: float = Field(alias="from")
-    stop: float = Field(alias="to")
-    num: int = Field(ge=1, le=1_000_000)
+    start: float = Field(alias="from", description="The first value of the range (included).")
+    stop: float = Field(alias="to", description="The last value of the range (included).")
+    num: int = Field(
+        ge=1,
+        le=1_000_000,
+        description="How many evenly spaced values, both ends included.",
+    )
 
     def values(self) -> list[float]:
         import numpy as np
@@ -153,10 +241,26 @@ class Scan(_Strict):
     product) or ``list`` (zipped) over design variables; the other variables take
     ``design`` or, if absent there, the middle of their box."""
 
-    mode: Literal["grid", "list"] = "grid"
-    vary: dict[str, list[float] | Range]
-    design: dict[str, float] = {}
-    batch: int = Field(256, ge=1)  # designs per vmapped call
+    mode: Literal["grid", "list"] = Field(
+        "grid",
+        description="`grid`: the Cartesian product of the varied values; `list`: equal-length "
+        "lists zipped.",
+    )
+    vary: dict[str, list[float] | Range] = Field(
+        description="`designopt scan`: {design variable: [values] or {from, to, num}}, the values "
+        "each varied variable takes.",
+    )
+    design: dict[str, float] = Field(
+        {},
+        description="Values of the design variables the scan does not vary (default: the middle of "
+        "their box).",
+    )
+    batch: int = Field(
+        256,
+        ge=1,
+        description="Designs per vmapped call (the last batch is padded, so one program is "
+        "compiled).",
+    )
 
     @field_validator("vary")
     @classmethod
@@ -179,15 +283,23 @@ MIN_FINAL_SAMPLES = 30
 class Front(_Strict):
     """How a Pareto front (``study.objective.pareto``) is finished and measured."""
 
-    n_samples: int | None = Field(None, gt=1)
-    """Monte-Carlo samples per design when the final front is re-scored on fresh samples
-    (default: 4 × the study's own)."""
-    reference: list[float] | None = None
-    """The hypervolume's reference point in the indices' own values, one per objective
-    (default: the nadir of the first generation)."""
-    max_points: int = Field(200, ge=2)
-    """At most this many front designs are re-scored and archived (the most crowded are
-    thinned)."""
+    n_samples: int | None = Field(
+        None,
+        gt=1,
+        description="Monte-Carlo samples per design when the final front is re-scored on a fresh "
+        "stream (default: 4 × the study's own).",
+    )
+    reference: list[float] | None = Field(
+        None,
+        description="The hypervolume's reference point, one value per objective in the indices' "
+        "own values (default: the nadir of the first generation).",
+    )
+    max_points: int = Field(
+        200,
+        ge=2,
+        description="At most this many front designs are re-scored and archived (the most crowded "
+        "are thinned first).",
+    )
 
 
 class Final(_Strict):
@@ -197,30 +309,89 @@ class Final(_Strict):
     independent sample stream (``final``, folded from the root key), never seen by the
     search."""
 
-    n_samples: int | None = Field(None, ge=MIN_FINAL_SAMPLES)
-    """Monte-Carlo samples per design of the re-scoring (default: 4 × the study's own, at
-    least 30)."""
+    n_samples: int | None = Field(
+        None,
+        ge=MIN_FINAL_SAMPLES,
+        description="Monte-Carlo samples per design when the final design (and each run's best) is "
+        "re-scored on a fresh stream the search never saw (default: 4 × the study's "
+        "own, at least 30; fewer is refused).",
+    )
 
 
 class RunConfigBase(_Strict):
     """Everything but the ``study`` section, whose model comes from the study registry."""
 
-    optimizer: Optimizer = Optimizer()
-    refine: Refine | None = None
-    sweep: Sweep | None = None
-    scan: Scan | None = None
-    front: Front = Front()
-    final: Final = Final()
-    precision: Literal["float32", "float64"] = "float64"
-    seed: int = Field(0, ge=0, le=validation.SEED_MAX)
-    output: str | None = None  # default results/<study>/<study>.h5
-    compile_cache: bool = True  # keep compiled programs between runs (CLI; --no-cache)
-    overwrite: bool = False  # replace an existing archive at the output (CLI; --overwrite)
+    optimizer: Optimizer = Field(
+        Optimizer(),
+        description="The search: which optimizer, how large, how long, and its settings.",
+    )
+    refine: Refine | None = Field(
+        None,
+        description="An optional polish of the best designs after the search (absent: none).",
+    )
+    sweep: Sweep | None = Field(
+        None,
+        description="Variations of numeric keys, one run per member (`designopt sweep`).",
+    )
+    scan: Scan | None = Field(
+        None,
+        description="Designs to score without optimising (`designopt scan`).",
+    )
+    front: Front = Field(
+        Front(),
+        description="How a Pareto front (`study.objective.pareto`) is re-scored and measured.",
+    )
+    final: Final = Field(
+        Final(),
+        description="How a run's final design is re-scored on fresh samples for the quoted values.",
+    )
+    precision: Literal["float32", "float64"] = Field(
+        "float64",
+        description="Floating-point precision of the computation: `float32` or `float64` (some "
+        "studies, e.g. a task, need float64).",
+    )
+    seed: int = Field(
+        0,
+        ge=0,
+        le=validation.SEED_MAX,
+        description="Root PRNG seed, split once into the named streams (optimizer, samples, "
+        "normalisation, figures); `--seed` overrides.",
+    )
+    output: str | None = Field(
+        None,
+        description="Archive path (default: results/<study>/<study>.h5); `--out` overrides; a "
+        "missing folder is created.",
+    )
+    compile_cache: bool = Field(
+        True,
+        description="Keep compiled programs (and mesh grids, parsed URDFs, passed checks) in the "
+        "cache folder between runs of the CLI; `--no-cache` overrides. Results are "
+        "identical either way.",
+    )
+    overwrite: bool = Field(
+        False,
+        description="Replace an existing archive at the output (`--overwrite`); without it an "
+        "existing archive is refused.",
+    )
     max_minutes: float | None = Field(
-        None, gt=0, allow_inf_nan=False
-    )  # stop cleanly (--max-minutes)
-    checkpoint_every_s: float = Field(10.0, ge=0, allow_inf_nan=False)  # checkpoint cadence
-    parallel: ParallelSettings | None = None  # devices and the axis to shard (--devices)
+        None,
+        gt=0,
+        allow_inf_nan=False,
+        description="Stop cleanly after this many minutes with a resumable checkpoint, exit 143 "
+        "(`--max-minutes`; default: no limit).",
+    )
+    checkpoint_every_s: float = Field(
+        10.0,
+        ge=0,
+        allow_inf_nan=False,
+        description="Seconds between checkpoints of a running optimisation (one is also written at "
+        "every stop).",
+    )
+    parallel: ParallelSettings | None = Field(
+        None,
+        description="Devices and the axis to shard (`--devices`; docs/scaling.md); absent: every "
+        "device JAX sees, axis auto.",
+    )
 
     CONTROL_KEYS: ClassVar[tuple[str, ...]] = (
         "output",
@@ -247,7 +418,12 @@ class RunConfigBase(_Strict):
 @functools.cache
 def _run_config(models: tuple[type[BaseModel], ...]) -> type[RunConfigBase]:
     union = models[0] if len(models) == 1 else Annotated[Union[models], Field(discriminator="name")]  # noqa: UP007
-    return create_model("RunConfig", __base__=RunConfigBase, study=(union, ...))
+    study = Field(
+        ...,
+        description="The study and its settings: `study.name` picks the study (`designopt "
+        "studies` lists them) and with it the keys this section takes.",
+    )
+    return create_model("RunConfig", __base__=RunConfigBase, study=(union, study))
 
 
 def run_config_model() -> type[RunConfigBase]:
@@ -388,7 +564,9 @@ def check_study(cfg: Any, where: str) -> None:
         check(cfg.study)
     except ValueError as e:
         key, sep, why = str(e).partition(": ")
-        raise ConfigError(f"{where}: key 'study.{key}': {why}" if sep else f"{where}: {e}") from None
+        raise ConfigError(
+            f"{where}: key 'study.{key}': {why}" if sep else f"{where}: {e}"
+        ) from None
     if marker is not None:  # (a folder that cannot be written: checked again next time)
         from designopt.core import exported
 

@@ -44,9 +44,16 @@ class Entry(_Strict):
     """One column of the comparison: a registry name, an optional label (to run the same
     optimizer twice with different settings) and its settings."""
 
-    name: str
-    label: str | None = None
-    settings: dict[str, float | str] = {}
+    name: str = Field(description="The optimizer registry entry to run.")
+    label: str | None = Field(
+        None,
+        description="The column's label (default: the name); lets one entry run twice with "
+        "different settings.",
+    )
+    settings: dict[str, float | str] = Field(
+        {},
+        description="The entry's own optimizer settings {name: value}.",
+    )
 
 
 MO_FUNCTIONS = ("zdt1", "zdt2", "zdt3", "dtlz2", "bnh", "srn")
@@ -56,36 +63,78 @@ MO_FUNCTIONS = ("zdt1", "zdt2", "zdt3", "dtlz2", "bnh", "srn")
 class Function(_Strict):
     """A multi-objective function with its sizes: ``{name: dtlz2, dim: 12, n_objectives: 3}``."""
 
-    name: Literal[MO_FUNCTIONS]  # type: ignore[valid-type]
-    dim: int | None = Field(None, ge=2)
-    n_objectives: int | None = Field(None, ge=2)
+    name: Literal[MO_FUNCTIONS] = Field(  # type: ignore[valid-type]
+        description="A multi-objective test problem: `zdt1`, `zdt2`, `zdt3`, `dtlz2`, `bnh` or "
+        "`srn`.",
+    )
+    dim: int | None = Field(None, ge=2, description="Its dimension D (default: the problem's own).")
+    n_objectives: int | None = Field(
+        None,
+        ge=2,
+        description="Its number of objectives (scalable problems such as dtlz2; default: the "
+        "problem's own).",
+    )
 
 
 class Bench(_Strict):
-    functions: list[Literal[BENCH_FUNCTIONS + MO_FUNCTIONS] | Function] = [  # type: ignore[valid-type]
-        "griewank", "rastrigin", "ackley", "sphere"]  # fmt: skip
-    hypervolume_reference: list[float] | None = None
-    """Multi-objective cases: the hypervolume's reference point (default 1.1 per objective)."""
-    dim: int = Field(30, ge=1)
-    shifted: bool = True  # also run every function with a seeded shift of its optimum
-    shift_seed: int = Field(1, ge=0, le=SEED_MAX)
-    variants: list[str | Entry] = ["p1", "p2", "p3", "p4", "p5", "p6", "p7", "cmaes"]
-    reference: str = "p3"  # Mann-Whitney of every other entry against this label
-    n_particles: int = Field(50, ge=2)  # population size of every entry (CMA-ES: λ)
-    n_iters: int = Field(1000, ge=1)
-    n_runs: int = Field(100, ge=2)
-    bounds: Literal["clip", "reflect", "reinit"] = "clip"
-    success: dict[str, float] = {}
-    settings: dict[
-        str, dict[str, float | str]
-    ] = {}  # per-label overrides, e.g. {p3: {gamma: 1e-5}}
+    functions: list[Literal[BENCH_FUNCTIONS + MO_FUNCTIONS] | Function] = Field(  # type: ignore
+        ["griewank", "rastrigin", "ackley", "sphere"],
+        description="Test functions: single-objective names (griewank, rastrigin, ackley, sphere, "
+        "rosenbrock, schwefel226) or multi-objective ones (a name or `{name, dim, "
+        "n_objectives}`), the latter run by multi-objective entries only.",
+    )
+    hypervolume_reference: list[float] | None = Field(
+        None,
+        description="The multi-objective cases' hypervolume reference point (default: 1.1 per "
+        "objective).",
+    )
+    dim: int = Field(30, ge=1, description="Dimension D of the single-objective functions.")
+    shifted: bool = Field(
+        True,
+        description="Also run every function with its optimum moved by a seeded shift (inside 80 % "
+        "of the box).",
+    )
+    shift_seed: int = Field(1, ge=0, le=SEED_MAX, description="Seed of the shifts.")
+    variants: list[str | Entry] = Field(
+        ["p1", "p2", "p3", "p4", "p5", "p6", "p7", "cmaes"],
+        description="Entries of the optimizer registry to compare: a name, or `{name, label, "
+        "settings}`.",
+    )
+    reference: str = Field(
+        "p3",
+        description="Label of the entry every other one is tested against (Mann-Whitney U, "
+        "Holm-corrected per function).",
+    )
+    n_particles: int = Field(50, ge=2, description="Population size of every entry (CMA-ES: λ).")
+    n_iters: int = Field(1000, ge=1, description="Iterations of every run.")
+    n_runs: int = Field(100, ge=2, description="Independent runs per entry and function.")
+    bounds: Literal["clip", "reflect", "reinit"] = Field(
+        "clip",
+        description="Bound handling: `clip`, `reflect` or `reinit`.",
+    )
+    success: dict[str, float] = Field(
+        {},
+        description="{function: value}: a final value at or below it counts as a success "
+        "(defaults: griewank 0.1, rastrigin 100, ackley 0.1, sphere 0.01, ...).",
+    )
+    settings: dict[str, dict[str, float | str]] = Field(
+        {},
+        description="Per-label settings overrides, e.g. `{p3: {gamma: 1.0e-5}}`; PSO's `draws` is "
+        "set here.",
+    )
 
 
 class BenchConfig(_Strict):
-    bench: Bench = Bench()
-    precision: Literal["float32", "float64"] = "float32"
-    seed: int = Field(0, ge=0, le=SEED_MAX)
-    output: str = "results/bench/pso_benchmark.h5"
+    bench: Bench = Field(Bench(), description="The benchmark suite's settings.")
+    precision: Literal["float32", "float64"] = Field(
+        "float32",
+        description="`float32` or `float64`.",
+    )
+    seed: int = Field(0, ge=0, le=SEED_MAX, description="Root PRNG seed of the benchmark.")
+    output: str = Field(
+        "results/bench/pso_benchmark.h5",
+        description="The benchmark archive's path.",
+    )
 
 
 def entries(cfg: BenchConfig) -> list[tuple[str, str, dict[str, Any]]]:

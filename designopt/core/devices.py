@@ -46,9 +46,24 @@ class ParallelSettings(Section):
     a multi-process job waits for a silent peer before it gives up (exit 1).
     """
 
-    devices: int | None = Field(None, ge=1)
-    axis: Literal["auto", "members", "runs", "particles", "samples"] = "auto"
-    timeout_s: int = Field(DEFAULT_TIMEOUT_S, ge=5, le=86_400)
+    devices: int | None = Field(
+        None,
+        ge=1,
+        description="How many devices the job uses, all processes together (default: every device "
+        "JAX sees); `--devices` overrides.",
+    )
+    axis: Literal["auto", "members", "runs", "particles", "samples"] = Field(
+        "auto",
+        description="What the device mesh splits: `members`, `runs`, `particles` or `samples`; "
+        "`auto`: the first of members, runs, particles whose size divides over the "
+        "devices, else samples.",
+    )
+    timeout_s: int = Field(
+        DEFAULT_TIMEOUT_S,
+        ge=5,
+        le=86_400,
+        description="Seconds a multi-process job waits for a silent peer before it stops (exit 1).",
+    )
 
 
 class PeerLost(RuntimeError):

@@ -110,33 +110,46 @@ class _Obstacle(Section):
     """What every obstacle has: ``inside`` marks anatomy inside the patient, checked
     against the instrument past its port instead of the arm outside (docs/planning.md)."""
 
-    inside: StrictBool = False
+    inside: StrictBool = Field(
+        False,
+        description="true: anatomy inside the patient, checked against the instrument past its "
+        "port (radius `tool_radius`) instead of the arm outside; a body wall refuses "
+        "it.",
+    )
 
 
 class BallObstacle(_Obstacle):
     """A solid ball."""
 
-    shape: Literal["ball"]
-    center: Point
-    radius: Length
+    shape: Literal["ball"] = Field(description="`ball`: a solid ball.")
+    center: Point = Field(
+        description="The ball's centre [x, y, z] in the base frame (length unit).",
+    )
+    radius: Length = Field(description="The ball's radius (length unit).")
 
 
 class CapsuleObstacle(_Obstacle):
     """A solid capsule: the points within ``radius`` of the segment ``a``–``b`` (e.g. a
     bar, another instrument, an assistant's arm); ``a == b`` makes it a ball."""
 
-    shape: Literal["capsule"]
-    a: Point
-    b: Point
-    radius: Length
+    shape: Literal["capsule"] = Field(
+        description="`capsule`: the points within `radius` of the segment a–b.",
+    )
+    a: Point = Field(description="One end [x, y, z] of the capsule's segment (length unit).")
+    b: Point = Field(
+        description="The other end [x, y, z] of the segment (length unit); equal to `a`: a ball.",
+    )
+    radius: Length = Field(description="The capsule's radius (length unit).")
 
 
 class BoxObstacle(_Obstacle):
     """A solid axis-aligned box of edge lengths ``size`` (each > 0) about ``center``."""
 
-    shape: Literal["box"]
-    center: Point
-    size: tuple[Length, Length, Length]
+    shape: Literal["box"] = Field(description="`box`: a solid axis-aligned box.")
+    center: Point = Field(description="The box's centre [x, y, z] (length unit).")
+    size: tuple[Length, Length, Length] = Field(
+        description="Edge lengths [sx, sy, sz] (length unit), each > 0.",
+    )
 
 
 class HalfSpace(_Obstacle):
@@ -144,9 +157,12 @@ class HalfSpace(_Obstacle):
     normal points out of the solid (e.g. up from a table, or out of the patient at the
     skin). ``normal`` need not be a unit vector but must not be zero."""
 
-    shape: Literal["halfspace"]
-    point: Point
-    normal: Point
+    shape: Literal["halfspace"] = Field(description="`halfspace`: the solid side of a plane.")
+    point: Point = Field(description="A point [x, y, z] on the plane (length unit).")
+    normal: Point = Field(
+        description="The plane's normal, pointing out of the solid (non-zero; need not be a unit "
+        "vector).",
+    )
 
     @field_validator("normal")
     @classmethod
@@ -171,13 +187,34 @@ class MeshObstacle(_Obstacle):
     side (default 4 cells), computed once (:mod:`designopt.kinematics.sdf`). A mesh that
     cannot be read or is not watertight is refused."""
 
-    shape: Literal["mesh"]
-    file: str
-    xyz: Point = (0.0, 0.0, 0.0)
-    rpy: Point = (0.0, 0.0, 0.0)
-    scale: Length = 1.0
-    resolution: int = sdf.DEFAULT_RESOLUTION
-    padding: Length | None = None
+    shape: Literal["mesh"] = Field(description="`mesh`: a solid bounded by a closed triangle mesh.")
+    file: str = Field(
+        description="The mesh file (STL, OBJ, PLY, ... whatever trimesh reads), read from the "
+        "config file's folder when relative; it must be watertight.",
+    )
+    xyz: Point = Field(
+        (0.0, 0.0, 0.0),
+        description="Translation [x, y, z] of the mesh after its scale and turn (length unit).",
+    )
+    rpy: Point = Field(
+        (0.0, 0.0, 0.0),
+        description="Roll, pitch, yaw (deg) turning the mesh: R = Rz(yaw)·Ry(pitch)·Rx(roll).",
+    )
+    scale: Length = Field(
+        1.0,
+        description="Scale applied to the file's coordinates about its origin, e.g. 0.001 for a "
+        "mesh in mm under a chain in m.",
+    )
+    resolution: int = Field(
+        sdf.DEFAULT_RESOLUTION,
+        description="Grid points per axis (32 to 128) of the signed-distance grid sampled once "
+        "over the mesh's bounding box.",
+    )
+    padding: Length | None = Field(
+        None,
+        description="How far the distance grid extends past the mesh's bounding box on every side "
+        "(length unit; default 4 cells).",
+    )
 
     @field_validator("file")
     @classmethod
@@ -254,14 +291,34 @@ class Collision(Section):
 
     model_config = ConfigDict(populate_by_name=True)  # `self` in YAML, `self_` in Python
 
-    links: Literal["auto", "urdf"] = "auto"
-    radius: float | list[float] | None = None
-    self_: StrictBool = Field(True, alias="self")
-    obstacles: list[Obstacle] = []
-    margin: Annotated[float, AfterValidator(_finite)] = 0.0
-    tool_radius: Length | None = None
-    """The instrument's radius past the port, against ``inside`` obstacles (None: the
-    last capsule's radius)."""
+    links: Literal["auto", "urdf"] = Field(
+        "auto",
+        description="`auto`: link i is the capsule from joint i's origin to joint i + 1's (the "
+        "tool tip for the last); `urdf`: the links from the URDF chain.",
+    )
+    radius: float | list[float] | None = Field(
+        None,
+        description="Capsule radius of every link (length unit), or a list with one per link.",
+    )
+    self_: StrictBool = Field(
+        True,
+        alias="self",
+        description="Also check the arm's non-adjacent link pairs against each other.",
+    )
+    obstacles: list[Obstacle] = Field(
+        [],
+        description="World geometry in the base frame the links must not touch: each `{shape: ball "
+        "| capsule | box | halfspace | mesh, ...}`.",
+    )
+    margin: Annotated[float, AfterValidator(_finite)] = Field(
+        0.0,
+        description="A clearance below this (length unit, ≥ 0) counts as a collision.",
+    )
+    tool_radius: Length | None = Field(
+        None,
+        description="The instrument's radius past the port (length unit), checked against the "
+        "obstacles marked `inside` (default: the last capsule's radius).",
+    )
 
     @field_validator("radius", mode="before")
     @classmethod

@@ -38,9 +38,12 @@ def _unit(v: Vec3, what: str) -> Vec3:
 class Box(Section):
     """An axis-aligned box; a zero size makes it planar (or a segment, or a point)."""
 
-    shape: Literal["box"]
-    center: Vec3
-    size: Vec3
+    shape: Literal["box"] = Field(description="`box`: an axis-aligned box.")
+    center: Vec3 = Field(description="The box's centre [x, y, z] (length unit).")
+    size: Vec3 = Field(
+        description="Edge lengths [sx, sy, sz] (length unit), each ≥ 0; a zero size makes it "
+        "planar.",
+    )
 
     @field_validator("size")
     @classmethod
@@ -54,19 +57,26 @@ class Box(Section):
 
 
 class Ball(Section):
-    shape: Literal["ball"]
-    center: Vec3
-    radius: float = Field(gt=0)
+    shape: Literal["ball"] = Field(description="`ball`: a solid ball.")
+    center: Vec3 = Field(description="The ball's centre [x, y, z] (length unit).")
+    radius: float = Field(gt=0, description="The ball's radius (length unit).")
 
 
 class Cylinder(Section):
     """A solid cylinder about ``axis`` through ``center``; height 0 makes it a disk."""
 
-    shape: Literal["cylinder"]
-    center: Vec3
-    axis: Vec3 = (0.0, 0.0, 1.0)
-    radius: float = Field(gt=0)
-    height: float = Field(0.0, ge=0)
+    shape: Literal["cylinder"] = Field(description="`cylinder`: a solid cylinder (or a disk).")
+    center: Vec3 = Field(description="The centre [x, y, z] of the cylinder (length unit).")
+    axis: Vec3 = Field(
+        (0.0, 0.0, 1.0),
+        description="The cylinder's axis direction (a non-zero vector; normalised).",
+    )
+    radius: float = Field(gt=0, description="The cylinder's radius (length unit).")
+    height: float = Field(
+        0.0,
+        ge=0,
+        description="The cylinder's height along its axis (length unit); 0 makes it a disk.",
+    )
 
     @field_validator("axis")
     @classmethod
@@ -80,11 +90,19 @@ class Cone(Section):
     port), cut by the planes at axial depths ``depth`` = [d0, d1] (0 ≤ d0 < d1): a
     frustum, or the whole cone to d1."""
 
-    shape: Literal["cone"]
-    apex: Vec3
-    axis: Vec3
-    half_angle: float
-    depth: tuple[float, float]
+    shape: Literal["cone"] = Field(description="`cone`: a solid cone (or frustum) from its apex.")
+    apex: Vec3 = Field(
+        description="The cone's apex [x, y, z] (length unit), e.g. the remote centre of motion at "
+        "the port.",
+    )
+    axis: Vec3 = Field(
+        description="The cone's axis direction from the apex (a non-zero vector; normalised).",
+    )
+    half_angle: float = Field(description="Half-angle of the cone (deg), in (0, 90).")
+    depth: tuple[float, float] = Field(
+        description="[d0, d1]: the axial depths (length unit) that cut the cone, 0 ≤ d0 < d1 (d0 = "
+        "0: the whole cone to d1).",
+    )
 
     @field_validator("axis")
     @classmethod
@@ -112,7 +130,11 @@ class Points(Section):
     ignored), e.g. a recorded instrument trajectory; a relative path is read from the
     config file's folder. The points are the task's sample (``n_samples`` is ignored)."""
 
-    points: str
+    points: str = Field(
+        description="A CSV file with a header row `x,y,z` (other columns ignored), read from the "
+        "config file's folder when relative: the targets themselves (`n_samples` is "
+        "ignored).",
+    )
     _xyz: np.ndarray | None = None
 
     @model_validator(mode="after")
@@ -186,8 +208,16 @@ class ToolAxis(Section):
     """The tool z axis drawn uniformly in the cone of half-angle ``cone`` (degrees, in
     [0, 180]) about ``direction``; 0 fixes it."""
 
-    direction: Vec3
-    cone: float = Field(0.0, ge=0, le=180)
+    direction: Vec3 = Field(
+        description="The cone's axis: the mean tool z direction (a non-zero vector; normalised).",
+    )
+    cone: float = Field(
+        0.0,
+        ge=0,
+        le=180,
+        description="Half-angle (deg) of the cone the tool z axis is drawn in uniformly; 0 fixes "
+        "it to `direction`. The roll about it is free.",
+    )
 
     @field_validator("direction")
     @classmethod
@@ -201,10 +231,24 @@ class Task(Section):
     target's tool axis is then the unit vector from the port to the target, and
     ``insertion`` = [d0, d1] bounds the tool's depth past the port, |target − port|)."""
 
-    region: Region
-    tool_axis: ToolAxis | None = None
-    port: Vec3 | None = None
-    insertion: tuple[float, float] | None = None
+    region: Region = Field(
+        description="Where the targets lie: `{shape: box | ball | cylinder | cone, ...}` or "
+        "`{points: FILE}`.",
+    )
+    tool_axis: ToolAxis | None = Field(
+        None,
+        description="An optional cone of tool directions at every target (excludes `port`).",
+    )
+    port: Vec3 | None = Field(
+        None,
+        description="[x, y, z]: the fixed point the instrument passes through; each target's tool "
+        "axis is the unit vector from the port to the target (excludes `tool_axis`).",
+    )
+    insertion: tuple[float, float] | None = Field(
+        None,
+        description="[d0, d1]: the tool's allowed depth |target − port| past the port (length "
+        "unit), 0 ≤ d0 < d1.",
+    )
 
     @field_validator("port")
     @classmethod

@@ -69,9 +69,13 @@ class EllipsoidWall(Section):
     along the world's x, y, z (an insufflated abdomen). Coordinates and radii are checked
     as an obstacle's are (finite, at most ``collision.MAX_LENGTH``; radii > 0)."""
 
-    shape: Literal["ellipsoid"]
-    center: Point
-    radii: tuple[Length, Length, Length]
+    shape: Literal["ellipsoid"] = Field(
+        description="`ellipsoid`: the patient is inside an ellipsoid (an insufflated abdomen).",
+    )
+    center: Point = Field(description="The ellipsoid's centre [x, y, z] (length unit).")
+    radii: tuple[Length, Length, Length] = Field(
+        description="Semi-axes along the world's x, y, z (length unit), each > 0.",
+    )
 
 
 class MeshWall(MeshObstacle):

@@ -16,7 +16,7 @@ from typing import Any
 
 import jax
 import numpy as np
-from pydantic import field_validator, model_validator
+from pydantic import Field, field_validator, model_validator
 
 from designopt.core.keys import STREAMS, archived_keys, key_data, streams  # noqa: F401 (re-exported)
 from designopt.core.settings import Section  # noqa: F401 (re-exported: studies' settings use it)
@@ -31,13 +31,21 @@ class StudySettings(Section):
     ``variables`` {name: (lo, hi)} and whatever else the study needs.
     """
 
-    name: str
-    variables: dict[str, tuple[float, float]]
-    pareto: dict[str, Any] | None = None
-    """``objective: {pareto: {index: min | max, ...}}`` (given under ``objective``, kept
-    here for every study): optimise the front of these indices instead of the weighted
-    f; an entry ``name: {min: {variable: weight, ...}}`` is a linear objective of the
-    design variables, e.g. a total length (docs/pareto.md)."""
+    name: str = Field(
+        description="The study (`designopt studies` lists them): picks the settings model of this "
+        "section.",
+    )
+    variables: dict[str, tuple[float, float]] = Field(
+        description="The design variables and their box {name: [lo, hi]}, lo < hi.",
+    )
+    pareto: dict[str, Any] | None = Field(
+        None,
+        description="Given as `objective: {pareto: {index: min | max, ...}}`: optimise the Pareto "
+        "front of two or more indices instead of the weighted f (needs a "
+        "multi-objective optimizer, nsga2); `name: {min: {variable: weight}}` is a "
+        "linear objective of the variables.",
+        json_schema_extra={"config_key": "objective.pareto"},  # its spelling in a config
+    )
 
     @model_validator(mode="before")
     @classmethod

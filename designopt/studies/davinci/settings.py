@@ -30,15 +30,33 @@ class Workspace(Section):
     task poses put the jaw point J at depth along a cone direction, the jaw's pointing
     direction within ``tool_cone_deg`` of it and the jaw axis at a uniform angle about it."""
 
-    cone_deg: float = Field(30.0, gt=0, le=80)
-    axis_q_deg: tuple[float, float] = (0.0, -67.5)
-    depth_mm: tuple[float, float] = (50.0, 250.0)
-    wrist_deg: tuple[tuple[float, float], tuple[float, float], tuple[float, float]] = (
-        (-180.0, 180.0),
-        (-80.0, 80.0),
-        (-80.0, 80.0),
+    cone_deg: float = Field(
+        30.0,
+        gt=0,
+        le=80,
+        description="Half-angle (deg) of the cone the shaft directions fill.",
     )
-    tool_cone_deg: float = Field(45.0, ge=0, le=90)
+    axis_q_deg: tuple[float, float] = Field(
+        (0.0, -67.5),
+        description="(q1, q2) in deg at which the Table 1 arm's shaft gives the cone's axis (a "
+        "fixed world direction).",
+    )
+    depth_mm: tuple[float, float] = Field(
+        (50.0, 250.0),
+        description="[lo, hi]: the insertion depth (mm) from the RCM point H, within [0, 315].",
+    )
+    wrist_deg: tuple[tuple[float, float], tuple[float, float], tuple[float, float]] = Field(
+        ((-180.0, 180.0), (-80.0, 80.0), (-80.0, 80.0)),
+        description="The ranges (deg) of the wrist joints q4, q5, q6 the samples are uniform over, "
+        "within their joint ranges.",
+    )
+    tool_cone_deg: float = Field(
+        45.0,
+        ge=0,
+        le=90,
+        description="Half-angle (deg) within which the IK task poses' jaw direction lies about the "
+        "shaft direction.",
+    )
 
     @field_validator("depth_mm")
     @classmethod
@@ -64,12 +82,36 @@ class Workspace(Section):
 class Indices(Section):
     """How dexterity and the IK success rate are estimated."""
 
-    n_samples: int = Field(4096, gt=1)  # joint samples for the GCI (shared by the swarm)
-    n_ik: int = Field(512, gt=1)  # task poses for the IK success rate
-    length_mm: float = Field(100.0, gt=0)  # characteristic length of the 6×6 Jacobian
-    sampler: Literal["uniform", "halton", "rqmc"] = "uniform"
-    replicates: int | None = Field(None, ge=1, le=1024)  # rqmc: 16 unless given (docs/indices.md)
-    solver: Literal["lm", "closed_form"] = "lm"  # which IK the success rate measures
+    n_samples: int = Field(
+        4096,
+        gt=1,
+        description="Joint samples per design for the GCI (shared by the swarm).",
+    )
+    n_ik: int = Field(512, gt=1, description="Task poses per design for the IK success rate.")
+    length_mm: float = Field(
+        100.0,
+        gt=0,
+        description="Characteristic length (mm) of the 6×6 Jacobian: the angular rows are scaled "
+        "by it.",
+    )
+    sampler: Literal["uniform", "halton", "rqmc"] = Field(
+        "uniform",
+        description="How the samples are drawn: `uniform` (i.i.d.), `halton` (one randomly shifted "
+        "Halton set) or `rqmc` (R independently shifted Halton sets; standard errors "
+        "from the replicates' spread).",
+    )
+    replicates: int | None = Field(
+        None,
+        ge=1,
+        le=1024,
+        description="R, the independent randomisations of the sampler: at least 2 with `rqmc` (16 "
+        "unless given), 1 with `halton`; `uniform` accepts R ≥ 2 (i.i.d. groups).",
+    )
+    solver: Literal["lm", "closed_form"] = Field(
+        "lm",
+        description="Which IK the success rate measures: `lm` (the batched Levenberg-Marquardt "
+        "solver) or `closed_form`.",
+    )
 
     _replicates = field_validator("replicates")(check_replicates)
 
@@ -77,8 +119,12 @@ class Indices(Section):
 class Objective(Section):
     """f = −(w_gci · GCI + w_ik · IK success rate): minimised."""
 
-    gci: float = Field(1.0, ge=0)
-    ik_success: float = Field(1.0, ge=0)
+    gci: float = Field(
+        1.0,
+        ge=0,
+        description="Weight w_gci of the GCI in f = −(w_gci·GCI + w_ik·IK success rate).",
+    )
+    ik_success: float = Field(1.0, ge=0, description="Weight w_ik of the IK success rate in f.")
 
     @model_validator(mode="after")
     def _some(self) -> Objective:
@@ -90,23 +136,88 @@ class Objective(Section):
 class IKSettings(Section):
     """The production IK solver (``designopt ik``; docs/davinci.md)."""
 
-    first_iter: int = Field(4, ge=1, le=100)
-    continue_iter: int = Field(6, ge=1, le=200)
-    max_iter: int = Field(60, ge=1, le=500)
-    warm_iter: int = Field(2, ge=1, le=100)
-    retries: int = Field(1, ge=0, le=4)
-    success_pos_mm: float = Field(1e-9, gt=0)
-    success_rot_rad: float = Field(1e-9, gt=0)
-    grid_deg: float = Field(10.0, gt=0, le=45)  # q1, q2 database step
-    grid_q3_mm: float = Field(15.0, gt=0, le=100)
-    grid_wrist_deg: float = Field(15.0, gt=0, le=45)  # q4, q5
-    grid_q6_deg: float = Field(10.0, gt=0, le=45)
-    q_prev: tuple[float, float, float, float, float, float] | None = None
-    """Previous configuration (deg; q3 in mm) for the branch choice of a cold solve."""
-    batch: int = Field(65536, ge=1)  # poses per compiled call
-    orthonormal_tol: float = Field(1e-6, gt=0)
-    arm: dict[str, float] = {}
-    """Arm parameters for ``designopt ik`` (Table 1 unless given here or in ``fixed``)."""
+    first_iter: int = Field(
+        4,
+        ge=1,
+        le=100,
+        description="LM iterations of the first pass over every pose (from its nearest "
+        "database seed).",
+    )
+    continue_iter: int = Field(
+        6,
+        ge=1,
+        le=200,
+        description="LM iterations of the short pass that continues the poses not yet solved.",
+    )
+    max_iter: int = Field(
+        60,
+        ge=1,
+        le=500,
+        description="LM iterations of each later rescue pass (the failed poses only).",
+    )
+    warm_iter: int = Field(
+        2,
+        ge=1,
+        le=100,
+        description="Trajectory mode: LM iterations from the solution predicted from the "
+        "previous poses.",
+    )
+    retries: int = Field(
+        1,
+        ge=0,
+        le=4,
+        description="Extra seeds (the next database entries) for poses that failed.",
+    )
+    success_pos_mm: float = Field(
+        1e-9,
+        gt=0,
+        description="Position error (mm) below which a pose counts as solved.",
+    )
+    success_rot_rad: float = Field(
+        1e-9,
+        gt=0,
+        description="Orientation error (rad) below which a pose counts as solved.",
+    )
+    grid_deg: float = Field(
+        10.0,
+        gt=0,
+        le=45,
+        description="Step (deg) of q1 and q2 in the FK seed database.",
+    )
+    grid_q3_mm: float = Field(
+        15.0,
+        gt=0,
+        le=100,
+        description="Step (mm) of the insertion q3 in the seed database.",
+    )
+    grid_wrist_deg: float = Field(
+        15.0,
+        gt=0,
+        le=45,
+        description="Step (deg) of q4 and q5 in the seed database.",
+    )
+    grid_q6_deg: float = Field(
+        10.0,
+        gt=0,
+        le=45,
+        description="Step (deg) of q6 in the seed database.",
+    )
+    q_prev: tuple[float, float, float, float, float, float] | None = Field(
+        None,
+        description="Previous configuration (deg; q3 in mm) for the branch choice of a cold solve.",
+    )
+    batch: int = Field(65536, ge=1, description="Poses per compiled call.")
+    orthonormal_tol: float = Field(
+        1e-6,
+        gt=0,
+        description="How far a target pose's rotation may be from orthonormal before the pose "
+        "is refused.",
+    )
+    arm: dict[str, float] = Field(
+        {},
+        description="Arm parameters for `designopt ik` {alpha_deg, beta_deg, l_QH, l_IJ} (Table 1 "
+        "unless given here or in `fixed`).",
+    )
 
     @field_validator("arm")
     @classmethod
@@ -117,13 +228,32 @@ class IKSettings(Section):
 class DavinciSettings(StudySettings):
     """The da Vinci patient-side arm (Applied Sciences 2019): wrist design and IK settings."""
 
-    name: Literal["davinci"] = "davinci"
-    variables: dict[str, tuple[float, float]] = {"l_IJ": (2.0, 30.0), "beta_deg": (15.0, 45.0)}
-    fixed: dict[str, float] = {}
-    workspace: Workspace = Workspace()
-    indices: Indices = Indices()
-    objective: Objective = Objective()
-    ik: IKSettings = IKSettings()
+    name: Literal["davinci"] = Field(
+        "davinci",
+        description="`davinci`: the da Vinci patient-side arm (Applied Sciences 2019).",
+    )
+    variables: dict[str, tuple[float, float]] = Field(
+        {"l_IJ": (2.0, 30.0), "beta_deg": (15.0, 45.0)},
+        description="Design variables and their box {name: [lo, hi]}: any of alpha_deg, beta_deg "
+        "(deg), l_QH, l_IJ (mm).",
+    )
+    fixed: dict[str, float] = Field(
+        {},
+        description="Arm parameters that are not varied (deg or mm; default: Table 1's values).",
+    )
+    workspace: Workspace = Field(
+        Workspace(),
+        description="The surgical workspace around the RCM point H.",
+    )
+    indices: Indices = Field(
+        Indices(),
+        description="How dexterity and the IK success rate are estimated.",
+    )
+    objective: Objective = Field(Objective(), description="Weights of the minimised f.")
+    ik: IKSettings = Field(
+        IKSettings(),
+        description="The production IK solver (`designopt ik`; docs/davinci.md).",
+    )
 
     @field_validator("variables")
     @classmethod

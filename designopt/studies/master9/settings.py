@@ -30,17 +30,56 @@ class Indices(Section):
     (default raw Frobenius, eq. 51-53); weights: (w_k, w_l, w_p) of eq. (43).
     """
 
-    n_samples: int = Field(20_000, gt=1)
-    chunk: int = Field(8_192, gt=0)  # (50, 8192) arrays stay in cache: 1.3-1.6× faster than 32768
-    measure: Literal["cartesian", "joint"] = "cartesian"
+    n_samples: int = Field(
+        20_000,
+        gt=1,
+        description="Joint-space samples per design (shared by the swarm).",
+    )
+    chunk: int = Field(
+        8_192,
+        gt=0,
+        description="Samples per step of the memory-bounded scan; (particles × chunk) arrays that "
+        "fit the CPU cache are fastest.",
+    )
+    measure: Literal["cartesian", "joint"] = Field(
+        "cartesian",
+        description="`cartesian` (the paper's ∫_W dW: weights |det J_v|) or `joint` (uniform in "
+        "the joint box).",
+    )
     # rqmc in configs/master9.yaml; uniform here keeps tiny runs (short replicates) bitwise
     # equal under particle sharding (docs/indices.md)
-    sampler: Literal["uniform", "halton", "rqmc"] = "uniform"
-    replicates: int | None = Field(None, ge=1, le=1024)  # rqmc: 16 by default (docs/indices.md)
-    backlash_deg: float | list[float] = 0.1
-    norm: Literal["fro", "2"] = "fro"
-    normalized: bool = False
-    weights: list[float] = [4.0, 2.0, 1.0]
+    sampler: Literal["uniform", "halton", "rqmc"] = Field(
+        "uniform",
+        description="How the samples are drawn: `uniform` (i.i.d.), `halton` (one randomly shifted "
+        "Halton set) or `rqmc` (R independently shifted Halton sets; standard errors "
+        "from the replicates' spread).",
+    )
+    replicates: int | None = Field(
+        None,
+        ge=1,
+        le=1024,
+        description="R, the independent randomisations of the sampler: at least 2 with `rqmc` (16 "
+        "unless given), 1 with `halton`; `uniform` accepts R ≥ 2 (i.i.d. groups).",
+    )
+    backlash_deg: float | list[float] = Field(
+        0.1,
+        description="Backlash (deg) of the position joints (q1, q2, q3): one number or a list of "
+        "3.",
+    )
+    norm: Literal["fro", "2"] = Field(
+        "fro",
+        description="Condition-number convention: `fro` (Frobenius, the paper's) or `2`.",
+    )
+    normalized: bool = Field(
+        False,
+        description="Switch to the normalised condition-number convention (default: the raw "
+        "Frobenius one, 1/k in [0, 1/3]; docs/indices.md).",
+    )
+    weights: list[float] = Field(
+        [4.0, 2.0, 1.0],
+        description="Weights (w_k, w_l, w_p) of f_k, f_l, f_p in eq. (43): one number or a list of "
+        "3.",
+    )
 
     _replicates = field_validator("replicates")(check_replicates)
 
@@ -109,12 +148,19 @@ def _three(v: float | list[float] | tuple[float, ...]) -> tuple[float, float, fl
 class Master9Settings(StudySettings):
     """Study A: the 9-DOF haptic master of seed 000."""
 
-    name: Literal["master9"] = "master9"
-    variables: dict[str, tuple[float, float]] = {
-        "a1": (250, 350),
-        "a3": (250, 350),
-        "d3": (50, 150),
-    }
-    fixed: dict[str, float] = {}
-    indices: Indices = Indices()
-    n_norm: int = Field(64, gt=1)
+    name: Literal["master9"] = Field("master9", description="`master9`: the 9-DOF haptic master.")
+    variables: dict[str, tuple[float, float]] = Field(
+        {"a1": (250, 350), "a3": (250, 350), "d3": (50, 150)},
+        description="Design variables and their box {name: [lo, hi]} (mm): any of a1, a3, d3, a4, "
+        "a5, d2, d5, d6.",
+    )
+    fixed: dict[str, float] = Field(
+        {},
+        description="Lengths (mm) that are not varied (default a4 10, a5 60, d2 30, d5 50, d6 80).",
+    )
+    indices: Indices = Field(Indices(), description="How the indices are estimated.")
+    n_norm: int = Field(
+        64,
+        gt=1,
+        description="Designs scored over the box for the objective's normalisation bounds.",
+    )

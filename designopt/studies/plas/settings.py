@@ -23,9 +23,9 @@ JOINTS = ("theta2", "theta3", "theta4")
 class JointBox(Section):
     """(lo, hi) in degrees for θ2, θ3, θ4."""
 
-    theta2: tuple[float, float]
-    theta3: tuple[float, float]
-    theta4: tuple[float, float]
+    theta2: tuple[float, float] = Field(description="[lo, hi] of θ2 (deg).")
+    theta3: tuple[float, float] = Field(description="[lo, hi] of θ3 (deg).")
+    theta4: tuple[float, float] = Field(description="[lo, hi] of θ4 (deg).")
 
     @field_validator("theta2", "theta3", "theta4")
     @classmethod
@@ -39,9 +39,9 @@ class JointBox(Section):
 class Slave(Section):
     """The slave lengths the mapping uses (seed 004 §3.4), mm."""
 
-    a2: float = 50.0
-    a3: float = 15.0
-    d5: float = 30.0
+    a2: float = Field(50.0, description="The slave's length a2 (mm, > 0).")
+    a3: float = Field(15.0, description="The slave's length a3 (mm, ≥ 0).")
+    d5: float = Field(30.0, description="The slave's length d5 (mm, > 0).")
 
     @field_validator("a2", "a3", "d5")
     @classmethod
@@ -56,12 +56,37 @@ class Slave(Section):
 class Mismatch(Section):
     """How the workspace mismatch is estimated."""
 
-    n_samples: int = Field(4096, gt=1)
-    chunk: int = Field(4096, gt=0)
-    sampler: Literal["uniform", "halton", "rqmc"] = "uniform"
-    replicates: int | None = Field(None, ge=1, le=1024)  # rqmc: 16 unless given (docs/indices.md)
-    n_path: int = Field(8, ge=1, le=64)  # midpoint rule along the home → θ path
-    joint_rate_deg_s: float = Field(30.0, gt=0)  # norm of the master's joint-rate vector
+    n_samples: int = Field(
+        4096,
+        gt=1,
+        description="Samples of the master's workspace per design (shared by the swarm).",
+    )
+    chunk: int = Field(4096, gt=0, description="Samples per step of the memory-bounded scan.")
+    sampler: Literal["uniform", "halton", "rqmc"] = Field(
+        "uniform",
+        description="How the samples are drawn: `uniform` (i.i.d.), `halton` (one randomly shifted "
+        "Halton set) or `rqmc` (R independently shifted Halton sets; standard errors "
+        "from the replicates' spread).",
+    )
+    replicates: int | None = Field(
+        None,
+        ge=1,
+        le=1024,
+        description="R, the independent randomisations of the sampler: at least 2 with `rqmc` (16 "
+        "unless given), 1 with `halton`; `uniform` accepts R ≥ 2 (i.i.d. groups).",
+    )
+    n_path: int = Field(
+        8,
+        ge=1,
+        le=64,
+        description="Points of the midpoint rule along the straight joint path from home to θ (the "
+        "position mismatch).",
+    )
+    joint_rate_deg_s: float = Field(
+        30.0,
+        gt=0,
+        description="Norm (deg/s) of the master's joint-rate vector behind the velocity mismatch.",
+    )
 
     _replicates = field_validator("replicates")(check_replicates)
 
@@ -83,9 +108,23 @@ class Constraints(Section):
     """Reach within ±tolerance of the built master; mapping factors within the range the
     slave motors can follow (our default, docs/plas.md)."""
 
-    reach_tolerance: float = Field(0.2, gt=0, lt=1)
-    factor_range: tuple[float, float] = (0.5, 3.0)
-    n_grid: int = Field(9, ge=2, le=41)  # grid points per joint for the factor range
+    reach_tolerance: float = Field(
+        0.2,
+        gt=0,
+        lt=1,
+        description="The reach a2' + a3' + d6 must lie within ± this share of the built master's.",
+    )
+    factor_range: tuple[float, float] = Field(
+        (0.5, 3.0),
+        description="[lo, hi], 0 < lo < hi: the range the mapping factors must stay in (what the "
+        "slave motors can follow).",
+    )
+    n_grid: int = Field(
+        9,
+        ge=2,
+        le=41,
+        description="Grid points per joint on which the factor range is checked.",
+    )
 
     @field_validator("factor_range")
     @classmethod
@@ -98,9 +137,21 @@ class Constraints(Section):
 class Objective(Section):
     """Weights of f = Σ w · index / (index of the built master)."""
 
-    velocity: float = Field(1.0, ge=0)
-    position: float = Field(0.0, ge=0)
-    inertia: float = Field(0.0, ge=0)
+    velocity: float = Field(
+        1.0,
+        ge=0,
+        description="Weight of the velocity mismatch (relative to the built master's).",
+    )
+    position: float = Field(
+        0.0,
+        ge=0,
+        description="Weight of the position mismatch (relative to the built master's).",
+    )
+    inertia: float = Field(
+        0.0,
+        ge=0,
+        description="Weight of the inertia (relative to the built master's).",
+    )
 
     @model_validator(mode="after")
     def _some(self) -> Objective:
@@ -113,27 +164,71 @@ class Counterbalance(Section):
     """§2.1.2: M, L (links beyond joint 4 and their lever), r, l, tilt θ. ``L_per_d6``:
     how much L grows per mm of d6 beyond the built 60 mm (our model, docs/plas.md)."""
 
-    M_g: float = Field(240.5, gt=0)
-    L_mm: float = Field(188.0, gt=0)
-    r_mm: float = Field(90.0, ge=0)
-    l_mm: float = Field(34.0, gt=0)
-    theta_deg: float = Field(25.0, gt=-90, lt=90)
-    L_per_d6: float = Field(1.0, ge=0)
+    M_g: float = Field(
+        240.5,
+        gt=0,
+        description="M (g): the mass of the links beyond joint 4 (§2.1.2; 240.5 g).",
+    )
+    L_mm: float = Field(188.0, gt=0, description="L (mm): their lever arm at the built d6.")
+    r_mm: float = Field(
+        90.0, ge=0, description="r (mm) in m(θ) = M(L·cosθ − r·sinθ) / (r·sinθ + l·cosθ) (§2.1.2)."
+    )
+    l_mm: float = Field(
+        34.0,
+        gt=0,
+        description="l (mm): the counterweight's lever in m(θ) and I = M·L² + m·l² (§2.1.2).",
+    )
+    theta_deg: float = Field(
+        25.0,
+        gt=-90,
+        lt=90,
+        description="The tilt θ (deg) of §2.1.2, in (−90, 90).",
+    )
+    L_per_d6: float = Field(
+        1.0,
+        ge=0,
+        description="How much L grows per mm of d6 beyond the built 60 mm (our model, "
+        "docs/plas.md).",
+    )
 
 
 class PlasSettings(StudySettings):
     """Study D: the PLAS all-joints master of seed 004."""
 
-    name: Literal["plas"] = "plas"
-    variables: dict[str, tuple[float, float]] = {"a2p": (80.0, 240.0), "d6": (30.0, 120.0)}
-    fixed: dict[str, float] = {}
-    slave: Slave = Slave()
-    slave_limits_deg: JointBox = JointBox(theta2=(-90, 90), theta3=(-90, 90), theta4=(-90, 90))
-    joint_ranges_deg: JointBox = JointBox(theta2=(-30, 30), theta3=(-60, 60), theta4=(-30, 30))
-    mismatch: Mismatch = Mismatch()
-    constraints: Constraints = Constraints()
-    objective: Objective = Objective()
-    counterbalance: Counterbalance = Counterbalance()
+    name: Literal["plas"] = Field("plas", description="`plas`: the PLAS all-joints master.")
+    variables: dict[str, tuple[float, float]] = Field(
+        {"a2p": (80.0, 240.0), "d6": (30.0, 120.0)},
+        description="Optimised master lengths and their box {name: [lo, hi]} (mm): any of a2p, "
+        "a3p, d6.",
+    )
+    fixed: dict[str, float] = Field(
+        {},
+        description="The other master lengths (mm; default: the built master's, a2p 138, a3p 0, d6 "
+        "60).",
+    )
+    slave: Slave = Field(Slave(), description="The slave lengths of the mapping.")
+    slave_limits_deg: JointBox = Field(
+        JointBox(theta2=(-90, 90), theta3=(-90, 90), theta4=(-90, 90)),
+        description="The slave's joint limits (deg; assumed ±90).",
+    )
+    joint_ranges_deg: JointBox = Field(
+        JointBox(theta2=(-30, 30), theta3=(-60, 60), theta4=(-30, 30)),
+        description="The master workspace the mismatch is averaged over (deg; within the slave's "
+        "limits).",
+    )
+    mismatch: Mismatch = Field(Mismatch(), description="How the workspace mismatch is estimated.")
+    constraints: Constraints = Field(
+        Constraints(),
+        description="Feasibility: the reach and the mapping factors' range.",
+    )
+    objective: Objective = Field(
+        Objective(),
+        description="Weights of f = Σ w · index / (the built master's index).",
+    )
+    counterbalance: Counterbalance = Field(
+        Counterbalance(),
+        description="The counterbalance model of §2.1.2 (the inertia index).",
+    )
 
     @field_validator("variables")
     @classmethod

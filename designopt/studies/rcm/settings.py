@@ -18,9 +18,15 @@ BUILT = {"a": 120.0, "b": 260.0, "c": 250.0}
 class Joints(Section):
     """Joint ranges (Table 2): θ1 in degrees, d1 and d2 in mm."""
 
-    theta1_deg: tuple[float, float] = (-38.0, 38.0)
-    d1: tuple[float, float] = (22.0, 215.0)
-    d2: tuple[float, float] = (35.0, 200.0)
+    theta1_deg: tuple[float, float] = Field((-38.0, 38.0), description="[lo, hi] of θ1 (deg).")
+    d1: tuple[float, float] = Field(
+        (22.0, 215.0),
+        description="[lo, hi] of the prismatic joint d1 (mm).",
+    )
+    d2: tuple[float, float] = Field(
+        (35.0, 200.0),
+        description="[lo, hi] of the prismatic joint d2 (mm), above 0.",
+    )
 
     @field_validator("theta1_deg", "d1", "d2")
     @classmethod
@@ -42,9 +48,21 @@ class Cone(Section):
     cone of the 3-DOF arm around the instrument's home direction, 1 its axis alone (depth
     uniform along the rod; the reading that reproduces the paper's Fig. 4a, docs/rcm.md)."""
 
-    apex_deg: float = Field(60.0, gt=0, lt=180)
-    depth: tuple[float, float] = (50.0, 200.0)
-    dim: Literal[1, 2, 3] = 2
+    apex_deg: float = Field(
+        60.0,
+        gt=0,
+        lt=180,
+        description="The task cone's full apex angle (deg) at R.",
+    )
+    depth: tuple[float, float] = Field(
+        (50.0, 200.0),
+        description="[lo, hi]: the insertion depth (mm) beyond R, lo > 0.",
+    )
+    dim: Literal[1, 2, 3] = Field(
+        2,
+        description="2: the cone's section in the mechanism's plane (a sector); 3: the 3-DOF arm's "
+        "cone; 1: its axis alone (depth uniform).",
+    )
 
     @field_validator("depth")
     @classmethod
@@ -64,11 +82,29 @@ class Eta(Section):
     (uniform in (d1, d2)); the other is the change of variables by |det J|.
     """
 
-    workspace: Literal["box", "cone", "reach"] = "cone"
-    measure: Literal["cartesian", "joint"] = "cartesian"
-    n_samples: int = Field(65_536, ge=2)
-    sampler: Literal["uniform", "halton", "rqmc"] = "uniform"
-    replicates: int | None = Field(None, ge=1, le=1024)  # rqmc: 16 unless given (docs/indices.md)
+    workspace: Literal["box", "cone", "reach"] = Field(
+        "cone",
+        description="Where η is averaged: `box` (the joint box), `cone` (the task cone, mapped by "
+        "IK) or `reach` (the part of the cone the joint box reaches).",
+    )
+    measure: Literal["cartesian", "joint"] = Field(
+        "cartesian",
+        description="`cartesian` (uniform in the tip's space) or `joint` (uniform in (d1, d2)).",
+    )
+    n_samples: int = Field(65_536, ge=2, description="Samples per design.")
+    sampler: Literal["uniform", "halton", "rqmc"] = Field(
+        "uniform",
+        description="How the samples are drawn: `uniform` (i.i.d.), `halton` (one randomly shifted "
+        "Halton set) or `rqmc` (R independently shifted Halton sets; standard errors "
+        "from the replicates' spread).",
+    )
+    replicates: int | None = Field(
+        None,
+        ge=1,
+        le=1024,
+        description="R, the independent randomisations of the sampler: at least 2 with `rqmc` (16 "
+        "unless given), 1 with `halton`; `uniform` accepts R ≥ 2 (i.i.d. groups).",
+    )
 
     _replicates = field_validator("replicates")(check_replicates)
 
@@ -77,20 +113,36 @@ class Constraints(Section):
     """Design constraints g ≤ 0: eq. (19) a ≥ sin(apex/2)·(c − depth_min), and the joint
     box reaching at least ``reach_min`` of the task cone's samples."""
 
-    eq19: bool = True
-    reach_min: float | None = Field(0.99, gt=0, le=1)
+    eq19: bool = Field(True, description="Impose eq. (19), a ≥ sin(apex/2)·(c − depth_min).")
+    reach_min: float | None = Field(
+        0.99,
+        gt=0,
+        le=1,
+        description="The joint box must reach at least this share of the task cone's samples "
+        "(null: no reach constraint).",
+    )
 
 
 class RcmSettings(StudySettings):
     """The planar RCM mechanism: design variables among (a, c); the rest fixed."""
 
-    name: Literal["rcm"] = "rcm"
-    variables: dict[str, tuple[float, float]] = {"a": (60.0, 200.0), "c": (200.0, 400.0)}
-    fixed: dict[str, float] = {}
-    joints: Joints = Joints()
-    cone: Cone = Cone()
-    eta: Eta = Eta()
-    constraints: Constraints = Constraints()
+    name: Literal["rcm"] = Field(
+        "rcm",
+        description="`rcm`: the planar RCM mechanism (Sensors 2023).",
+    )
+    variables: dict[str, tuple[float, float]] = Field(
+        {"a": (60.0, 200.0), "c": (200.0, 400.0)},
+        description="Design variables and their box {name: [lo, hi]} (mm): a and/or c.",
+    )
+    fixed: dict[str, float] = Field(
+        {},
+        description="Lengths (mm) of a, b, c that are not varied (default: the built design, Table "
+        "1).",
+    )
+    joints: Joints = Field(Joints(), description="Joint ranges (Table 2).")
+    cone: Cone = Field(Cone(), description="The task cone at R.")
+    eta: Eta = Field(Eta(), description="How the global conditioning index η is estimated.")
+    constraints: Constraints = Field(Constraints(), description="Design constraints g ≤ 0.")
 
     @field_validator("variables")
     @classmethod
@@ -121,10 +173,13 @@ class Arm(Section):
     """The 3-DOF arm's lengths, mm: a, b, c (Table 1) and L, the height of R above the
     base frame (Table 3; not printed in the paper, 0 puts R at the origin)."""
 
-    a: float = Field(120.0, gt=0)
-    b: float = Field(260.0, gt=0)
-    c: float = Field(250.0, gt=0)
-    L: float = 0.0
+    a: float = Field(120.0, gt=0, description="Length a (mm, Table 1).")
+    b: float = Field(260.0, gt=0, description="Length b (mm, Table 1).")
+    c: float = Field(250.0, gt=0, description="Length c (mm, Table 1).")
+    L: float = Field(
+        0.0,
+        description="Height L (mm) of R above the base frame (0 puts R at the origin).",
+    )
 
 
 class TeleopSettings(StudySettings):
@@ -137,15 +192,41 @@ class TeleopSettings(StudySettings):
     60-80 ms).
     """
 
-    name: Literal["rcm_teleop"] = "rcm_teleop"
-    variables: dict[str, tuple[float, float]] = {}
-    arm: Arm = Arm()
-    joints: Joints = Joints()
-    trajectory: str
-    scale: float = Field(2.0, gt=0, allow_inf_nan=False)
-    master_to_slave_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    q0: tuple[float, float, float] = (0.0, 120.0, 130.0)
-    delay_ms: float = Field(70.0, ge=0, le=10_000)
+    name: Literal["rcm_teleop"] = Field(
+        "rcm_teleop",
+        description="`rcm_teleop`: a master trajectory replayed through the incremental mapping.",
+    )
+    variables: dict[str, tuple[float, float]] = Field(
+        {},
+        description="Must be empty: a replay has no design variables (give lengths under `arm`).",
+    )
+    arm: Arm = Field(Arm(), description="The 3-DOF arm's lengths.")
+    joints: Joints = Field(Joints(), description="Joint ranges (Table 2).")
+    trajectory: str = Field(
+        description="The master trajectory: a CSV `t,x,y,z,clutch` (s, mm, 0/1), read from the "
+        "config file's folder when relative.",
+    )
+    scale: float = Field(
+        2.0,
+        gt=0,
+        allow_inf_nan=False,
+        description="s of an s:1 master-to-slave motion ratio.",
+    )
+    master_to_slave_deg: tuple[float, float, float] = Field(
+        (0.0, 0.0, 0.0),
+        description="Fixed-axis angles (x, y, z; deg) of the rotation from the master's frame to "
+        "the slave's.",
+    )
+    q0: tuple[float, float, float] = Field(
+        (0.0, 120.0, 130.0),
+        description="The slave's start: θ1 (deg), d1, d2 (mm), within the joint ranges.",
+    )
+    delay_ms: float = Field(
+        70.0,
+        ge=0,
+        le=10_000,
+        description="The servo delay (ms; the paper measured 60-80 ms).",
+    )
 
     @field_validator("variables")
     @classmethod

@@ -54,15 +54,33 @@ class Joint(Section):
     """One DH row: joint type, the four DH entries (α, θ in degrees) and the joint limits
     (degrees for R joints, length units for P joints)."""
 
-    type: Literal["R", "P"]
-    a: float | str = 0.0
-    alpha: float | str = 0.0
-    d: float | str = 0.0
-    theta: float | str = 0.0
-    limits: tuple[float, float]
+    type: Literal["R", "P"] = Field(
+        description="`R` (revolute: the joint adds to θ) or `P` (prismatic: adds to d).",
+    )
+    a: float | str = Field(
+        0.0,
+        description="DH length a: a number (length unit) or the name of a variable or fixed value.",
+    )
+    alpha: float | str = Field(
+        0.0,
+        description="DH twist α (deg): a number or the name of a variable or fixed value.",
+    )
+    d: float | str = Field(
+        0.0,
+        description="DH offset d: a number (length unit) or the name of a variable or fixed value.",
+    )
+    theta: float | str = Field(
+        0.0,
+        description="DH angle θ (deg): a number or the name of a variable or fixed value.",
+    )
+    limits: tuple[float, float] = Field(
+        description="[lo, hi], lo < hi: the joint range sampled (deg for R joints, length unit for "
+        "P).",
+    )
 
     _numbers = field_validator("a", "alpha", "d", "theta", mode="before")(
-        classmethod(lambda cls, v: _number_or_name(v)))
+        classmethod(lambda cls, v: _number_or_name(v))
+    )
 
     @field_validator("limits")
     @classmethod
@@ -73,8 +91,16 @@ class Joint(Section):
 
 
 class Chain(Section):
-    convention: Literal["standard", "modified"] = "standard"
-    joints: list[Joint] = Field(min_length=1, max_length=12)
+    convention: Literal["standard", "modified"] = Field(
+        "standard",
+        description="`standard` (T = Rz(θ) Tz(d) Tx(a) Rx(α)) or `modified` (Craig: T = Rx(α) "
+        "Tx(a) Rz(θ) Tz(d)).",
+    )
+    joints: list[Joint] = Field(
+        min_length=1,
+        max_length=12,
+        description="One DH row per joint (1 to 12).",
+    )
 
 
 class ImportedJoint(NamedTuple):
@@ -100,13 +126,41 @@ class UrdfChain(Section):
     config is loaded (the resolved file and its text), so that an archive carries the
     robot it was run on and ``designopt export`` needs nothing else."""
 
-    urdf: str = Field(min_length=1)
-    base: str | None = None
-    tip: str | None = None
-    set: dict[str, float | str] = {}
-    limits: dict[str, tuple[float, float]] = {}
-    urdf_path: str | None = None
-    urdf_text: str | None = None
+    urdf: str = Field(
+        min_length=1,
+        description="The URDF file, read from the config file's folder when relative.",
+    )
+    base: str | None = Field(
+        None,
+        description="The link whose frame is the base frame (default: the root); an ancestor of "
+        "`tip`.",
+    )
+    tip: str | None = Field(
+        None,
+        description="The end-effector link (default: the single leaf; required when there are "
+        "several).",
+    )
+    set: dict[str, float | str] = Field(
+        {},
+        description="{<joint>.origin.<x|y|z|roll|pitch|yaw|length>: variable, fixed name or "
+        "number}: origin entries bound to designs (lengths in the URDF's unit, angles "
+        "in deg).",
+    )
+    limits: dict[str, tuple[float, float]] = Field(
+        {},
+        description="{joint: [lo, hi]} overriding the URDF's limits: deg for revolute and "
+        "continuous joints, length unit for prismatic.",
+    )
+    urdf_path: str | None = Field(
+        None,
+        description="Filled in on load: the resolved URDF file (an archive carries it; do not "
+        "set).",
+    )
+    urdf_text: str | None = Field(
+        None,
+        description="Filled in on load: the URDF's text, so an archive carries its robot (do not "
+        "set).",
+    )
     _imported: Any = PrivateAttr(default=None)
 
     @field_validator("set", mode="before")
@@ -203,16 +257,56 @@ class SerialIndices(Section):
     """Which Jacobian, which condition number, which measure, how many samples."""
 
     jacobian: list[Literal["vx", "vy", "vz", "wx", "wy", "wz"]] | Literal["position", "full"] = (
-        "position"
+        Field(
+            "position",
+            description="Rows of the 6×n geometric Jacobian (base frame): a list of vx vy vz "
+            "wx wy wz, or `position` (vx vy vz) or `full` (all six).",
+        )
     )
-    norm: Literal["2", "fro"] = "2"
-    normalized: bool = False  # fro only: report k_F/m (m = min(rows, joints)) so that k >= 1
-    measure: Literal["joint", "cartesian", "task"] = "joint"
-    sampler: Literal["uniform", "halton", "rqmc"] = "uniform"
-    n_samples: int = Field(20_000, gt=1)
-    chunk: int = Field(16_384, gt=0)  # samples per chunk (task: targets, 1024 unless given)
-    length_scale: float = Field(1.0, gt=0)  # multiplies the angular rows (full Jacobian)
-    replicates: int | None = Field(None, ge=1, le=1024)  # rqmc: 16 unless given (docs/indices.md)
+    norm: Literal["2", "fro"] = Field(
+        "2",
+        description="`2`: 1/k = σmin/σmax; `fro`: 1/k = 1/(‖J‖_F ‖J⁺‖_F).",
+    )
+    normalized: bool = Field(
+        False,
+        description="`fro` only: report k_F/m (m = min(rows, joints)) so that k ≥ 1.",
+    )
+    measure: Literal["joint", "cartesian", "task"] = Field(
+        "joint",
+        description="`joint` (uniform in the joint box), `cartesian` (weights |det J|; a square "
+        "Jacobian) or `task` (targets of `study.task`, solved by IK).",
+    )
+    sampler: Literal["uniform", "halton", "rqmc"] = Field(
+        "uniform",
+        description="How the samples are drawn: `uniform` (i.i.d.), `halton` (one randomly shifted "
+        "Halton set) or `rqmc` (R independently shifted Halton sets; standard errors "
+        "from the replicates' spread).",
+    )
+    n_samples: int = Field(
+        20_000,
+        gt=1,
+        description="Samples per design, shared by the swarm (task: targets; ignored for a points "
+        "file).",
+    )
+    chunk: int = Field(
+        16_384,
+        gt=0,
+        description="Samples per streamed chunk, bounding memory (task: targets solved at a time, "
+        "1024 unless given).",
+    )
+    length_scale: float = Field(
+        1.0,
+        gt=0,
+        description="Characteristic length L (length unit) multiplying the angular rows, so that "
+        "both blocks have length units.",
+    )
+    replicates: int | None = Field(
+        None,
+        ge=1,
+        le=1024,
+        description="R, the independent randomisations of the sampler: at least 2 with `rqmc` (16 "
+        "unless given), 1 with `halton`; `uniform` accepts R ≥ 2 (i.i.d. groups).",
+    )
 
     _replicates = field_validator("replicates")(check_replicates)
 
@@ -237,8 +331,16 @@ class SerialIndices(Section):
 class _Bound(Section):
     """One side of a constraint: exactly one of ``le`` and ``ge``."""
 
-    le: float | None = Field(None, allow_inf_nan=False)
-    ge: float | None = Field(None, allow_inf_nan=False)
+    le: float | None = Field(
+        None,
+        allow_inf_nan=False,
+        description="Upper bound: feasible when the value is ≤ le (give le or ge, not both).",
+    )
+    ge: float | None = Field(
+        None,
+        allow_inf_nan=False,
+        description="Lower bound: feasible when the value is ≥ ge (give le or ge, not both).",
+    )
 
     @model_validator(mode="after")
     def _one_side(self) -> _Bound:
@@ -251,14 +353,19 @@ class LinearConstraint(_Bound):
     """A linear constraint on the design variables: Σ terms[name]·x[name] ≤ le (or ≥ ge),
     e.g. ``{terms: {l1: 1, l2: 1}, le: 1.2}`` bounds the total reach."""
 
-    terms: dict[str, float] = Field(min_length=1)
+    terms: dict[str, float] = Field(
+        min_length=1,
+        description="{design variable: coefficient}: the constrained value Σ terms·x.",
+    )
 
 
 class IndexConstraint(_Bound):
     """A bound on an index of the study, e.g. ``{index: reach, ge: 0.99}``: feasible when
     the index is ≥ ge (or ≤ le). Deb's rules or the penalty see g = ge − index (index − le)."""
 
-    index: str
+    index: str = Field(
+        description="The index bounded, e.g. `reach` (g = ge − index, or index − le).",
+    )
 
 
 def _constraint_kind(v: Any) -> str:
@@ -286,23 +393,95 @@ class TaskIK(Section):
     the reach scale, orientation in rad), the damping (λ = damping_e·E + damping), and
     the scheduling (stall factor, Z-order window, steps per block, slots in flight)."""
 
-    iters: int = Field(48, ge=1, le=1000)
-    rounds: int = Field(8, ge=1, le=100)
-    n_db: int = Field(4096, ge=1, le=1_000_000)
-    n_nearest: int = Field(4, ge=0, le=64)
-    n_random: int = Field(6, ge=0, le=64)
-    n_best: int = Field(2, ge=1, le=64)
-    climb: int = Field(0, ge=0, le=200)
-    neighbours: int = Field(0, ge=0, le=15)
-    best: Literal["dexterity", "clearance"] = "dexterity"
-    tol_pos: float = Field(1e-9, gt=0, le=1)
-    tol_rot: float = Field(1e-9, gt=0, le=1)
-    damping: float = Field(1e-16, gt=0, le=1)
-    damping_e: float = Field(0.1, ge=0, le=100)
-    stall: float = Field(0.5, gt=0, le=1)
-    window: int = Field(32, ge=1, le=4096)
-    block: int = Field(4, ge=1, le=64)
-    slots: int = Field(0, ge=0, le=1_000_000)
+    iters: int = Field(48, ge=1, le=1000, description="LM steps per seed at most.")
+    rounds: int = Field(
+        8,
+        ge=1,
+        le=100,
+        description="Rounds of `n_random` uniform seed draws after the nearest database entries.",
+    )
+    n_db: int = Field(4096, ge=1, le=1_000_000, description="FK-database entries per design.")
+    n_nearest: int = Field(
+        4,
+        ge=0,
+        le=64,
+        description="Seeds per target from its nearest database entries, tried first.",
+    )
+    n_random: int = Field(
+        6,
+        ge=0,
+        le=64,
+        description="Uniform random seeds per round (at least one seed in all).",
+    )
+    n_best: int = Field(
+        2,
+        ge=1,
+        le=64,
+        description="Distinct converged seeds compared per target; the one with the best `best` "
+        "score is kept (1: the first).",
+    )
+    climb: int = Field(
+        0,
+        ge=0,
+        le=200,
+        description="Null-space ascent steps of the score from each candidate solution (0: none).",
+    )
+    neighbours: int = Field(
+        0,
+        ge=0,
+        le=15,
+        description="A second pass seeded with the kept solutions of this many nearest reached "
+        "targets among each run of 16 (0: none).",
+    )
+    best: Literal["dexterity", "clearance"] = Field(
+        "dexterity",
+        description="The score `n_best` compares: `dexterity` (the study's 1/k) or `clearance` "
+        "(needs `collision`).",
+    )
+    tol_pos: float = Field(
+        1e-9,
+        gt=0,
+        le=1,
+        description="A target is reached within tol_pos × the reach scale.",
+    )
+    tol_rot: float = Field(
+        1e-9,
+        gt=0,
+        le=1,
+        description="A target's orientation is reached within tol_rot (rad).",
+    )
+    damping: float = Field(
+        1e-16,
+        gt=0,
+        le=1,
+        description="The constant term of the damping λ = damping_e·½|e|² + damping.",
+    )
+    damping_e: float = Field(
+        0.1,
+        ge=0,
+        le=100,
+        description="The error-scaled term of the damping λ = damping_e·½|e|² + damping "
+        "(Sugihara's).",
+    )
+    stall: float = Field(
+        0.5,
+        gt=0,
+        le=1,
+        description="Drop a seed whose least error fell by less than this factor in `block` steps.",
+    )
+    window: int = Field(
+        32,
+        ge=1,
+        le=4096,
+        description="Z-order neighbours among which the nearest database seeds are ranked.",
+    )
+    block: int = Field(4, ge=1, le=64, description="LM steps per block between checks.")
+    slots: int = Field(
+        0,
+        ge=0,
+        le=1_000_000,
+        description="Targets in flight per call (0: automatic).",
+    )
 
     @model_validator(mode="after")
     def _seeds(self) -> TaskIK:
@@ -325,13 +504,23 @@ class SerialTask(Task):
     names of design variables or fixed values, or minus one), the body wall the ports lie
     on and the IK's settings."""
 
-    port: tuple[Entry, Entry, Entry] | None = None  # type: ignore[assignment]
-    body_wall: BodyWall | None = None
-    """The wall every port is projected onto (``designopt.kinematics.wall``)."""
-    instrument_angle: tuple[float, float] | None = None
-    """[lo, hi] degrees: the band of the angle between two arms' instruments that
-    ``instrument_ok`` counts (unset by default)."""
-    ik: TaskIK = TaskIK()
+    port: tuple[Entry, Entry, Entry] | None = Field(  # type: ignore[assignment]
+        None,
+        description="[x, y, z]: the port the instrument passes through (numbers, names of "
+        "variables or fixed values, or `-name`); each target's tool axis points from "
+        "it to the target.",
+    )
+    body_wall: BodyWall | None = Field(
+        None,
+        description="The wall every port is projected onto: `{shape: halfspace | ellipsoid | mesh, "
+        "...}` (docs/planning.md).",
+    )
+    instrument_angle: tuple[float, float] | None = Field(
+        None,
+        description="[lo, hi] (deg): the band of the angle between arms 0 and 1's instruments that "
+        "`instrument_ok` counts.",
+    )
+    ik: TaskIK = Field(TaskIK(), description="The batched IK that solves every target.")
 
     @field_validator("instrument_angle")
     @classmethod
@@ -362,7 +551,14 @@ class Units(Section):
     printout and axis says it; undeclared, lengths are labelled ``L`` (the chain's own
     length unit). A URDF chain is in metres by the URDF specification."""
 
-    length: str | None = Field(None, min_length=1, max_length=16, pattern=r"^[^\s\[\]]+$")
+    length: str | None = Field(
+        None,
+        min_length=1,
+        max_length=16,
+        pattern=r"^[^\s\[\]]+$",
+        description="The unit of the chain's lengths and the task's coordinates (e.g. `mm`, `m`), "
+        "printed on every length; unset: `L` (a URDF chain is in m).",
+    )
 
 
 class ArmBase(Section):
@@ -372,26 +568,40 @@ class ArmBase(Section):
     value, or minus one ("-b"), so the placement can be designed like any chain number
     (two arms at x = −b and x = b share the variable b)."""
 
-    xyz: tuple[Entry, Entry, Entry] = (0.0, 0.0, 0.0)
-    rpy: tuple[Entry, Entry, Entry] = (0.0, 0.0, 0.0)
+    xyz: tuple[Entry, Entry, Entry] = Field(
+        (0.0, 0.0, 0.0),
+        description="The arm base's position [x, y, z] in the world (length unit): numbers, "
+        "variable or fixed names, or `-name`.",
+    )
+    rpy: tuple[Entry, Entry, Entry] = Field(
+        (0.0, 0.0, 0.0),
+        description="The arm base's roll, pitch, yaw (deg; R = Rz(yaw)·Ry(pitch)·Rx(roll)): "
+        "numbers, variable or fixed names, or `-name`.",
+    )
 
     _numbers = field_validator("xyz", "rpy", mode="before")(
-        classmethod(lambda cls, v: _number_or_name(v)))
+        classmethod(lambda cls, v: _number_or_name(v))
+    )
 
 
 class Arm(Section):
     """One of several identical arms (copies of ``chain``): its base and its port (else
     ``task.port``, if any)."""
 
-    base: ArmBase = ArmBase()
-    port: tuple[Entry, Entry, Entry] | None = None
-    """This arm's port (numbers, or names of design variables or fixed values, or minus
-    one): placed on ``task.body_wall`` when one is given (docs/planning.md)."""
-    insertion: tuple[float, float] | None = None
-    """[d0, d1]: this arm's tool depth past its port (else ``task.insertion``)."""
+    base: ArmBase = Field(ArmBase(), description="Where this arm's base frame sits.")
+    port: tuple[Entry, Entry, Entry] | None = Field(
+        None,
+        description="This arm's port (numbers, variable or fixed names, or `-name`; else "
+        "`task.port`), placed on `task.body_wall` when one is given.",
+    )
+    insertion: tuple[float, float] | None = Field(
+        None,
+        description="[d0, d1]: this arm's tool depth past its port (else `task.insertion`).",
+    )
 
     _port_numbers = field_validator("port", mode="before")(
-        classmethod(lambda cls, v: _number_or_name(v)))
+        classmethod(lambda cls, v: _number_or_name(v))
+    )
 
     @field_validator("insertion")
     @classmethod
@@ -411,17 +621,51 @@ COLLISION_INDEX_NAMES = ("clearance", "collision_free")
 class SerialSettings(StudySettings):
     """A user's serial mechanism: chain, design variables, indices, objective."""
 
-    name: Literal["serial"] = "serial"
-    variables: dict[str, tuple[float, float]]
-    fixed: dict[str, float] = {}
-    arms: list[Arm] | None = Field(None, min_length=2, max_length=8)
-    chain: AnyChain
-    indices: SerialIndices = SerialIndices()
-    objective: dict[str, float | bool | int] = {"gci": -1.0}
-    constraints: list[AnyConstraint] = []
-    task: SerialTask | None = None
-    collision: Collision | None = None
-    units: Units = Units()
+    name: Literal["serial"] = Field(
+        "serial",
+        description="`serial`: your own serial chain, as a DH table or a URDF.",
+    )
+    variables: dict[str, tuple[float, float]] = Field(
+        description="The design box {name: [lo, hi]}; every variable must appear in the chain "
+        "(angles in deg).",
+    )
+    fixed: dict[str, float] = Field(
+        {},
+        description="{name: value} for names the chain uses that are not optimised.",
+    )
+    arms: list[Arm] | None = Field(
+        None,
+        min_length=2,
+        max_length=8,
+        description="2-8 copies of the chain, each with its own base and port (needs `collision`).",
+    )
+    chain: AnyChain = Field(
+        description="The chain: `{convention, joints: [...]}` (DH) or `{urdf: FILE, ...}`.",
+    )
+    indices: SerialIndices = Field(
+        SerialIndices(),
+        description="Which Jacobian, which condition number, which measure, how many samples.",
+    )
+    objective: dict[str, float | bool | int] = Field(
+        {"gci": -1.0},
+        description="{index: weight} of the minimised f = Σ w·index; `normalize: true` maps each "
+        "index to [0, 1] over `n_norm` (default 64) designs first.",
+    )
+    constraints: list[AnyConstraint] = Field(
+        [],
+        description="Linear constraints `{terms, le | ge}` on the variables and index bounds "
+        "`{index, le | ge}`.",
+    )
+    task: SerialTask | None = Field(
+        None,
+        description="The task to reach under `indices.measure: task`: region, tool axis or port, "
+        "IK.",
+    )
+    collision: Collision | None = Field(
+        None,
+        description="Link capsules and obstacles: adds `clearance` and `collision_free`.",
+    )
+    units: Units = Field(Units(), description="The length unit the chain is in.")
 
     @field_validator("units")
     @classmethod
@@ -677,7 +921,9 @@ class SerialSettings(StudySettings):
         } | self._arm_angles()
 
     def _arm_angles(self) -> set[str]:
-        return {v.removeprefix("-") for a in self.arms or [] for v in a.base.rpy if isinstance(v, str)}
+        return {
+            v.removeprefix("-") for a in self.arms or [] for v in a.base.rpy if isinstance(v, str)
+        }
 
     def insertions(self) -> list[tuple[float, float]]:
         """The insertion range [d0, d1] of each arm (one entry without ``arms``): its own,
@@ -750,8 +996,6 @@ def _urdf_names(chain: UrdfChain, info: ValidationInfo, known: set[str],
         if kinds.setdefault(v, kind) != kind:
             raise ValueError(f"set.{key}: '{v}' is used as an angle and as a length")
     return chain  # names no entry uses: SerialSettings._unused (a port may use them too)
-
-
 
 
 def entry_value(s: SerialSettings, v: Entry, design: Any = None) -> float:

@@ -29,8 +29,18 @@ class Cone(Section):
     cone's axis (90: the base axis perpendicular to the cone's axis, the placement that
     puts the isotropy optimum at (90°, 90°); docs/sphere.md)."""
 
-    half_angle_deg: float = Field(30.0, gt=0, le=90)
-    axis_angle_deg: float = Field(90.0, ge=0, le=180)
+    half_angle_deg: float = Field(
+        30.0,
+        gt=0,
+        le=90,
+        description="Half-angle β (deg) of the cone of tool directions (30: the 60° cone).",
+    )
+    axis_angle_deg: float = Field(
+        90.0,
+        ge=0,
+        le=180,
+        description="Angle γ (deg) between joint axis 1 and the cone's axis.",
+    )
 
 
 class Index(Section):
@@ -38,10 +48,26 @@ class Index(Section):
     on the cone's spherical cap (common to the whole swarm), ``chunk`` of them in flight,
     the sampler and its replicates (docs/indices.md)."""
 
-    n_samples: int = Field(4096, ge=2, le=100_000_000)
-    chunk: int = Field(4096, ge=1, le=1_000_000)
-    sampler: Literal["uniform", "halton", "rqmc"] = "rqmc"
-    replicates: int | None = Field(None, ge=1, le=1024)  # rqmc: 16 unless given
+    n_samples: int = Field(
+        4096,
+        ge=2,
+        le=100_000_000,
+        description="Directions per design, uniform on the cone's cap (shared by the swarm).",
+    )
+    chunk: int = Field(4096, ge=1, le=1_000_000, description="Directions in flight at a time.")
+    sampler: Literal["uniform", "halton", "rqmc"] = Field(
+        "rqmc",
+        description="How the samples are drawn: `uniform` (i.i.d.), `halton` (one randomly shifted "
+        "Halton set) or `rqmc` (R independently shifted Halton sets; standard errors "
+        "from the replicates' spread).",
+    )
+    replicates: int | None = Field(
+        None,
+        ge=1,
+        le=1024,
+        description="R, the independent randomisations of the sampler: at least 2 with `rqmc` (16 "
+        "unless given), 1 with `halton`; `uniform` accepts R ≥ 2 (i.i.d. groups).",
+    )
 
     _replicates = field_validator("replicates")(check_replicates)
 
@@ -53,22 +79,49 @@ class Constraints(Section):
     |α12 − α23| ≤ φ ≤ min(α12 + α23, 360° − α12 − α23)): the hybrid paper's "reach the
     whole abdomen" restriction in our reading (docs/sphere.md)."""
 
-    reach_min: float | None = Field(None, gt=0, le=1)
-    reach_all_deg: float | None = Field(None, gt=0, lt=90)
+    reach_min: float | None = Field(
+        None,
+        gt=0,
+        le=1,
+        description="The Monte-Carlo share of the task cone reached must be at least this (null: "
+        "none).",
+    )
+    reach_all_deg: float | None = Field(
+        None,
+        gt=0,
+        lt=90,
+        description="Every direction within this angle (deg) of the cone's axis must be reachable, "
+        "checked exactly (null: none).",
+    )
 
 
 class SphereSettings(StudySettings):
     """A 2-DOF spherical RCM mechanism, scored by the isotropy of its Jacobian over a
     cone of tool directions."""
 
-    name: Literal["sphere_rcm"] = "sphere_rcm"
-    variables: dict[str, tuple[float, float]] = {"alpha12": (30.0, 150.0),
-                                                 "alpha23": (30.0, 150.0)}  # fmt: skip
-    fixed: dict[str, float] = {}
-    cone: Cone = Cone()
-    index: Index = Index()
-    objective: dict[str, float] = {"gci": -1.0}
-    constraints: Constraints = Constraints()
+    name: Literal["sphere_rcm"] = Field(
+        "sphere_rcm",
+        description="`sphere_rcm`: the 2-DOF spherical RCM mechanism.",
+    )
+    variables: dict[str, tuple[float, float]] = Field(
+        {"alpha12": (30.0, 150.0), "alpha23": (30.0, 150.0)},
+        description="Link angles and their box {name: [lo, hi]} (deg, in (0, 180)): alpha12, "
+        "alpha23.",
+    )
+    fixed: dict[str, float] = Field(
+        {},
+        description="Link angles (deg) that are not varied (default: 90, the kinematic optimum).",
+    )
+    cone: Cone = Field(
+        Cone(),
+        description="The task: a cone of tool directions at the remote centre.",
+    )
+    index: Index = Field(Index(), description="How the mean of 1/k over the cone is estimated.")
+    objective: dict[str, float] = Field(
+        {"gci": -1.0},
+        description="{index: weight} of f = Σ w·index over `gci`, `reach`, `arc_length`.",
+    )
+    constraints: Constraints = Field(Constraints(), description="Constraints g ≤ 0 on the reach.")
 
     @field_validator("variables")
     @classmethod
