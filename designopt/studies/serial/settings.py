@@ -521,6 +521,16 @@ class SerialTask(Task):
         "`instrument_ok` counts.",
     )
     ik: TaskIK = Field(TaskIK(), description="The batched IK that solves every target.")
+    port_gap: float | None = Field(
+        None,
+        ge=0,
+        allow_inf_nan=False,
+        description="The least distance between two incision points (length unit; 0: no "
+        "check): closer ports get a `warning:` after a run and on `eval`. Unset: 5 cm in the "
+        "chain's unit (m, cm or mm; no check under an undeclared unit): the common "
+        "laparoscopic rule of thumb of trocars at least about 5 cm apart (robotic systems' "
+        "port-placement guides ask for more, typically 6-10 cm: set it to your system's).",
+    )
 
     @field_validator("instrument_angle")
     @classmethod
