@@ -16,7 +16,7 @@ from typing import Any
 
 from designopt.core.errors import ConfigError, WriteError
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 API = ("load_config", "run", "scan", "evaluate", "load")
 

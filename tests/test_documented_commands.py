@@ -1,5 +1,5 @@
-"""Every command line the documentation shows runs in a test (#45): README.md, docs/*.md
-and the headers of configs/*.yaml are read for command lines (code blocks, indented
+"""Every command line the documentation shows runs in a test (#45): README.md, the site's
+pages (docs/**/*.md; CHANGELOG.md is not one) and the headers of configs/*.yaml are read for command lines (code blocks, indented
 blocks, inline code, YAML comments), and each one is
 
 - run here as written (``SCENARIOS``), in a folder of its own that looks like the
@@ -42,12 +42,14 @@ SELF = Path(__file__).name
 # ------------------------------------------------------------------ reading the docs
 
 START = re.compile(
-    r"(?:srun\s+)?designopt\s+[a-z][a-z|-]*\b"
+    r"(?:srun\s+)?designopt\s+(?:[a-z][a-z|-]*|--version)\b"
     r"|(?:\.venv/bin/)?python3?\s+(?:-m\s+\S+|benchmarks/\S+|docs/\S+\.py)"
     r"|pip\s+install\b"
+    r"|mkdocs\s+(?:serve|build)\b"
 )
-"""Where a command starts: ``designopt SUBCOMMAND``, ``python benchmarks/X.py``,
-``python -m X``, ``python docs/X.py``, ``pip install``."""
+"""Where a command starts: ``designopt SUBCOMMAND``, ``designopt --version``, ``python
+benchmarks/X.py``, ``python -m X``, ``python docs/X.py``, ``pip install``, ``mkdocs
+serve|build``."""
 STOP = re.compile(r"\s#|→|\s\(|&&|`|\s+&\s*$|;\s")
 """Where a command in a code line ends: a comment, an arrow, a parenthesis, ``&&``."""
 SPAN = re.compile(r"(?<!`)`([^`\n]+(?:\n[^`\n]+)?)`(?!`)")
@@ -112,7 +114,10 @@ def extract(path: Path) -> list[tuple[str, str]]:
 
 
 def doc_files() -> list[Path]:
-    return [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")),
+    """README.md, every page of the site (docs/ and its folders; docs/changelog.md only
+    includes CHANGELOG.md, which is not read: its entries name commands of the past) and
+    the configs' headers."""
+    return [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md")),
             *sorted((ROOT / "configs").glob("*.yaml"))]  # fmt: skip
 
 
@@ -141,10 +146,17 @@ def subcommands(cmd: str) -> list[str]:
 # earlier one wrote). A step is the documented command, run as written, or (documented
 # synopsis, the concrete argv that runs it: every flag the synopsis shows).
 SCENARIOS: list[tuple] = [
-    # README "Quick start", docs/scaling.md, docs/architecture.md
-    # (one scenario when two commands run the same program: one folder, one compile)
+    # README "Quick start", docs/getting-started/main-job.md, docs/scaling.md,
+    # docs/architecture.md (one scenario when two commands run the same program: one
+    # folder, one compile)
     ("designopt run configs/master9.yaml",
+     "designopt show results/master9/master9.h5",
+     "designopt report results/master9/master9.h5 --html",
      "designopt run configs/master9.yaml --seed 4 --out results/m.h5"),
+    # the version and the config reference (README, docs/reference/cli.md and config.md)
+    ("designopt --version",),
+    ("designopt config --keys optimizer",
+     ("designopt config --keys PREFIX", "config --keys study.task.ik")),
     # the planar RCM mechanism, PLAS (README, docs/rcm.md, docs/plas.md, their configs)
     ("designopt run configs/rcm.yaml", "designopt report results/rcm/rcm.h5 --html"),
     ("designopt scan configs/rcm_eta.yaml",),
@@ -179,11 +191,16 @@ SCENARIOS: list[tuple] = [
     ("designopt eval configs/two_ur5_front.yaml --design a2=0.425 a3=0.39225 b=0.6",),
     ("designopt view configs/two_ur5_front.yaml --design b=0.6 --q 0,-60,80,-110,-90,0",),
     ("designopt run configs/two_ur5_front.yaml",),
-    # the planning case (configs/port_placement.yaml, docs/planning.md)
+    # the planning case (configs/port_placement.yaml, docs/planning.md,
+    # docs/getting-started/first-planning.md)
     ("designopt eval configs/port_placement.yaml --design b=0.6 by=0 px=0.03 py0=0 py1=0",
+     "designopt view configs/port_placement.yaml --design b=0.6 by=0 px=0.03 py0=0 py1=0",
      "designopt eval configs/port_placement.yaml --design b=0.6,by=0,px=0.03,py0=0,py1=0 "
      "--design b=0.5085,by=-0.018,px=0.021,py0=-0.119,py1=0.126"),
-    ("designopt run configs/port_placement.yaml",),
+    ("designopt run configs/port_placement.yaml",
+     "designopt show results/port_placement/port_placement.h5",
+     "designopt show results/port_placement/port_placement.h5 --csv",
+     "designopt report results/port_placement/port_placement.h5 --html"),
     ("designopt run configs/two_arms_front.yaml",
      ("designopt report ARCHIVE --html", "report results/two_arms/two_arms_front.h5 --html")),
     # URDF (docs/urdf.md, configs/urdf_*.yaml)
@@ -247,6 +264,8 @@ SCENARIOS: list[tuple] = [
 # compiling) are skipped, for a quick local run.
 QUICK = {
     "designopt run configs/master9.yaml",
+    "designopt --version",
+    "designopt config --keys optimizer",
     "designopt scan configs/planar2r.yaml",
     "designopt view configs/urdf_arm.yaml --design l_wrist=0.02",
     "designopt view configs/puma560.yaml --q 10,20,-30,40,50,60",
@@ -340,8 +359,10 @@ HERE = f"{SELF}::test_documented_command_runs"
 RESUME = f"{SELF}::test_max_minutes_stops_cleanly_and_the_printed_command_resumes"
 PIPELINE_RESUME = "test_pipeline.py::test_interrupted_run_is_marked_incomplete_and_resume_matches"
 PIPELINE_RUN = "test_pipeline.py::test_run_with_refine_matches_schema_and_draws_figures"
-PLANNING_AGREE = ("designopt run configs/port_placement.yaml --set optimizer.n_runs=3 --set "
-                  "optimizer.n_particles=64 --set optimizer.n_iters=16 --set refine.method=compass")
+PLANNING_AGREE = (
+    "designopt run configs/port_placement.yaml --set optimizer.n_runs=3 --set "
+    "optimizer.n_particles=64 --set optimizer.n_iters=16 --set refine.method=compass"
+)
 ELSEWHERE: dict[str, list[str]] = {
     PLANNING_AGREE: ["test_compass.py::test_a_fronts_runs_are_polished_by_their_scaled_"
                      "distance_on_the_search_samples"],
@@ -414,8 +435,10 @@ OTHER_CONFIG = {  # ELSEWHERE commands whose tests run the form on a config of t
     c: "device counts are set before JAX starts: a child process each, on a tiny config"
     for c in ELSEWHERE
     if "--devices" in c
-} | {PLANNING_AGREE: "minutes on the planning case (three runs of 64 × 16, then the polish): "
-                     "the form, the runs and the polish set by --set, on a small front"}
+} | {
+    PLANNING_AGREE: "minutes on the planning case (three runs of 64 × 16, then the polish): "
+    "the form, the runs and the polish set by --set, on a small front"
+}
 
 BENCH = "a benchmark script: minutes of timed repeats on the full sizes, no pass/fail"
 SKIP: dict[str, str] = {
@@ -423,6 +446,10 @@ SKIP: dict[str, str] = {
     "pip install -e .": "installs the package the tests import",
     'pip install -e ".[test]"': "installs the package and the test dependencies",
     'pip install -e ".[bench]"': "installs the benchmark peers (network)",
+    'pip install -e ".[docs]"': "installs the documentation tools (network)",
+    "mkdocs build --strict": "tests/test_site.py builds the site so, into a temporary folder, "
+                             "and checks its pages",
+    "mkdocs serve": "a server that runs until stopped; tests/test_site.py builds the same site",
     "pip install roboticstoolbox-python ikpy": "installs the benchmark peers (network)",
     "python -m pytest -q -n auto --dist loadfile": "the test suite itself",
     "srun designopt run configs/big.yaml --devices 32 --quiet":
@@ -533,11 +560,23 @@ def _steps(scenario: tuple) -> list[tuple[str, list[str]]]:
 PATHISH = re.compile(r"[\w./-]+\.(?:h5|png|pdf|html|urdf|csv)\b")
 
 
+def _prints_what_it_says(doc: str, argv: list[str], out: str) -> None:
+    """The commands whose output is the point: the version, the config reference."""
+    if argv == ["--version"]:
+        import designopt
+
+        assert designopt.__version__ in out, f"`{doc}` printed {out!r}"
+    if argv[:2] == ["config", "--keys"]:
+        prefix = argv[2] if len(argv) > 2 else ""
+        assert f"{prefix}." in out, f"`{doc}` names no key under {prefix!r}:\n{out[:2000]}"
+
+
 def run_steps(scenario: tuple, folder: Path, capsys) -> None:
     for doc, argv in _steps(scenario):
         rc = main(argv)
         out, err = capsys.readouterr()
         assert rc == 0, f"`{doc}` ({' '.join(argv)}): exit {rc}\n{err[-3000:]}"
+        _prints_what_it_says(doc, argv, out)
         for line in out.splitlines():  # every file it prints as its output is there
             p = line.removeprefix("archive: ").strip()
             if PATHISH.fullmatch(p):
@@ -759,7 +798,9 @@ def test_the_reader_finds_each_kind_of_place():
     for cmd, where in [
         ("designopt ik configs/davinci_ik.yaml --poses docs/davinci_poses.csv", "docs/davinci.md"),
         ("designopt run configs/rcm.yaml", "README.md"),
-        ("python benchmarks/main_job.py --repeat 3", "README.md"),
+        ("python -m pytest -q -n auto --dist loadfile", "README.md"),
+        ("mkdocs serve", "README.md"),
+        ("designopt config --keys optimizer", "docs/reference/config.md"),
         ("designopt report", "docs/faults.md"),
         ("designopt run configs/master9.yaml --out results/master9/master9.h5 --seed 0 --quiet "
          "--resume", "docs/faults.md"),
