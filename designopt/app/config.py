@@ -307,7 +307,15 @@ class Final(_Strict):
     final design (a weighted or constrained run's, each sweep member's) and, with
     ``optimizer.n_runs`` ≥ 2, each run's best design are re-scored together on a fresh,
     independent sample stream (``final``, folded from the root key), never seen by the
-    search."""
+    search. The keys ``seed`` to ``alpha`` set the race that decides between candidate
+    layouts on a validation stream (designopt.numerics.racing: paired differences on
+    common samples, Holm's correction, an equivalence margin per objective, Wilson
+    intervals for share constraints)."""
+
+    MARGIN: ClassVar[float] = 0.01
+    """The default equivalence margin of an index with values in [0, 1] (gci-like)."""
+    SHARE_MARGIN: ClassVar[float] = 0.02
+    """The default equivalence margin of a share (a fraction of targets, e.g. arms_ok)."""
 
     n_samples: int | None = Field(
         None,
@@ -316,6 +324,72 @@ class Final(_Strict):
         "re-scored on a fresh stream the search never saw (default: 4 × the study's "
         "own, at least 30; fewer is refused).",
     )
+    seed: int = Field(
+        20260,
+        ge=0,
+        le=validation.SEED_MAX,
+        description="Key of the validation stream on which candidate layouts are raced: fixed by "
+        "the config and independent of `seed` and `--seed`, so runs at any seed judge their "
+        "candidates on the same targets; its samples are disjoint from the search's.",
+    )
+    max_samples: int = Field(
+        1024,
+        ge=MIN_FINAL_SAMPLES,
+        description="The race's cap: at most this many validation samples per candidate (at "
+        "least 30; fewer is refused). A candidate clearly worse stops earlier.",
+    )
+    stage: int = Field(
+        128,
+        ge=MIN_FINAL_SAMPLES,
+        description="Validation samples added per stage of the race, to every candidate still "
+        "undecided (at least 30, at most `max_samples`); the race looks at the data after "
+        "each stage.",
+    )
+    margin: (
+        Annotated[float, Field(gt=0, allow_inf_nan=False)]
+        | dict[str, Annotated[float, Field(gt=0, allow_inf_nan=False)]]
+        | None
+    ) = Field(
+        None,
+        description="Equivalence margin per objective, in the index's own units: two layouts "
+        "whose difference is shown to be smaller are equal for a surgeon. One number for "
+        "every objective, or a mapping index name → margin (indices not named keep the "
+        "default). Default: 0.01 for an index with values in [0, 1] (e.g. gci), 0.02 for a "
+        "share (e.g. arms_ok). Must be > 0.",
+    )
+    radius: float = Field(
+        0.02,
+        ge=0,
+        allow_inf_nan=False,
+        description="Clearing radius: candidate designs closer than this in the box-normalised "
+        "design space ((x − lower)/(upper − lower), Euclidean) are one candidate, the better "
+        "one standing for both (0: only identical designs merge).",
+    )
+    alpha: float = Field(
+        0.05,
+        gt=0,
+        lt=0.5,
+        allow_inf_nan=False,
+        description="Family-wise error of the race's decisions of each kind (a layout worse; "
+        "two layouts equivalent or a trade-off), split over the race's looks and "
+        "Holm-corrected within each; share constraints are read from Wilson intervals at "
+        "the per-look level.",
+    )
+
+    @model_validator(mode="after")
+    def _stage_within_cap(self) -> Final:
+        if self.stage > self.max_samples:
+            raise ValueError(f"stage: {self.stage} samples per stage exceed max_samples "
+                             f"({self.max_samples}); give at most {self.max_samples}")  # fmt: skip
+        return self
+
+    def margin_of(self, index: str, share: bool = False) -> float:
+        """The equivalence margin of objective ``index`` (``share``: the index is a share,
+        whose default is :attr:`SHARE_MARGIN`)."""
+        default = self.SHARE_MARGIN if share else self.MARGIN
+        if isinstance(self.margin, dict):
+            return float(self.margin.get(index, default))
+        return default if self.margin is None else float(self.margin)
 
 
 class RunConfigBase(_Strict):
