@@ -16,6 +16,11 @@ maximised (F = ±index, all minimised for the optimizer). A multi-objective opti
    own non-dominated final population: ``app.rescoring.front_picks``) is re-scored in the
    same call, on the same stream, and the runs' agreement archived (``runs``).
 
+The re-scoring is the one scoring of every quoted number (``designopt.app.quoted``:
+``eval --fresh`` of a front design gives its archived values bit for bit), and each front
+design gets the warnings a weighted run says of its final design (``quoted.warnings``),
+with, for a task, its IK coverage figure (:func:`design_notes`).
+
 With ``refine: {method: compass}`` each run's recommended design is first polished on
 the search's samples (``app.polishing.front``); the polished designs are the runs'
 recommendations and join the front's candidates.
@@ -145,9 +150,9 @@ def groups(job: Any, problem: Problem, res: Any) -> dict[str, Any]:
     """The groups of a front's record: optimizer (hypervolume history of the best front
     found so far, the populations' hypervolume, final populations and archives), front
     (re-scored designs, objectives ± SE, every index ± SE, ambiguous pairs) and problem."""
+    from designopt.app import quoted
     from designopt.app.scoring import check_finite, placement, problem_group, with_placement
     from designopt.numerics import pareto
-    from designopt.problems.evaluate import score
 
     cfg, where = job.cfg, job.where
     front = cfg.study.pareto
@@ -178,9 +183,10 @@ def groups(job: Any, problem: Problem, res: Any) -> dict[str, Any]:
     c, fresh, n_samples = rescoring(job)
     rescore = rs.problem(job, "front")
     n_front = len(X)
+    n_samples = int(rescore.n_samples_used or n_samples)  # a points file: its points
     if R >= 2:  # each run's recommended design, scored in the same call on the same stream
         X = np.concatenate([X, X_runs])
-    vals = score(rescore, X)
+    vals = quoted.blocked(rescore, X)  # the one scoring of quoted numbers (eval --fresh's)
     for k, w in weights(front, problem.names).items():  # exact: no samples behind them
         vals[k], vals[k + "_se"] = X @ w, np.zeros(len(X))
     na = problem.na_range
@@ -222,6 +228,7 @@ def groups(job: Any, problem: Problem, res: Any) -> dict[str, Any]:
                     "n_samples": n_samples, "n_candidates": int(len(keep)), "z": Z,
                     "units": linear_units(front, job.study.units(cfg.study))}}  # fmt: skip
     with_placement(fr, placement(job.study, cfg.study, X), None)  # ports, bases: (n, ...)
+    fr["attrs"] |= design_notes(job, X, idx, c, fresh)
     out = {"optimizer": opt, "front": fr, "problem": problem_group(problem)}
     if polished is not None:
         out["refine"] = polished
@@ -233,6 +240,47 @@ def groups(job: Any, problem: Problem, res: Any) -> dict[str, Any]:
         if tg is not None:
             out["targets"] = tg
     return out
+
+
+def design_notes(job: Any, X: np.ndarray, vals: Mapping[str, np.ndarray], c: Any,
+                 keys: Mapping[str, Any]) -> dict[str, Any]:  # fmt: skip
+    """The front's attrs on its designs X (n, D) with their re-scored ``vals``, as a
+    weighted run says them of its final design: ``warnings`` (each distinct line of
+    ``quoted.warnings`` once, naming the designs it concerns) and, for a task, each
+    design's IK coverage figure (``quoted.coverage`` on the re-scoring's config ``c`` and
+    ``keys``): ``ik_better`` (n,), ``ik_better_n`` and ``coverage_lines``, the lines of
+    the design whose share is the largest (the worst; its warning, if any, is among the
+    warnings)."""
+    from designopt.app import quoted
+
+    n = len(X)
+    # each design's coverage solves it again (two solves): at most COVERAGE_DESIGNS of
+    # them, evenly along the front where there are more
+    rows = set(range(n)) if n <= COVERAGE_DESIGNS else set(
+        np.unique(np.linspace(0, n - 1, COVERAGE_DESIGNS).round().astype(int)).tolist())
+    covers = [quoted.coverage(job, c.study, X[i], keys) if i in rows else {} for i in range(n)]
+    per = [quoted.warnings(job, {k: np.asarray(v)[i] for k, v in vals.items()}, X[i],
+                           covers[i]) for i in range(n)]  # fmt: skip
+    out: dict[str, Any] = {}
+    warns = quoted.grouped(per, "front design")
+    if warns:
+        out["warnings"] = warns
+    if n and any(cv and "ik_better" in cv for cv in covers):
+        share = [float(cv["ik_better"]) if cv else float("nan") for cv in covers]
+        w = int(np.nanargmax(share))
+        of = (f"the worst of the {n}" if len(rows) == n else
+              f"the worst of the {len(rows)} checked, evenly along the {n}")  # fmt: skip
+        out |= {"ik_better": share, "ik_better_n": float(covers[w]["ik_better_n"]),
+                "coverage_lines": [f"front design #{w}, {of}: {ln}" if n > 1 else ln
+                                   for ln in covers[w]["lines"]]}  # fmt: skip
+    return out
+
+
+COVERAGE_DESIGNS = 6
+"""A front's IK coverage figure (:func:`design_notes`) is measured for at most this many
+of its designs, evenly along the front where it holds more: each is solved twice more
+through the study's one-design ``targets`` hook (about 5 s a design on the shipped
+planning case, configs/port_placement.yaml, on a 2-core CPU)."""
 
 
 def runs_group(job: Any, problem: Problem, vals: dict[str, np.ndarray], X: np.ndarray,

@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from designopt.app import checkpoint as ckpt
-from designopt.app import fronts, rescoring
+from designopt.app import fronts, quoted, rescoring
 from designopt.app.designs import Designs, matrix, scan_designs
 from designopt.app.job import Job, base_attrs, build_problem
 from designopt.app.optimise import optimise
@@ -41,7 +41,6 @@ from designopt.core.timing import Stopwatch
 from designopt.io import archive, writer
 from designopt.problems.evaluate import score
 from designopt.results import FrontRecord, Record, ReplayRecord, RunRecord, ScanRecord, SweepRecord
-from designopt.results.base import na_warnings
 
 Progress = Callable[[int | None, str], contextlib.AbstractContextManager[Callable[[int], None]]]
 """``progress(total, desc)``: a context giving ``update(n)`` for ``total`` iterations, or
@@ -99,16 +98,15 @@ def _writing(out: Path | None, cfg: Any, est: Estimate) -> Iterator[writer.Sessi
 
 
 def warnings(job: Job, final: dict[str, Any], targets: dict[str, Any] | None = None) -> None:
-    """A final group's ``warnings`` attr: the study's lines on the (fresh) values, a line
-    for every n/a index (``results.base.na_warnings``), the optimism lines of
-    :func:`designopt.app.rescoring.final_groups` (attr ``optimism``, then dropped) and
-    the ``warnings`` attr of the final design's ``targets`` group (the study's
-    ``targets`` hook: a task's IK coverage)."""
+    """A final group's ``warnings`` attr, decided by :func:`designopt.app.quoted.warnings`
+    (the one rule of every run kind): the study's lines on the (fresh) values, a line for
+    every n/a index, the optimism lines of :func:`designopt.app.rescoring.final_groups`
+    (attr ``optimism``, then dropped) and the IK coverage's (the ``warnings`` attr of the
+    final design's ``targets`` group: the study's ``targets`` hook)."""
     at = final.setdefault("attrs", {})
-    own = list(job.study.warnings(job.cfg.study, final))
-    tw = (targets or {}).get("attrs", {}).get("warnings", [])
-    warn = (na_warnings(final, own) + list(at.pop("optimism", []))
-            + ([tw] if isinstance(tw, str) else list(tw)))
+    vals = {k: v for k, v in final.items() if k not in ("attrs", "x")}
+    warn = quoted.warnings(job, vals, final.get("x"), (targets or {}).get("attrs", {}),
+                           list(at.pop("optimism", [])))  # fmt: skip
     if warn:  # far from what was asked: archived, printed, shown, marked on figures
         at["warnings"] = list(warn)
 
@@ -412,18 +410,28 @@ def compare(cfg: Any, designs: list[Mapping[str, float]], where: str = "config",
     {index: value, index_se: paired SE}}], "replicas": replicas, "n_samples": samples per
     design}. A variable outside the box: ConfigError naming it.
 
-    ``fresh``: on the fresh ``final`` stream (``final.n_samples`` per design, the run's
-    normalisation; ``designopt.app.rescoring``) a run quotes its final design on, so the
-    final design's values are the archive's ``final/``; the replicas fold from it."""
+    Each design's values come with its ``warnings`` (``designopt.app.quoted.warnings``,
+    the rule of every run kind) and, for a task, its IK coverage figure (``coverage``:
+    ``ik_better``, ``ik_better_n``, ``lines``, ``warnings``; ``quoted.coverage``).
+
+    ``fresh``: on the fresh stream a run of this config quotes its values on
+    (``quoted.section``: ``final``, ``final.n_samples`` per design with the run's
+    normalisation; a front's ``front``, ``front.n_samples``), scored by the function
+    that scored them (``quoted.score``), so a run's final design (a front's design)
+    gives the archive's ``final/`` (``front/``) values bit for bit; the replicas fold
+    from it. The result's ``stream`` names the samples: ``final``, ``front`` or ``search``
+    (the study's own)."""
     import jax
 
     job = Job.build(cfg, where, n_designs=len(designs))
-    base_cfg, base_keys = cfg, job.keys
+    base_cfg, base_keys, stream = cfg, job.keys, "search"
+    search = None
     if fresh:  # the run's normalisation: its search's (optimizer.fidelity's settings)
-        fr = rescoring.plan(job, "final")
-        search = job.search_problem
-        problem = rescoring.problem(job, "final", search)
+        fr = quoted.stream(job)
+        search = job.search_problem if fr.section == "final" else None  # a front: f moot
+        problem = quoted.problem(job, search)
         base_cfg, base_keys, n_used = fr.cfg, fr.keys, int(problem.n_samples_used or fr.n)
+        stream = fr.section
     else:
         problem = job.problem
         n_used = int(problem.n_samples_used)
@@ -436,24 +444,25 @@ def compare(cfg: Any, designs: list[Mapping[str, float]], where: str = "config",
     X = matrix(problem, list(designs), where)
     front = getattr(cfg.study, "pareto", None) is not None
 
-    def scored(prob: Any) -> dict[str, np.ndarray]:
-        res = {k: np.asarray(v, np.float64) for k, v in score(prob, X, batch=len(X)).items()}
+    def scored(prob: Any) -> dict[str, np.ndarray]:  # quoted.blocked: a run's own scoring
+        res = {k: np.asarray(v, np.float64) for k, v in quoted.blocked(prob, X).items()}
         return {k: v for k, v in res.items() if not (front and k in ("f", "f_se"))}
 
     res = scored(problem)
     units = dict(job.study.units(cfg.study))
     placed = placement(job.study, cfg.study, X)
     out: dict[str, Any] = {"designs": [], "differences": [], "replicas": int(replicas),
-                           "n_samples": n_used}  # fmt: skip
+                           "n_samples": n_used, "stream": stream}  # fmt: skip
     for i, d in enumerate(designs):
         vals = {k: float(v[i]) for k, v in res.items()}
         x = dict(zip(problem.names, X[i].tolist(), strict=True))
         pl = {k: placed[k][i] for k in placed.get("attrs", {}).get("placement", [])}
-        warns = na_warnings(vals, job.study.warnings(cfg.study, vals | {"x": X[i]}))
+        cover = quoted.coverage(job, base_cfg.study, X[i], base_keys)
+        warns = quoted.warnings(job, vals, X[i], cover)
         lines = list(job.study.extra_lines(cfg.study, pl)) if pl else []
         out["designs"].append({"design": x, "filled": [n for n in problem.names if n not in d],
                                "values": vals, "warnings": warns, "units": units,
-                               "placement": pl, "lines": lines})  # fmt: skip
+                               "placement": pl, "lines": lines, "coverage": cover})  # fmt: skip
     if len(designs) < 2:
         return out
     names = [k for k in res if k + "_se" in res]
@@ -462,7 +471,8 @@ def compare(cfg: Any, designs: list[Mapping[str, float]], where: str = "config",
     for r in range(replicas):  # the same designs on independent sample sets
         keys = dict(base_keys) | {"samples": jax.random.fold_in(root, r)}
         prob = build_problem(base_cfg, keys, where, job.dtype)
-        rep = scored(rescoring.same_normalisation(prob, search) if fresh else prob)
+        rep = scored(rescoring.same_normalisation(prob, search)
+                     if fresh and stream == "final" else prob)  # fmt: skip
         diffs.append({k: rep[k][1:] - rep[k][0] for k in names})
     for j in range(len(designs) - 1):
         vals: dict[str, float] = {}

@@ -38,6 +38,7 @@ import numpy as np
 
 from designopt.core.errors import ConfigError
 from designopt.problems.base import Problem
+from designopt.problems.evaluate import score
 from designopt.results.base import SEARCH_LABEL
 
 FRONT_STREAM = 0x46524F4E  # "FRON"
@@ -53,6 +54,11 @@ FLAT = 0.10
 than this share of its box."""
 MIN_DEFAULT = 30
 """The default re-scoring is 4 × the study's samples, and at least this many."""
+BLOCK = 8
+"""Designs per scoring call of a quoted number (:func:`blocked`) for a problem scored in
+one program (a study with its own block program, ``Problem.staged``, scores in its
+blocks): every call holds this many rows, the last one padded with copies of its last
+design."""
 
 
 @dataclasses.dataclass
@@ -122,6 +128,22 @@ def stream(cfg: Any, study: Any, keys: Mapping[str, Any], section: str = "final"
     fresh = dict(keys) | {"samples": jax.random.fold_in(jax.random.key(cfg.seed),
                                                         STREAMS[section])}  # fmt: skip
     return Fresh(section, c, fresh, n, int(cost.samples))
+
+
+def blocked(prob: Problem, X: np.ndarray) -> dict[str, np.ndarray]:
+    """Every value of designs X (n, D) on ``prob``, scored in calls of :data:`BLOCK`
+    designs (a staged problem: of its own block), each padded with copies of its last
+    design: one compiled program for any n, and row i's values those of design i alone."""
+    X = np.atleast_2d(np.asarray(X, np.float64))
+    B = prob.staged.designs if prob.staged is not None else BLOCK
+    parts = []
+    for i in range(0, len(X), B):
+        Xi = X[i : i + B]
+        k = len(Xi)
+        if k < B:
+            Xi = np.concatenate([Xi, np.repeat(Xi[-1:], B - k, 0)])
+        parts.append({key: np.asarray(v)[:k] for key, v in score(prob, Xi, batch=B).items()})
+    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
 
 def problem(job: Any, section: str = "front", like: Problem | None = None) -> Problem:
@@ -263,8 +285,6 @@ def final_groups(job: Any, problem: Problem, res: Any, groups: dict[str, Any],
     design on the common stream with the agreement; the optimism lines go to
     ``final`` attrs ``optimism`` (the caller adds them to its warnings). ``ref``: the
     best run (default ``best_run`` attrs ``run_index``)."""
-    from designopt.problems.evaluate import score
-
     fr = plan(job, "final")
     fresh = problem_for(job, problem)
     fin = groups["final"]
@@ -279,7 +299,7 @@ def final_groups(job: Any, problem: Problem, res: Any, groups: dict[str, Any],
         best[np.asarray(pol["run_index"], np.int64)] = pol["x"]
         pick += ", polished by a compass search on the search's samples (refine)"
     X = np.concatenate([best, x_final[None]]) if runs else x_final[None]
-    vals = score(fresh, X)
+    vals = blocked(fresh, X)  # the one scoring of quoted numbers (eval --fresh's)
     own = {k: v for k, v in fin.items() if k not in ("x", "attrs")}  # the search's values
     at = dict(fin.get("attrs", {}))
     fid = dict(job.cfg.optimizer.fidelity)

@@ -190,8 +190,12 @@ def cmd_eval(args: argparse.Namespace) -> int:
     else:
         _print_many(out, box, units)
     if fresh:
-        print(f"scored on the fresh stream a run quotes its final design on ({out['n_samples']} "
-              "samples per design; the run's normalisation)")  # fmt: skip
+        which = ("a front's designs (the front stream, front.n_samples" if out["stream"] == "front"
+                 else "its final design (the final stream, final.n_samples")  # fmt: skip
+        print(f"scored on the fresh stream a run quotes {which}: {out['n_samples']} samples "
+              "per design), with the study's own settings"
+              + ("" if out["stream"] == "front" else " and the run's normalisation")
+              + ": the run's quoted values, bit for bit")  # fmt: skip
     front = getattr(st, "pareto", None)
     if front is not None:
         from designopt.app.config import senses
@@ -226,12 +230,17 @@ def _eval_json(out: dict[str, Any], one: bool) -> Any:
         if "violation" in r:
             r["feasible"] = bool(r["violation"] <= 0)
         r |= dict(d["placement"]) | {"warnings": d["warnings"]}
+        cov = d.get("coverage") or {}
+        if cov:  # a task's IK coverage figure: the share and its line
+            r |= {"ik_better": cov.get("ik_better"), "ik_better_n": cov.get("ik_better_n"),
+                  "ik_coverage": list(cov.get("lines", []))}  # fmt: skip
         rows.append(r if one else {"design": d["design"], "middle_of_box": d["filled"]} | r)
     if one:
         return _finite(rows[0])
     diffs = [{"of": [a + 1, b + 1]} | x["values"] for x in out["differences"]
              for a, b in [x["of"]]]  # fmt: skip
-    return _finite({"designs": rows, "differences": diffs,
+    return _finite({"designs": rows, "differences": diffs, "stream": out["stream"],
+                    "n_samples": out["n_samples"],
                     "paired_se": f"the standard deviation of each difference over the run's "
                                  f"samples and {out['replicas']} further independent sample "
                                  "sets, the designs scored together on each"})  # fmt: skip
@@ -272,6 +281,8 @@ def _tail(d: dict[str, Any], label: str = "") -> None:
     res = d["values"]
     for line in d.get("lines", []):
         print(line)
+    for line in (d.get("coverage") or {}).get("lines", []):  # a task's IK coverage figure
+        print(f"{label}{line}")
     if "violation" in res:
         v = res["violation"]
         print(f"{label}constraints: " + ("feasible" if v <= 0 else
@@ -309,7 +320,7 @@ def _print_many(out: dict[str, Any], box: Any, units: dict[str, str]) -> None:
           f"(and on {out['replicas']} further independent sample sets: the SE is the spread "
           "of the difference over them)")  # fmt: skip
     for i, d in enumerate(ds):
-        if d.get("lines") or "violation" in d["values"] or d["warnings"]:
+        if d.get("lines") or "violation" in d["values"] or d["warnings"] or d.get("coverage"):
             print(f"design {i + 1}:")
             _tail(d, "  ")
 
@@ -558,9 +569,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     e.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     e.add_argument("--fresh", action="store_true",
-                   help="score on the fresh sample stream a run quotes its final design on "
-                        "(final.n_samples per design; the run's final/ values), not the "
-                        "search's samples")  # fmt: skip
+                   help="score on the fresh sample stream a run of this config quotes its "
+                        "values on, with the study's own settings: a run's final design's "
+                        "(final.n_samples per design; its final/ values), a front's designs' "
+                        "(front.n_samples; front/), bit for bit; not the search's samples")  # fmt: skip
     e.set_defaults(func=cmd_eval)
     st = sub.add_parser("studies", help="list the registered studies")
     st.set_defaults(func=cmd_studies)

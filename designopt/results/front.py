@@ -215,8 +215,29 @@ class FrontRecord(Record):
                          f"{SEARCH_LABEL}: distance to the ideal point (objectives scaled to "
                          f"[0, 1]) {d0} → {d} ({int(at['iterations'])} iterations, "
                          f"{int(at['evaluations'])} designs scored)")  # fmt: skip
+        lines += self.coverage_lines
         lines += runs_lines(self.runs, self.names, self.units())
+        warns = self.warnings
+        lines += [f"warning: {w}" for w in warns[:SHOWN]]
+        if len(warns) > SHOWN:  # a front trading reach: a line per design; all archived
+            lines.append(f"  ({len(warns) - SHOWN} more warnings of the front's designs in "
+                         "the archive: front attr warnings, and on the HTML report)")  # fmt: skip
         return lines
+
+    @property
+    def warnings(self) -> list[str]:
+        """What a weighted run would say of its final design, said of each front design
+        it concerns (each distinct line once, naming the designs: ``front`` attr
+        ``warnings``; ``designopt.app.quoted.warnings``); empty when none."""
+        w = self.groups["front"].get("attrs", {}).get("warnings", [])
+        return [w] if isinstance(w, str) else [str(x) for x in w]
+
+    @property
+    def coverage_lines(self) -> list[str]:
+        """A task front's IK coverage figure: the lines of its worst design (``front``
+        attr ``coverage_lines``; each design's share in attr ``ik_better``)."""
+        w = self.groups["front"].get("attrs", {}).get("coverage_lines", [])
+        return [w] if isinstance(w, str) else [str(x) for x in w]
 
     @property
     def runs(self) -> dict[str, Any] | None:

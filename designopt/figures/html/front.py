@@ -28,7 +28,7 @@ from designopt.figures.html.model import (
     esc,
 )
 from designopt.figures.html.plots import _convergence, _index_names, _lab, _layout, _rgba
-from designopt.figures.html.run import placement_table
+from designopt.figures.html.run import notes_html, placement_table
 
 
 def _pairs(amb: Any, n: int) -> np.ndarray:
@@ -206,6 +206,10 @@ def _front(tree: Mapping[str, Any], ids: _Ids, units: dict[str, str]) -> list[Pa
                      "there.</p>" + _table(["index", "sense"], rows))  # fmt: skip
     if X.shape[1]:
         sec.items.append(_designs(fr, prob, X, vnames, axl, vals, others, keep, ids, units))
+    at = fr.get("attrs", {})  # what a weighted run says of its final design, per design
+    notes = notes_html(at.get("coverage_lines", []), at.get("warnings", []))
+    if notes:
+        sec.items.append(notes)
     placed = placement_table(fr, front=True)
     if placed:  # each design's placement in numbers (e.g. a planning case's ports, bases)
         sec.items.append("<p class='note'>Where each design (its row in the archive's "

@@ -199,11 +199,8 @@ def _final_tables(tree: Mapping[str, Any], units: dict[str, str]) -> str:
                      "study gives it (lengths in the chain's unit, angles in degrees)</p>"
                      + placed)  # fmt: skip
     at = fin.get("attrs", {})
-    warns = at.get("warnings", [])
-    warns = json.loads(warns) if isinstance(warns, str | bytes) else list(warns)
-    if warns:  # what run and show print, on the page too
-        parts.append("<h3>Warnings</h3><ul>" + "".join(f"<li>{esc(_s(w))}</li>" for w in warns)
-                     + "</ul>")  # fmt: skip
+    cover = tree.get("targets", {}).get("attrs", {}).get("lines", [])  # a task's IK coverage
+    parts.append(notes_html(cover, at.get("warnings", [])))
     cap = f"stage: {_s(at['stage'])}" if "stage" in at else ""
     fresh = _s(at.get("samples", "")) == "fresh"
     if "n_samples_used" in at:
@@ -224,6 +221,34 @@ def _final_tables(tree: Mapping[str, Any], units: dict[str, str]) -> str:
     parts.append("<h3>Final indices (± 1 SE)</h3>" + (f"<p class='note'>{esc(cap)}</p>" if cap else "")
                  + _table([*head, "unit"], rows))  # fmt: skip
     return "".join(parts)
+
+
+def _texts(v: Any) -> list[str]:
+    """An attr holding text lines (a list, one string, or JSON of a list) as a list."""
+    if v is None:
+        return []
+    if isinstance(v, bytes):
+        v = v.decode()
+    if isinstance(v, str):
+        try:
+            v = json.loads(v)
+        except ValueError:
+            return [v]
+        return [str(v)] if isinstance(v, str) else [_s(w) for w in v]
+    return [_s(w) for w in np.atleast_1d(np.asarray(v, dtype=object)).tolist()] if len(v) else []
+
+
+def notes_html(coverage: Any, warnings: Any) -> str:
+    """The IK coverage figure's lines (a task's) and the ``warning:`` lines of a scored
+    design (a run's final design, a front's designs) as the page shows them: what
+    ``run`` and ``show`` print, on the page too."""
+    cov, warns = _texts(coverage), _texts(warnings)
+    out = ""
+    if cov:
+        out += "<h3>IK coverage</h3>" + "".join(f"<p class='note'>{esc(c)}</p>" for c in cov)
+    if warns:
+        out += "<h3>Warnings</h3><ul>" + "".join(f"<li>{esc(w)}</li>" for w in warns) + "</ul>"
+    return out
 
 
 def _runs(tree: Mapping[str, Any], units: dict[str, str]) -> PageSection:
