@@ -16,7 +16,12 @@ from typing import Any
 
 from designopt.core.errors import ConfigError, WriteError
 
-__version__ = "0.2.0"
+try:  # one source of the version: pyproject.toml, as pip installed it
+    from importlib.metadata import version as _dist_version
+
+    __version__ = _dist_version("designopt")
+except Exception:  # a source tree on sys.path, not installed  # noqa: BLE001
+    __version__ = "unknown"
 
 API = ("load_config", "run", "scan", "evaluate", "load")
 

@@ -118,11 +118,12 @@ def test_the_planning_case_passes_and_says_nothing():
     ({"shape": "mesh", "file": str(ROOT / "configs" / "data" / "abdomen.stl")},
      ["-px", "py0", 30], ["30 looks like centimetres", "write 0.3", "bounding box's diagonal"]),
     ({"shape": "ellipsoid", "center": [0, 0, 0.06], "radii": [0.2, 0.25, 0.12]},
-     ["-px", "py0", 0.8], ["arms.0.port:", "check the port's coordinates and their unit"]),
+     ["-px", "py0", 0.88], ["arms.0.port:", "check the port's coordinates and their unit"]),
 ])  # fmt: skip
 def test_a_unit_slip_on_every_kind_of_wall(wall, port, words):
     """A half-space wall is measured from the task region; a mesh by its size; a port
-    0.6 m off an ellipsoid is far (refused), but it is no slip of a unit."""
+    0.7 m above an ellipsoid (beyond its bounding box's 0.684 m diagonal) is far (refused),
+    but no slip of a unit (0.88 is under plancheck.SLIP × the wall's 0.18 m reach along z)."""
 
     def edit(r):
         r["study"]["task"]["body_wall"] = wall

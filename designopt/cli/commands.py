@@ -509,11 +509,23 @@ def _item(word: str) -> bool:
     return "=" in word and not word.startswith("-")
 
 
+def _version() -> str:
+    """The installed distribution's version (the package's metadata, as pip installed it)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("designopt")
+    except PackageNotFoundError:  # a source tree on sys.path, not installed
+        return "unknown (not installed)"
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = Parser(
         prog="designopt",
         description="Vectorized JAX design-space optimizer for surgical-robot mechanisms.",
     )
+    ap.add_argument("--version", action="version", version=f"designopt {_version()}",
+                    help="print the installed version and exit")  # fmt: skip
     sub = ap.add_subparsers(dest="command", required=True, parser_class=Parser)
 
     def common(p, seed=True, out=True, quiet=True, figures=True, dry=True):
@@ -582,10 +594,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     common(b, figures=False, dry=False)
     b.set_defaults(func=cmd_bench)
-    from designopt.cli import ik
+    from designopt.cli import ik, reference
     from designopt.studies import STUDIES
 
     ik.add_parser(sub)  # one `ik` for every study with Study.ik
+    reference.add_parser(sub)  # `designopt config --keys [PREFIX]`: the schema's reference
     for study in STUDIES.values():
         for c in study.commands:
             q = sub.add_parser(c.name, help=c.help, description=c.description or None)

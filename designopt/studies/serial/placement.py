@@ -9,6 +9,19 @@ from typing import Any
 from designopt.studies.serial.settings import SerialSettings, length_unit
 
 
+def entry_range(s: SerialSettings, v: float | str) -> tuple[float, float]:
+    """One base or port entry's range over the design box: a number, a variable's box, a
+    fixed value, or minus one of these ("-b")."""
+    if not isinstance(v, str):
+        return float(v), float(v)
+    name = v.removeprefix("-")
+    if name in s.variables:
+        lo, hi = (float(w) for w in s.variables[name])
+    else:
+        lo = hi = float(s.fixed[name])
+    return (-hi, -lo) if v.startswith("-") else (lo, hi)
+
+
 def entries(s: SerialSettings, row: Any, X: Any) -> Any:
     """Base or port entries (numbers, fixed values, design variables, "-name") as numbers
     (n, len(row)) for designs ``X`` (n, D) (config units; ``settings.entry_value``'s rule,
@@ -72,3 +85,22 @@ def placement(s: SerialSettings, X: Any) -> dict[str, Any] | None:
     return out | {"attrs": {"length_unit": u, "wall": wall,
                             "columns": {k: cols[k] for k in out},
                             "titles": {k: titles[k] for k in out}}}  # fmt: skip
+
+
+def ports_of(s: SerialSettings, k: int, designs: list[dict[str, float] | None]) -> Any:
+    """Arm ``k``'s port (D, 3) at each design (a mapping of the design variables), on
+    ``task.body_wall`` when there is one (the projection the objective makes)."""
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    from designopt.kinematics import wall as kw
+    from designopt.studies.serial.settings import port_at
+
+    p = np.asarray([port_at(s, k, d) for d in designs], np.float64)
+    wall = s.task.body_wall  # type: ignore[union-attr]
+    if wall is None:
+        return p
+    dt = jnp.float64 if jax.config.jax_enable_x64 else jnp.float32
+    return np.asarray(kw.project(wall.shape, kw.wall_params(wall, dt), jnp.asarray(p, dt)),
+                      np.float64)  # fmt: skip

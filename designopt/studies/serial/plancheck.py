@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from designopt.kinematics import task as tk
+from designopt.studies.serial.placement import entry_range, ports_of
 from designopt.studies.serial.settings import SerialSettings, entry_value, length_unit
 
 HALFSPACE_FACTOR = 4.0
@@ -119,11 +120,11 @@ def wall_distance(wall: Any, P: Any) -> np.ndarray:
 
 
 def wall_size(wall: Any, region: Any = None) -> tuple[float, str]:
-    """(the wall's size, what it is): an ellipsoid's largest semi-axis, a mesh's bounding
-    box diagonal; for a half-space :data:`HALFSPACE_FACTOR` × (the task region's bounding
+    """(the wall's size, what it is): the diagonal of an ellipsoid's or a mesh's bounding
+    box; for a half-space :data:`HALFSPACE_FACTOR` × (the task region's bounding
     radius + its centre's distance from the plane)."""
     if wall.shape == "ellipsoid":
-        return float(max(wall.radii)), "its largest semi-axis"
+        return float(2 * np.linalg.norm(wall.radii)), "its bounding box's diagonal"
     if wall.shape == "mesh":
         v, _ = _mesh_world(wall)
         return float(np.linalg.norm(v.max(0) - v.min(0))), "its bounding box's diagonal"
@@ -240,22 +241,9 @@ def inside_shares(s: SerialSettings) -> dict[int, float]:
 # ------------------------------------------------------------------ the design box
 
 
-def _entry_range(s: SerialSettings, v: float | str) -> tuple[float, float]:
-    """One entry's range over the design box (a number, a variable's box, a fixed value,
-    or minus one of these)."""
-    if not isinstance(v, str):
-        return float(v), float(v)
-    name = v.removeprefix("-")
-    if name in s.variables:
-        lo, hi = (float(w) for w in s.variables[name])
-    else:
-        lo = hi = float(s.fixed[name])
-    return (-hi, -lo) if v.startswith("-") else (lo, hi)
-
-
 def _corners(s: SerialSettings, entries: Sequence[float | str]) -> np.ndarray:
     """The corners (K, 3) of the box the entries span over the design box."""
-    r = [_entry_range(s, v) for v in entries]
+    r = [entry_range(s, v) for v in entries]
     return np.unique(np.array(list(itertools.product(*r)), np.float64), axis=0)
 
 
@@ -320,7 +308,7 @@ def _slip(s: SerialSettings, entries: Sequence[float | str], size: float,
     ``size`` of the wall."""
     u = length_unit(s)
     big = [i for i, v in enumerate(entries)
-           if max(map(abs, _entry_range(s, v))) > SLIP * bound[i]]  # fmt: skip
+           if max(map(abs, entry_range(s, v))) > SLIP * bound[i]]  # fmt: skip
     if not big:
         return None
     here = UNITS.get(u)
@@ -329,7 +317,7 @@ def _slip(s: SerialSettings, entries: Sequence[float | str], size: float,
     for w, f in sorted(cands, key=lambda c: -c[1]):  # the nearest unit first: cm before mm
         if w == "µm":
             continue
-        r = [_entry_range(s, v) for v in entries]
+        r = [entry_range(s, v) for v in entries]
         r = [(a * f, b * f) if i in big else (a, b) for i, (a, b) in enumerate(r)]
         corners = np.array(list(itertools.product(*r)), np.float64)
         if np.all(_far(s, corners) <= size):
@@ -500,7 +488,7 @@ def _check_bases(s: SerialSettings) -> None:
             key = arm_key or solid_key  # one arm: its base is the world's origin
             tried = list(designs)
             if box:
-                lo, hi = (np.array(r) for r in zip(*(_entry_range(s, v) for v in xyz),
+                lo, hi = (np.array(r) for r in zip(*(entry_range(s, v) for v in xyz),
                                                     strict=True))  # fmt: skip
                 for p in _probes(shape, lo, hi):
                     tried.append(designs[0] | {n: (-p[i] if str(xyz[i]).startswith("-") else p[i])
@@ -558,9 +546,7 @@ def incisions(s: SerialSettings, final: Mapping[str, Any]) -> np.ndarray | None:
     if len(xv) != len(s.variables):
         return None
     design = dict(zip(s.variables, xv.tolist(), strict=True))
-    from designopt.studies.serial import reach
-
-    return np.stack([reach.ports_of(s, k, [design])[0] for k in range(len(ports))])
+    return np.stack([ports_of(s, k, [design])[0] for k in range(len(ports))])
 
 
 def warnings(s: SerialSettings, final: Mapping[str, Any]) -> list[str]:

@@ -14,7 +14,9 @@ import numpy as np
 
 from designopt.kinematics import task as tk
 from designopt.kinematics.urdf import rpy_matrix
+from designopt.studies.serial import plancheck
 from designopt.studies.serial.mechanism import build
+from designopt.studies.serial.placement import entry_range, ports_of
 from designopt.studies.serial.settings import SerialSettings, length_unit
 
 REACH_WARNING = 0.95
@@ -43,6 +45,7 @@ def check(s: SerialSettings) -> None:
     if s.task is None:
         return
     _check_reach(s)  # first: a region out of reach is the cause, whatever the ports say
+    plancheck.check(s)  # a unit slip is named before _check_ports finds a port off the wall
     _check_ports(s)
     if s.collision is not None:
         from designopt.studies.serial import bodies
@@ -81,23 +84,10 @@ def _check_reach(s: SerialSettings) -> None:
         )
 
 
-def _entry_range(s: SerialSettings, v: float | str) -> tuple[float, float]:
-    """The range of one base entry over the design box: a number, a variable's box, a
-    fixed value, or minus one of these ("-b")."""
-    if not isinstance(v, str):
-        return float(v), float(v)
-    name = v.removeprefix("-")
-    if name in s.variables:
-        lo, hi = (float(w) for w in s.variables[name])
-    else:
-        lo = hi = float(s.fixed[name])
-    return (-hi, -lo) if v.startswith("-") else (lo, hi)
-
-
 def base_range(s: SerialSettings, k: int) -> tuple[np.ndarray, np.ndarray]:
     """(lower (3,), upper (3,)): the box that arm ``k``'s base origin stays in over the
     design box (each ``xyz`` entry's own range; the chain's length unit)."""
-    r = [_entry_range(s, v) for v in s.arms[k].base.xyz]  # type: ignore[index]
+    r = [entry_range(s, v) for v in s.arms[k].base.xyz]  # type: ignore[index]
     return np.array([a for a, _ in r]), np.array([b for _, b in r])
 
 
@@ -191,8 +181,8 @@ PORT_DESIGNS = 64
 a port that the design moves is checked before a run."""
 WALL_TOL = 1e-6
 """A port given as numbers lies on ``task.body_wall`` when within this share of the
-wall's size (its largest semi-axis, or 1 for a plane; a mesh wall's bounding-box diagonal)
-of its surface."""
+wall's size (an ellipsoid's largest semi-axis, or 1 for a plane; a mesh wall's bounding-box
+diagonal) of its surface."""
 
 
 def port_designs(s: SerialSettings) -> list[dict[str, float] | None]:
@@ -211,29 +201,6 @@ def port_designs(s: SerialSettings) -> list[dict[str, float] | None]:
         if len(names) <= 6 else np.zeros((0, len(names)))  # fmt: skip
     u = np.concatenate([corners, np.random.default_rng(0).uniform(size=(PORT_DESIGNS, len(names)))])
     return [mid] + [mid | dict(zip(names, (lo + w * (hi - lo)).tolist(), strict=True)) for w in u]
-
-
-def ports_of(s: SerialSettings, k: int, designs: list[dict[str, float] | None]) -> np.ndarray:
-    """Arm ``k``'s port (D, 3) at each design, on ``task.body_wall`` when there is one."""
-    from designopt.studies.serial.settings import port_at
-
-    p = np.asarray([port_at(s, k, d) for d in designs], np.float64)
-    wall = s.task.body_wall  # type: ignore[union-attr]
-    if wall is None:
-        return p
-    import jax.numpy as jnp
-
-    from designopt.kinematics import wall as kw
-
-    dt = jnp.float64 if _x64() else jnp.float32
-    return np.asarray(kw.project(wall.shape, kw.wall_params(wall, dt), jnp.asarray(p, dt)),
-                      np.float64)  # fmt: skip
-
-
-def _x64() -> bool:
-    import jax
-
-    return bool(jax.config.jax_enable_x64)
 
 
 def _check_ports(s: SerialSettings) -> None:
@@ -420,7 +387,7 @@ def warnings(s: SerialSettings, final: Mapping[str, Any]) -> list[str]:
     if na:  # f is then a search value: the worst end of each n/a term's range
         out.append(f"f: its term(s) {', '.join(na)} n/a; f counts each at the worst end of "
                    "its range (the value a search ranks it by), not an estimate")  # fmt: skip
-    return out
+    return out + plancheck.warnings(s, final)  # incisions too close; targets in the anatomy
 
 
 def _arm_warnings(s: SerialSettings, final: Mapping[str, Any]) -> list[str]:
