@@ -8,6 +8,10 @@ excluded, best of ``--repeat``). Float64, one design, one process; the machine's
 printed with the numbers.
 
     python benchmarks/accuracy.py [--repeat 3]
+
+The task indices (gci, gci_q05, manipulability, joint_margin, clearance, the arms' shares at
+the IK's solutions) are checked the other way, by their spread over seeds against the
+printed SE: benchmarks/se_honesty.py.
 """
 
 from __future__ import annotations

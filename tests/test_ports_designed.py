@@ -232,17 +232,24 @@ def test_instrument_angle_is_the_angle_of_the_two_port_lines():
         ax = np.asarray(per["axis"])[k, 0]
         np.testing.assert_allclose(ax[ok[k, 0]], line[ok[k, 0]], atol=1e-7)
     est = taskindex.estimates_of(s, mech, per, params)
-    # the tuples: arm 1's targets permuted as taskindex draws them
+    # the tuples: arm 1's targets paired as taskindex pairs them (within a replication group)
     key = jax.random.fold_in(params["sample_key"], 2)
-    perm = np.asarray(jax.random.permutation(jax.random.fold_in(key, 1), len(t)))
+    R, run = taskindex.groups(s)
+    lab = np.arange(len(t)) // run % R  # target t's replication group
+    perm = np.asarray(taskindex.perms(key, len(t), jnp.asarray(lab), 2)[1])
+    assert np.all(lab[perm] == lab) and not np.any(perm == np.arange(len(t)))
     u0 = t - ports[0]
     u1 = t[perm] - ports[1]
     cos = np.sum(u0 * u1, 1) / np.linalg.norm(u0, axis=1) / np.linalg.norm(u1, axis=1)
     ang = np.degrees(np.arccos(np.clip(cos, -1, 1)))
     both = ok[0, 0] & ok[1, 0][perm]
     np.testing.assert_allclose(float(est["instrument_angle"][0][0]), ang[both].mean(), atol=1e-5)
-    se = ang[both].std(ddof=1) / np.sqrt(both.sum())
-    assert 0.8 * se < float(est["instrument_angle"][1][0]) < 1.25 * se
+    # its SE: batch means over the R groups (the ratio estimator Σ angle / Σ both)
+    Y = np.bincount(lab, np.where(both, ang, 0.0), R)
+    X = np.bincount(lab, both.astype(float), R)
+    r = Y.sum() / X.sum()
+    se = np.sqrt(np.sum((Y - r * X) ** 2) / (R * (R - 1))) / (X.sum() / R)
+    np.testing.assert_allclose(float(est["instrument_angle"][1][0]), se, rtol=1e-9)
     assert 0 < float(est["instrument_ok"][0][0]) <= float(est["arms_ok"][0][0])
 
 
@@ -268,8 +275,12 @@ def test_a_port_is_projected_onto_a_mesh_wall_within_the_grid_bound():
     assert np.all(np.linalg.norm(q - p, axis=1) <= near + 2 * wall.grid().bound())
 
 
-def test_a_port_of_numbers_off_a_mesh_wall_is_refused(tmp_path, capsys):
-    cfg = _puma([0.5, 0.1, -0.2])
+@pytest.mark.parametrize("z,needle", [
+    (-0.3, "off task.body_wall"),  # 7 cm above the organ (0.154 m across): off the wall
+    (-0.2, "farther than the wall's size"),  # 17 cm above: far off, a unit to check
+])  # fmt: skip
+def test_a_port_of_numbers_off_a_mesh_wall_is_refused(tmp_path, capsys, z, needle):
+    cfg = _puma([0.5, 0.1, z])
     cfg["study"]["task"]["body_wall"] = {"shape": "mesh", "file": str(ROOT / "configs/data/organ.stl"),
                                          "xyz": [0.5, 0.1, -0.4]}  # fmt: skip
-    _run_eval(tmp_path, capsys, cfg, "task.port", "off task.body_wall")
+    _run_eval(tmp_path, capsys, cfg, "task.port", needle)

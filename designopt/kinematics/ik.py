@@ -558,8 +558,8 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
           score: Callable[[jax.Array], jax.Array] | None = None,
           accept: Callable[[jax.Array, jax.Array, jax.Array], jax.Array] | None = None,
           t0: jax.Array | int = 0, rep: jax.Array | None = None,
-          hopeless: jax.Array | None = None, n_keep: jax.Array | None = None
-          ) -> IKResult:  # fmt: skip
+          hopeless: jax.Array | None = None, n_keep: jax.Array | None = None,
+          groups: int = 1, run: int = 1) -> IKResult:  # fmt: skip
     """IK of the same T targets (p_t (T, 3), R_t (T, 3, 3) or None) for M designs
     X (M, D), or of each design's own T targets (p_t (M, T, 3), R_t (M, T, 3, 3)): every
     field has leading axes (M, T). The database draws and the seeds' hashes are shared
@@ -594,7 +594,14 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
     joints of its k nearest reached targets of the same design among its run of
     :data:`NEIGHBOUR_GROUP` (:func:`_neighbour_seeds`); its solution replaces the first
     pass's where it scores higher. A task solved in chunks that are multiples of the run
-    (``t0`` too) gets the values of one piece."""
+    (``t0`` too) gets the values of one piece. ``groups`` = G > 1 (static): the task's
+    targets fall into G interleaved groups, target ``t0 + t`` in group
+    ``((t0 + t) // run) % G`` (runs of ``run`` targets: :data:`NEIGHBOUR_GROUP` with
+    ``neighbours``, so that a neighbour is always of the target's own group), and each
+    group draws its own database (``opts.n_db`` entries, from the key's database draw
+    at index g), which its targets' nearest and random seeds come from: the groups are
+    independent replications of the whole solve, whose spread is the standard error of
+    an index read at the solutions (:func:`group_of`; G = 1: one database, as before)."""
     _check(mode, R_t, opts)
     X = jnp.asarray(X)
     per_design = p_t.ndim == 3
@@ -605,28 +612,68 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
     rev = ch.rev
     k_db, k_hash = jax.random.split(key)
 
-    # the databases: one set of joints, FK per design, each sorted by Z order
-    u = jax.random.uniform(k_db, (opts.n_db, n), dtype=dtype)
-    q_db = lower + u * (upper - lower)
-    R_db, p_db = _fk_arrays(ch, X, q_db)
-    L = jnp.maximum(jnp.max(jnp.linalg.norm(p_db - jnp.mean(p_db, 1, keepdims=True), axis=-1),
-                            -1), 1e-12)  # fmt: skip
-    one = _one(q_db)  # from data every design shares: a NaN design must not touch the others
-    index = jax.vmap(lambda p, R, Lm: _index(q_db, p, R, Lm, mode))(p_db, R_db, L)
-    q_sorted = index[4]  # (M, n_db, n)
-    n_near = min(opts.n_nearest, opts.n_db, opts.window)
-    if n_near and per_design:
-        near = jax.lax.map(lambda a: _nearest(a[:5], a[6], a[7], a[5], mode, n_near, opts.window,
-                                              rev), (*index, L, p_t, R_t))  # (M, T, k)  # fmt: skip
-    elif n_near:
-        near = jax.lax.map(lambda a: _nearest(a[:5], p_t, R_t, a[5], mode, n_near, opts.window,
-                                              rev), (*index, L))  # (M, T, k)  # fmt: skip
+    G = max(int(groups), 1)
+    t_base = jnp.asarray(t0).astype(jnp.uint32)  # the chunk's first target in the task
+    # each target's group (T,): its database (all 0 with one group)
+    grp = group_of(jnp.arange(T, dtype=jnp.int32) + jnp.asarray(t0, jnp.int32), G, run)
+    # the databases: one set of joints per group, FK per design, each sorted by Z order
+    if G == 1:
+        u = jax.random.uniform(k_db, (opts.n_db, n), dtype=dtype)
     else:
-        near = jnp.zeros((M, T, 1), jnp.int32)
+        u = jax.random.uniform(k_db, (G, opts.n_db, n), dtype=dtype).reshape(-1, n)
+    q_db = lower + u * (upper - lower)  # (G·n_db, n)
+    one = _one(q_db)  # from data every design shares: a NaN design must not touch the others
+    qg = q_db.reshape(G, opts.n_db, n)
+    n_near = min(opts.n_nearest, opts.n_db, opts.window)
+    # a design's databases and its targets' nearest entries are made for representatives
+    # only (a block of copies, eval's one design, pays for one; the rest copy theirs)
+    if G > 1:  # the targets by group: each group's in task order, where it starts, its size
+        g_order = jnp.argsort(grp, stable=True)
+        g_count = jnp.sum(grp[None, :] == jnp.arange(G)[:, None], 1)
+        g_start = jnp.cumsum(g_count) - g_count
+        g_place = jnp.zeros((T,), jnp.int32).at[g_order].set(jnp.arange(T, dtype=jnp.int32)) \
+            - g_start[grp]  # each target's place among its group's  # fmt: skip
+        r_ = max(int(run), 1)
+        K_g = min(T, (T // (r_ * G) + 2) * r_)  # a group's most targets in T consecutive ones
+    is_rep = (jnp.ones((M,), bool) if rep is None
+              else jnp.asarray(rep, jnp.int32) == jnp.arange(M, dtype=jnp.int32))  # fmt: skip
+
+    def database(m):
+        """Design m's reach L, its G sorted databases (:func:`_index`, each (G, ...)) and
+        its targets' nearest entries in their own group's database (T, k)."""
+        R_m, p_m = _fk_arrays(ch, X[m][None], q_db)  # (1, G·n_db, ...)
+        L_m = jnp.maximum(jnp.max(jnp.linalg.norm(p_m[0] - jnp.mean(p_m[0], 0), axis=-1)),
+                          1e-12)  # fmt: skip
+        idx = jax.vmap(lambda q, p, R: _index(q, p, R, L_m, mode))(
+            qg, p_m.reshape(G, opts.n_db, 3), R_m.reshape(G, opts.n_db, 3, 3))  # fmt: skip
+        if not n_near:
+            return L_m, idx, jnp.zeros((T, 1), jnp.int32)
+        pt_m = p_t[m] if per_design else p_t
+        Rt_m = None if R_t is None else R_t[m] if per_design else R_t
+        if G == 1:
+            return L_m, idx, _nearest(jax.tree_util.tree_map(lambda a: a[0], idx), pt_m, Rt_m,
+                                      L_m, mode, n_near, opts.window, rev)  # fmt: skip
+        # each group's own targets (K places, the last repeated) in its own database
+        sel = jnp.minimum(g_start[:, None] + jnp.arange(K_g)[None, :],
+                          g_start[:, None] + jnp.maximum(g_count[:, None], 1) - 1)  # (G, K)
+        tg = g_order[sel]  # (G, K) target indices
+        nr = jax.lax.map(lambda a: _nearest(a[0], pt_m[a[1]], None if Rt_m is None else
+                                            Rt_m[a[1]], L_m, mode, n_near, opts.window, rev),
+                         (idx, tg))  # (G, K, k)  # fmt: skip
+        return L_m, idx, nr[grp, g_place]
+
+    blank = jax.tree_util.tree_map(lambda a: jnp.zeros(a.shape, a.dtype),
+                                   jax.eval_shape(database, jnp.int32(0)))  # fmt: skip
+    L, index, near = jax.lax.map(
+        lambda m: jax.lax.cond(is_rep[m], database, lambda m: blank, m),
+        jnp.arange(M, dtype=jnp.int32))  # fmt: skip
+    if rep is not None:
+        L, index, near = jax.tree_util.tree_map(lambda a: a[jnp.asarray(rep, jnp.int32)],
+                                                (L, index, near))  # fmt: skip
+    q_sorted = index[4]  # (M, G, n_db, n)
     attempts = max(n_near + opts.n_random * opts.rounds, 1)
     K_nb = opts.neighbours  # seeds of the neighbour pass (0: no such pass)
     salt = jax.random.bits(k_hash, (), jnp.uint32)
-    t_base = jnp.asarray(t0).astype(jnp.uint32)  # the chunk's first target in the task
     xT = X.T  # (D, M)
     # (3, T) or, per design, (3, M·T) by item; R: row 3i + j holds R[i, j]
     ptT = p_t.reshape(-1, 3).T
@@ -649,7 +696,7 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
              ^ (a.astype(jnp.uint32) + salt) * jnp.uint32(2246822519))  # fmt: skip
         h = h ^ (h >> 15)
         a_rand = (h % jnp.uint32(opts.n_db)).astype(jnp.int32)
-        q = q_sorted[m, jnp.where(a < n_near, a_near, a_rand)].T
+        q = q_sorted[m, grp[t], jnp.where(a < n_near, a_near, a_rand)].T
         if not K_nb:
             return q
         # a neighbour pass: seed a is the kept joints of the item's a-th nearest neighbour
@@ -949,6 +996,13 @@ def solve(model: SerialModel, X: jax.Array, p_t: jax.Array, R_t: jax.Array | Non
     best0 = IKResult(jnp.zeros((M, T, n), dtype), zi > 0, zf, zf, zf, zi, zi > 0, zi, zi)
     best, _ = jax.lax.fori_loop(0, 2, passes, (best0, jnp.full((M, T), -jnp.inf, dtype)))
     return _materialised(copied(best))
+
+
+def group_of(t: jax.Array, groups: int, run: int = 1) -> jax.Array:
+    """The replication group of task targets ``t`` (int): ``(t // run) % groups``
+    (:func:`solve`'s ``groups``): interleaved runs of ``run`` targets."""
+    t = jnp.asarray(t, jnp.int32)
+    return (t // max(int(run), 1)) % max(int(groups), 1)
 
 
 NEIGHBOUR_GROUP = 16

@@ -131,9 +131,11 @@ def _tuples(s: SerialSettings, mech: Mechanism, sol: Mapping[str, np.ndarray],
     A = len(s.arms)  # type: ignore[arg-type]
     ok = np.asarray(sol["success"], bool)
     N = ok.shape[1]
+    from designopt.studies.serial import taskindex
+
     key = jax.random.fold_in(keys["samples"], 2)
-    perm = [np.arange(N)] + [np.asarray(jax.random.permutation(jax.random.fold_in(key, k), N))
-                             for k in range(1, A)]  # fmt: skip
+    lab = taskindex.labels(N, taskindex.groups(s))  # the tuples pair targets of one group
+    perm = [np.asarray(p) for p in taskindex.perms(key, N, lab, A)]
     both = np.all(np.stack([ok[k][perm[k]] for k in range(A)]), 0)
     seg = [np.asarray(sol["segments"])[k][perm[k]] for k in range(A)]  # (N, L, 2, 3) world
     g = bodies.geometry(s, mech)

@@ -95,7 +95,8 @@ def build_task_fn(mech: Mechanism, s: SerialSettings, dtype: Any) -> tuple[Any, 
         if lin:
             c = normalise.weighted_sum([taskindex.values(per, names[i]) for i in lin],
                                        b[jnp.asarray(lin)], [w[i] for i in lin])  # fmt: skip
-            f_se = jnp.std(c, -1, ddof=1) / np.sqrt(c.shape[-1])
+            G, run = taskindex.groups(s)  # batch means over the replications (issue #65)
+            f_se = taskindex.mean_se(c, taskindex.labels(c.shape[-1], (G, run)), G)
         for i, k in enumerate(names):
             if not taskindex.mean_type(k):  # an n/a term is a search value: no SE
                 se = jnp.nan_to_num(out[k + "_se"], nan=0.0)

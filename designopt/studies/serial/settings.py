@@ -521,6 +521,17 @@ class SerialTask(Task):
         "`instrument_ok` counts.",
     )
     ik: TaskIK = Field(TaskIK(), description="The batched IK that solves every target.")
+    replications: int = Field(
+        8,
+        ge=1,
+        le=64,
+        description="R, the independent replications of every task index's estimate: the "
+        "targets fall into R interleaved groups (runs of 16 under `ik.neighbours`), each "
+        "solved with its own FK database and IK seeds, and an index's SE is the spread of "
+        "the groups' values (batch means), so it covers the IK's random choices too "
+        "(docs/indices.md). 1: one database for all targets, i.i.d. SEs that leave the IK's "
+        "draw out.",
+    )
     port_gap: float | None = Field(
         None,
         ge=0,

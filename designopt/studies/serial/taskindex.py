@@ -12,10 +12,24 @@ the indices are means (or a quantile) over the targets at the solutions:
 The targets are drawn once per run from the ``samples`` stream (``designopt.kinematics.task``) and
 travel in ``params``: every design of the swarm is scored on the same targets (common
 random numbers), and one compiled program serves every design and every target set of
-that size. Means carry the i.i.d. standard error sd/√N (reach: the Agresti–Coull one,
-which stays positive when all or no targets are reached); the quantile carries the
-order-statistic one (half the distance between the order statistics N·p ± √(N·p(1−p)),
-the distribution-free ±1-SE band of the sample quantile).
+that size.
+
+Standard errors: batch means over R independent replications (``study.task.replications``,
+default :data:`REPLICATIONS`; issue #65). The targets fall into R interleaved groups
+(:func:`groups`: target t in group (t // r) % R, runs of r = 1 target, or of
+``ik.NEIGHBOUR_GROUP`` with ``task.ik.neighbours``), and each group's IK draws its own FK
+database and seeds (``ik.solve``'s ``groups``): the groups are i.i.d. replications of the
+whole estimator, targets and IK draws together. One database shared by every target made
+the targets' values correlated, and the i.i.d. SE sd/√N was 4-17× below the spread over
+seeds. Every index is computed over all targets (the point estimate); its SE is the
+spread of the groups' values: for a mean or a share √(Σ_g (S_g − r̂ n_g)² / (G(G − 1))) / n̄
+over the G non-empty groups' sums S_g and counts n_g (:func:`batch_se`: the SD of the
+group means / √G for equal groups; a ratio estimator with the denominator's group sums
+for n_g), shares never below their Agresti–Coull SE (positive where every target, or
+none, counts); ``gci_q05`` the SD of the groups' 5 % quantiles / √G, never below the
+order-statistic SE (half the distance between the order statistics N·p ± √(N·p(1−p))).
+The arms' target tuples pair distinct targets of one group (:func:`perms`), so a tuple's
+value is its group's. With R = 1 the i.i.d. SEs of before.
 """
 
 from __future__ import annotations
@@ -43,18 +57,78 @@ def mean_type(name: str) -> bool:
     return name in MEANS or name == "clearance"
 
 
+REPLICATIONS = 8
+"""Independent replications (groups of targets, each with its own IK database and seeds)
+whose spread is a task index's SE, unless ``study.task.replications`` says otherwise.
+The SE's own relative error is about 1/√(2(R − 1)): 27 % at 8."""
+
+
+def replications(s: SerialSettings) -> int:
+    """R: ``study.task.replications`` (default :data:`REPLICATIONS`; no task: 1)."""
+    return REPLICATIONS if s.task is None else int(s.task.replications)
+
+
+def groups(s: SerialSettings) -> tuple[int, int]:
+    """(R, r): the replication groups of the task's targets, target t in group
+    (t // r) % R (``ik.group_of``): runs of r = ``ik.NEIGHBOUR_GROUP`` targets with
+    ``task.ik.neighbours`` (a neighbour is of the target's group), else of 1."""
+    run = ik.NEIGHBOUR_GROUP if s.task is not None and s.task.ik.neighbours else 1
+    return replications(s), run
+
+
+def labels(N: int, grp: tuple[int, int] | None) -> jax.Array | None:
+    """(N,) int32: each target's group (None without groups or with one)."""
+    if grp is None or grp[0] <= 1:
+        return None
+    return ik.group_of(jnp.arange(N, dtype=jnp.int32), *grp)
+
+
+def _sums(x: jax.Array, lab: jax.Array, G: int) -> jax.Array:
+    """(..., G): the sums of x (..., N) over each group's targets."""
+    return x @ (lab[:, None] == jnp.arange(G)[None, :]).astype(x.dtype)
+
+
+def batch_se(y: jax.Array, lab: jax.Array, G: int, x: jax.Array | None = None) -> jax.Array:
+    """The batch-means SE (...,) of Σy/Σx along the last axis (x: 1, i.e. the mean of y)
+    from the groups ``lab`` (N,) of G: √(Σ_g (Y_g − r X_g)² / (G'(G' − 1))) / (ΣX/G'), Y_g
+    and X_g the groups' sums, r = ΣY/ΣX, G' the non-empty groups (the SD of the group
+    means / √G' for equal groups); NaN with fewer than 2 groups or ΣX = 0."""
+    n = _sums(jnp.ones(lab.shape, y.dtype), lab, G)  # (G,)
+    Y = _sums(y, lab, G)
+    X = jnp.broadcast_to(n, Y.shape) if x is None else _sums(x, lab, G)
+    full = n > 0
+    Gp = jnp.sum(full).astype(y.dtype)
+    sx = jnp.sum(X, -1)
+    ok = (Gp >= 2) & (sx > 0)
+    r = jnp.sum(Y, -1) / jnp.where(ok, sx, 1.0)
+    res = jnp.where(full, Y - r[..., None] * X, 0.0)
+    var = jnp.sum(res * res, -1) / jnp.where(ok, Gp * (Gp - 1), 1.0)
+    return jnp.where(ok, jnp.sqrt(var) / jnp.where(ok, sx / Gp, 1.0), jnp.nan)
+
+
+def mean_se(v: jax.Array, lab: jax.Array | None, G: int = 1) -> jax.Array:
+    """The SE of the mean of v (..., N) along N: :func:`batch_se` over the groups, or
+    sd/√N without them (or with fewer than 2 non-empty groups)."""
+    iid = jnp.std(v, -1, ddof=1) / np.sqrt(v.shape[-1])
+    if lab is None:
+        return iid
+    se = batch_se(v, lab, G)
+    return jnp.where(jnp.isnan(se), iid, se)  # fewer than 2 groups: the i.i.d. SE
+
+
 def estimates_of(s: SerialSettings, mech: Mechanism, per: dict[str, jax.Array],
                  params: dict[str, Any]) -> dict[str, tuple[jax.Array, jax.Array]]:  # fmt: skip
-    """:func:`estimates` with the study's arms, radii and margin (``bodies.geometry``)."""
+    """:func:`estimates` with the study's replication groups (:func:`groups`), arms, radii
+    and margin (``bodies.geometry``)."""
     from designopt.studies.serial import bodies
 
     g = bodies.geometry(s, mech)
     if g is None:
-        return estimates(per)
+        return estimates(per, grp=groups(s))
     key = jax.random.fold_in(params["sample_key"], 2)  # the arms' target tuples
     sc_p = params if "scene_insertion" in params else scene_params(s, per["success"].dtype, mech)
     gp = sc_p["scene_geometry"]
-    return estimates(per, key, gp["radii"], gp["margin"], sc_p.get("scene_band"))
+    return estimates(per, key, gp["radii"], gp["margin"], sc_p.get("scene_band"), groups(s))
 
 
 def scene_params(s: SerialSettings, dtype: Any, mech: Mechanism | None = None) -> dict[str, Any]:
@@ -97,7 +171,7 @@ def counts_of(s: SerialSettings, mech: Mechanism, per: dict[str, jax.Array],
 
     if bodies.geometry(s, mech) is None:
         return counts(per)
-    return counts(per, jax.random.fold_in(params["sample_key"], 2))
+    return counts(per, jax.random.fold_in(params["sample_key"], 2), groups(s))
 
 
 BEST_SLOTS = 8
@@ -334,8 +408,10 @@ def chunk_values(mech: Mechanism, s: SerialSettings, params: dict[str, Any], ful
             blocked = _shaft_blocked(mech, geo, full, lo, hi, port, pt, depth, inner, gp, rep,
                                      ~hopeless, A, M, C)  # fmt: skip
             hopeless = hopeless | blocked
+    R_, run = groups(s)  # each replication group its own database (issue #65)
     res = ik.solve(mech.model, X, p_ik, R_ik, lo, hi, key, md, opts, score, accept, t0, rep,
-                   hopeless, sc_p["ik_n_best"] if "ik_n_best" in sc_p else s.task.ik.n_best)  # type: ignore[union-attr]  # fmt: skip
+                   hopeless, sc_p["ik_n_best"] if "ik_n_best" in sc_p else s.task.ik.n_best,  # type: ignore[union-attr]
+                   R_, run)  # fmt: skip
     J = jac(res.q)
     inv_k, man = inv_cond(J * sc[:, None], ind.norm, ind.normalized, with_volume=True)
     ok, conv = res.success, res.converged
@@ -421,16 +497,29 @@ def _shaft_blocked(mech: Mechanism, geo: Any, full: jax.Array, lo: jax.Array, hi
     return blocked.reshape(A * M, C)[rep]
 
 
-def quantile(v: jax.Array, q: float = Q) -> tuple[jax.Array, jax.Array]:
-    """(the q-quantile of v (M, N) along N (linear interpolation), its order-statistic SE:
-    half the spread of the order statistics at ranks N·q ± √(N·q(1−q)))."""
+def quantile(v: jax.Array, q: float = Q, lab: jax.Array | None = None, G: int = 1
+             ) -> tuple[jax.Array, jax.Array]:  # fmt: skip
+    """(the q-quantile of v (M, N) along N (linear interpolation), its SE): the
+    order-statistic SE, half the spread of the order statistics at ranks
+    N·q ± √(N·q(1−q)) (the distribution-free ±1-SE band of an i.i.d. sample's quantile).
+    With groups ``lab`` (N,) of G it is scaled by what the groups add to the share of
+    values at or below the quantile (Bahadur's representation: the quantile's error is
+    that share's error over the density there): the batch-means SE of that share
+    (:func:`batch_se`) over its i.i.d. SE √(q(1−q)/N), never below 1. (The spread of the
+    groups' own quantiles, tried first, claimed 0.036 for a quantile that was 0 at
+    every seed: a group of 16 targets may hold no unreached one.)"""
     N = v.shape[-1]
     srt = jnp.sort(v, -1)
     val = jnp.quantile(v, q, axis=-1)
     d = float(np.sqrt(N * q * (1 - q)))
     lo_r = int(np.clip(np.floor(N * q - d), 0, N - 1))
     hi_r = int(np.clip(np.ceil(N * q + d), 0, N - 1))
-    return val, (srt[..., hi_r] - srt[..., lo_r]) / 2
+    se = (srt[..., hi_r] - srt[..., lo_r]) / 2
+    if lab is None:
+        return val, se
+    below = (v <= val[..., None]).astype(v.dtype)
+    deff = batch_se(below, lab, G) / np.sqrt(q * (1 - q) / N)
+    return val, se * jnp.maximum(jnp.nan_to_num(deff, nan=1.0), 1.0)
 
 
 def values(per: dict[str, jax.Array], name: str) -> jax.Array:
@@ -440,13 +529,18 @@ def values(per: dict[str, jax.Array], name: str) -> jax.Array:
     return jnp.mean(v, 0)
 
 
-def _share(x: jax.Array) -> tuple[jax.Array, jax.Array]:
-    """(mean, Agresti–Coull SE) of 0/1 values (M, N) along N: sd/√N is 0 when every
-    target (or none) counts, which claims too much; √(p̃(1 − p̃)/(N + 4)) with
-    p̃ = (x + 2)/(N + 4) stays positive there and equals the usual SE to O(1/N)."""
+def _share(x: jax.Array, lab: jax.Array | None = None, G: int = 1
+           ) -> tuple[jax.Array, jax.Array]:  # fmt: skip
+    """(mean, SE) of 0/1 values (M, N) along N: the Agresti–Coull SE (sd/√N is 0 when
+    every target (or none) counts, which claims too much; √(p̃(1 − p̃)/(N + 4)) with
+    p̃ = (x + 2)/(N + 4) stays positive there and equals the usual SE to O(1/N)); with
+    groups ``lab`` of G never below the batch-means SE (:func:`batch_se`)."""
     N = x.shape[-1]
     pt = (jnp.sum(x, -1) + 2.0) / (N + 4.0)
-    return jnp.mean(x, -1), jnp.sqrt(pt * (1.0 - pt) / (N + 4.0))
+    se = jnp.sqrt(pt * (1.0 - pt) / (N + 4.0))
+    if lab is not None:
+        se = jnp.maximum(se, jnp.nan_to_num(batch_se(x, lab, G), nan=0.0))
+    return jnp.mean(x, -1), se
 
 
 N_MIN = 30
@@ -461,25 +555,29 @@ NA_WORST = {k: (0.0, 180.0 if k == "instrument_angle" else 1.0) for k in RATIOS}
 that its sense ranks worst (0 when maximised, 1 when minimised)."""
 
 
-def ratio(y: jax.Array, x: jax.Array, n_min: int = N_MIN) -> tuple[jax.Array, jax.Array]:
+def ratio(y: jax.Array, x: jax.Array, n_min: int = N_MIN, lab: jax.Array | None = None,
+          G: int = 1) -> tuple[jax.Array, jax.Array]:  # fmt: skip
     """The ratio estimator Σy/Σx of 0/1 values y ≤ x along the last axis (the share of
     the counted items that pass) with its delta-method SE √(Σ(y − r x)² / (N (N − 1))) / x̄,
     never below the Agresti–Coull SE of Σy of Σx (:func:`_share`: a share of 0 or 1 is
     not exact); NaN and NaN where Σx < ``n_min`` (a ratio over a handful of items claims
-    what the sample cannot show)."""
+    what the sample cannot show). With groups ``lab`` (N,) of G: the batch-means SE of
+    the ratio (:func:`batch_se`) in place of the delta method's."""
     N = y.shape[-1]
     sx, sy = jnp.sum(x, -1), jnp.sum(y, -1)
     ok = sx >= max(n_min, 1)
     r = jnp.where(ok, sy / jnp.where(ok, sx, 1.0), 0.0)
     res = y - r[..., None] * x
     se = jnp.sqrt(jnp.sum(res * res, -1) / (N * (N - 1))) / jnp.where(ok, sx / N, 1.0)
+    if lab is not None:
+        se = jnp.nan_to_num(batch_se(y, lab, G, x), nan=0.0)
     pt = (sy + 2.0) / (sx + 4.0)
     se = jnp.maximum(se, jnp.sqrt(pt * (1.0 - pt) / (sx + 4.0)))
     return jnp.where(ok, r, jnp.nan), jnp.where(ok, se, jnp.nan)
 
 
-def counts(per: dict[str, jax.Array], key: jax.Array | None = None
-           ) -> dict[str, tuple[jax.Array, int]]:  # fmt: skip
+def counts(per: dict[str, jax.Array], key: jax.Array | None = None,
+           grp: tuple[int, int] | None = None) -> dict[str, tuple[jax.Array, int]]:  # fmt: skip
     """(denominator count (M,), out of) of each ratio estimator :func:`estimates` gives:
     ``collision_free``: converged targets of A·N; ``arms_free``: tuples every arm reaches
     of N."""
@@ -488,43 +586,69 @@ def counts(per: dict[str, jax.Array], key: jax.Array | None = None
     if "clearance" in per:
         out["collision_free"] = (jnp.sum(per["converged"], (0, 2)), A * N)
     if A > 1 and key is not None and "segments" in per:
-        out["arms_free"] = (jnp.sum(_tuples(per, key)[0], -1), N)
+        out["arms_free"] = (jnp.sum(_tuples(per, key, labels(N, grp))[0], -1), N)
         if "axis" in per:
             out["instrument_angle"] = out["arms_free"]
     return out
 
 
-def ratio_mean(y: jax.Array, x: jax.Array, n_min: int = N_MIN) -> tuple[jax.Array, jax.Array]:
+def ratio_mean(y: jax.Array, x: jax.Array, n_min: int = N_MIN, lab: jax.Array | None = None,
+               G: int = 1) -> tuple[jax.Array, jax.Array]:  # fmt: skip
     """The mean of ``y`` over the items where the 0/1 ``x`` is 1, along the last axis
     (the ratio estimator Σ x y / Σ x), with its delta-method SE
-    √(Σ x² (y − r)² / (N (N − 1))) / x̄; NaN and NaN where Σx < ``n_min``."""
+    √(Σ x² (y − r)² / (N (N − 1))) / x̄ (with groups ``lab`` of G: the batch-means one,
+    :func:`batch_se`); NaN and NaN where Σx < ``n_min``."""
     N = y.shape[-1]
     sx = jnp.sum(x, -1)
     ok = sx >= max(n_min, 1)
     r = jnp.where(ok, jnp.sum(x * y, -1) / jnp.where(ok, sx, 1.0), 0.0)
     res = x * (y - r[..., None])
     se = jnp.sqrt(jnp.sum(res * res, -1) / (N * (N - 1))) / jnp.where(ok, sx / N, 1.0)
+    if lab is not None:
+        se = jnp.nan_to_num(batch_se(x * y, lab, G, x), nan=0.0)
     return jnp.where(ok, r, jnp.nan), jnp.where(ok, se, jnp.nan)
 
 
-def instrument_angles(per: dict[str, jax.Array], key: jax.Array) -> jax.Array:
+def perms(key: jax.Array, N: int, lab: jax.Array | None, A: int) -> list[jax.Array]:
+    """The arms' target permutations [π_0, …, π_{A−1}] of the tuples (π_0 the identity):
+    without groups, π_k an independent random permutation from ``fold_in(key, k)``; with
+    groups ``lab`` (N,), the targets of each group in one random order (from
+    ``fold_in(key, 1)``) and π_k(j) the target k places after j in its group's order,
+    cyclically: a tuple's targets are of one group and distinct (a target paired with
+    itself puts both instruments' tips at one point: 1/16 of the tuples with groups of
+    16, where a random permutation has a fixed point at a share of 1/N_g)."""
+    ident = jnp.arange(N)
+    if lab is None:
+        return [ident] + [jax.random.permutation(jax.random.fold_in(key, k), N)
+                          for k in range(1, A)]  # fmt: skip
+    u = jax.random.uniform(jax.random.fold_in(key, 1), (N,))
+    order = jnp.argsort(lab.astype(u.dtype) + u)  # by group, at random within
+    at = jnp.zeros((N,), order.dtype).at[order].set(ident.astype(order.dtype))  # j's place
+    count = jnp.sum(lab[:, None] == lab[None, :], 1)  # each target's group size (N,)
+    start = jnp.sum(lab[None, :] < lab[:, None], 1)  # where its group starts in ``order``
+    return [ident] + [order[start + (at - start + k) % count] for k in range(1, A)]
+
+
+def instrument_angles(per: dict[str, jax.Array], key: jax.Array,
+                      lab: jax.Array | None = None) -> jax.Array:  # fmt: skip
     """The angle (degrees, (M, N)) between arm 0's and arm 1's tool axes (``per["axis"]``,
     world frame) at each target tuple of :func:`_tuples` (the triangulation of the two
-    instruments)."""
+    instruments; ``lab``: the targets' groups, :func:`perms`)."""
     A, M, N = per["success"].shape
-    perm = jax.random.permutation(jax.random.fold_in(key, 1), N)
+    perm = perms(key, N, lab, 2)[1]
     a, b = per["axis"][0], per["axis"][1][:, perm]
     c = jnp.clip(jnp.sum(a * b, -1), -1.0, 1.0)
     return jnp.degrees(jnp.arccos(c))
 
 
-def _tuples(per: dict[str, jax.Array], key: jax.Array) -> tuple[jax.Array, list[jax.Array]]:
+def _tuples(per: dict[str, jax.Array], key: jax.Array, lab: jax.Array | None = None
+            ) -> tuple[jax.Array, list[jax.Array]]:  # fmt: skip
     """(every arm reaches its target of the tuple (M, N), the arms' kept capsules per tuple
     [(M, N, L, 2, 3)] × A): tuple j takes arm k's target π_k(j), π_0 the identity and π_k
-    the k-th independent permutation drawn from ``key``."""
+    the k-th permutation drawn from ``key`` (with groups ``lab``, within each group:
+    :func:`perms`)."""
     A, M, N = per["success"].shape
-    perm = [jnp.arange(N)] + [jax.random.permutation(jax.random.fold_in(key, k), N)
-                              for k in range(1, A)]  # fmt: skip
+    perm = perms(key, N, lab, A)
     ok = jnp.prod(jnp.stack([per["success"][k][:, perm[k]] for k in range(A)]), 0)
     seg = [per["segments"][k][:, perm[k]] for k in range(A)]
     return ok, seg
@@ -532,8 +656,10 @@ def _tuples(per: dict[str, jax.Array], key: jax.Array) -> tuple[jax.Array, list[
 
 def estimates(per: dict[str, jax.Array], key: jax.Array | None = None,
               radii: tuple[float, ...] = (), margin: float = 0.0, band: Any = None,
-              ) -> dict[str, tuple[jax.Array, jax.Array]]:  # fmt: skip
+              grp: tuple[int, int] | None = None) -> dict[str, tuple[jax.Array, jax.Array]]:  # fmt: skip
     """(value, SE) (M,) of every task index from the per-target values (A, M, N).
+    ``grp``: the targets' replication groups (:func:`groups`), whose spread the SEs are
+    (batch means; the module's docstring); None: the i.i.d. SEs.
 
     With several arms (A > 1): ``reach``, ``gci`` and the other means are means over the
     arms and targets (their SE the spread of the per-target means over the arms, never
@@ -554,27 +680,31 @@ def estimates(per: dict[str, jax.Array], key: jax.Array | None = None,
     ``instrument_ok``: the unconditional share of the tuples that every arm reaches free
     of the others whose angle lies in the band."""
     A, M, N = per["success"].shape
+    lab = labels(N, grp)
+    G = 1 if lab is None else grp[0]  # type: ignore[index]
+    lab_a = None if lab is None else jnp.tile(lab, A)  # the (A·N) values' groups, arm-major
     out = {}
     for k in MEANS + (("clearance",) if "clearance" in per else ()):
         v = values(per, k)
-        out[k] = (jnp.mean(v, -1), jnp.std(v, -1, ddof=1) / np.sqrt(N))
+        out[k] = (jnp.mean(v, -1), mean_se(v, lab, G))
     if A == 1:
-        out["reach"] = _share(per["success"][0])
+        out["reach"] = _share(per["success"][0], lab, G)
     else:
-        out["reach"] = (out["reach"][0], jnp.maximum(out["reach"][1], _share(
+        out["reach"] = (out["reach"][0], jnp.maximum(jnp.nan_to_num(out["reach"][1], nan=0.0), _share(
             jnp.moveaxis(per["success"], 0, 1).reshape(M, A * N))[1]))  # fmt: skip
-    out["gci_q05"] = quantile(jnp.moveaxis(per["inv_k"], 0, 1).reshape(M, A * N))
+    out["gci_q05"] = quantile(jnp.moveaxis(per["inv_k"], 0, 1).reshape(M, A * N), Q, lab_a, G)
     if "clearance" in per:
-        out["collision_free"] = ratio(jnp.sum(per["success"], 0), jnp.sum(per["converged"], 0))
+        out["collision_free"] = ratio(jnp.sum(per["success"], 0), jnp.sum(per["converged"], 0),
+                                      N_MIN, lab, G)  # fmt: skip
     if A > 1:
         from designopt.kinematics.collision import arms_clearance
 
         for k in range(A):
-            out[f"reach_{k}"] = _share(per["success"][k])
-        out["reach_all"] = _share(jnp.prod(per["success"], 0))
+            out[f"reach_{k}"] = _share(per["success"][k], lab, G)
+        out["reach_all"] = _share(jnp.prod(per["success"], 0), lab, G)
         if key is None or "segments" not in per:
             return out  # arms_free needs the tuples' key and the kept capsules
-        ok, seg = _tuples(per, key)
+        ok, seg = _tuples(per, key, lab)
         r = jnp.asarray(radii, seg[0].dtype)
         gap = None
         for a in range(A):
@@ -582,14 +712,14 @@ def estimates(per: dict[str, jax.Array], key: jax.Array | None = None,
                 d = arms_clearance(seg[a], r, seg[b], r)
                 gap = d if gap is None else jnp.minimum(gap, d)
         free = (gap >= margin).astype(ok.dtype)  # type: ignore[operator]
-        out["arms_ok"] = _share(ok * free)
-        out["arms_free"] = ratio(ok * free, ok)
+        out["arms_ok"] = _share(ok * free, lab, G)
+        out["arms_free"] = ratio(ok * free, ok, N_MIN, lab, G)
         if "axis" in per:
-            ang = instrument_angles(per, key)
-            out["instrument_angle"] = ratio_mean(ang, ok)
+            ang = instrument_angles(per, key, lab)
+            out["instrument_angle"] = ratio_mean(ang, ok, N_MIN, lab, G)
             if band is not None:
                 lo, hi = band[0].astype(ang.dtype), band[1].astype(ang.dtype)
-                out["instrument_ok"] = _share(ok * free * ((ang >= lo) & (ang <= hi)))
+                out["instrument_ok"] = _share(ok * free * ((ang >= lo) & (ang <= hi)), lab, G)
     return out
 
 
