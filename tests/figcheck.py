@@ -1,7 +1,9 @@
 """The figure checker (docs/figures.md), shared by tests/test_figures.py and the study
 contract tests: every axis and colour-bar label carries a unit in [..] or (..) ([-]:
 dimensionless); no text overlaps another text, another panel or leaves the canvas
-(renderer-based window extents); panels declared comparable share their colour limits."""
+(renderer-based window extents); panels declared comparable share their colour limits.
+:func:`text_problems` checks every drawn text artist of a figure (annotations, table
+cells and figure texts included) against the figure's edge and against every other."""
 
 from __future__ import annotations
 
@@ -100,6 +102,74 @@ def problems(fig) -> list[str]:
         lims = {tuple(np.round(m.get_clim(), 12)) for m in group}
         if len(lims) != 1:
             out.append(f"panels meant to be compared have colour limits {sorted(lims)}")
+    return out
+
+
+def drawn_texts(fig) -> list:
+    """Every visible text artist of ``fig`` that is drawn: titles, axis labels, the tick
+    labels a 2-D axes draws (those within its view interval), legends' texts, table
+    cells, annotations and figure texts. A 3-D axes' tick labels are left out (matplotlib
+    gives them no reliable extent), its axis labels kept; an axes drawn without its
+    frame (``set_axis_off``: a table's) contributes no axis text."""
+    from matplotlib.text import Text
+
+    ticks, keep = set(), []
+    for ax in fig.axes:
+        is3d = isinstance(ax, Axes3D)
+        on = ax.axison if not is3d else getattr(ax, "_axis3don", True)
+        axis = [ax.xaxis, ax.yaxis] + ([ax.zaxis] if is3d else [])
+        for a in axis:
+            every = a.get_major_ticks() + a.get_minor_ticks()
+            ticks |= {id(t) for k in every for t in (k.label1, k.label2)}
+            ticks |= {id(a.label), id(a.offsetText)}
+            if not (on and ax.get_visible() and a.get_visible()):
+                continue
+            keep += [a.label, a.offsetText]
+            if not is3d:
+                keep += [t for k in a._update_ticks() for t in (k.label1, k.label2)]
+        keep += [c.get_text() for tab in ax.tables for c in tab.get_celld().values()]
+    out = [t for t in fig.findobj(Text) if id(t) not in ticks] + keep
+    seen, uniq = set(), []
+    for t in out:
+        if id(t) not in seen and _visible(t) and _shown(t):
+            seen.add(id(t))
+            uniq.append(t)
+    return uniq
+
+
+def _shown(t) -> bool:
+    """Whether a text's parents (its axes, legend) are visible too."""
+    ax = t.axes
+    if ax is not None and not ax.get_visible():
+        return False
+    p = getattr(t, "_parent_legend", None)
+    return p is None or p.get_visible()
+
+
+def text_problems(fig, tol: float = TOL) -> list[str]:
+    """Every drawn text artist (:func:`drawn_texts`) of a saved figure must lie inside
+    the figure and overlap no other text artist (window extents after a draw; overlaps
+    under ``tol`` px tolerated). Returns what is wrong (empty: it passes)."""
+    if not hasattr(fig.canvas, "get_renderer"):
+        FigureCanvasAgg(fig)
+    fig.canvas.draw()
+    r = fig.canvas.get_renderer()
+    canvas = fig.bbox
+    from matplotlib.text import Text
+
+    texts = drawn_texts(fig)
+    boxes = [Text.get_window_extent(t, r) for t in texts]  # an annotation's text, not its arrow
+    out = []
+    for t, b in zip(texts, boxes, strict=True):
+        if b.x0 < canvas.x0 - tol or b.y0 < canvas.y0 - tol or b.x1 > canvas.x1 + tol or \
+                b.y1 > canvas.y1 + tol:  # fmt: skip
+            out.append(f"text {_name(t)} leaves the figure")
+    for i in range(len(texts)):
+        for j in range(i + 1, len(texts)):
+            w = min(boxes[i].x1, boxes[j].x1) - max(boxes[i].x0, boxes[j].x0)
+            h = min(boxes[i].y1, boxes[j].y1) - max(boxes[i].y0, boxes[j].y0)
+            if w > tol and h > tol:
+                out.append(f"text {_name(texts[i])} overlaps {_name(texts[j])}")
     return out
 
 

@@ -24,7 +24,7 @@ import designopt
 from designopt.cli.commands import main
 from designopt.figures import convergence
 from designopt.figures.robot import ANATOMY
-from designopt.studies.serial import blocks, report
+from designopt.studies.serial import blocks, report, taskindex
 from designopt.studies.serial import figures as serial_figs
 from designopt.studies.serial.mechanism import build
 
@@ -103,7 +103,8 @@ def _gaps(rec, sol):
     s = rec.config.study
     g = bodies.geometry(s, build(s))
     key = jax.random.fold_in(_samples(rec), 2)
-    perm = [np.arange(N), np.asarray(jax.random.permutation(jax.random.fold_in(key, 1), N))]
+    lab = taskindex.labels(N, taskindex.groups(s))
+    perm = [np.asarray(p) for p in taskindex.perms(key, N, lab, 2)]
     ok = np.asarray(sol["success"], bool)
     both = ok[0][perm[0]] & ok[1][perm[1]]
     seg = [np.asarray(sol["segments"])[k][perm[k]] for k in range(2)]
@@ -157,7 +158,8 @@ def test_robot_png_is_one_panel_when_no_link_geometry_is_a_variable(run, drawn):
     assert len(tips) == 2
     j = int(re.search(r"median tuple (\d+)", ax.get_title()).group(1))
     key = jax.random.fold_in(_samples(rec), 2)
-    p1 = int(np.asarray(jax.random.permutation(jax.random.fold_in(key, 1), N))[j])
+    lab = taskindex.labels(N, taskindex.groups(rec.config.study))
+    p1 = int(np.asarray(taskindex.perms(key, N, lab, 2)[1])[j])
     targets = np.asarray(sol["target_p"])[[j, p1]]
     for (x, y, z), t in zip(tips, targets, strict=True):
         np.testing.assert_allclose([x[-1], y[-1], z[-1]], t, atol=1e-4)

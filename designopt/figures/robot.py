@@ -597,13 +597,17 @@ def legend_handles(scene: Scene) -> list:
 
 
 def draw_3d(ax: Any, scene: Scene, unit: str, legend: bool = True,
-            limits: np.ndarray | None = None) -> Any:  # fmt: skip
+            limits: np.ndarray | None = None, clip: bool = False, zoom: float = 1.0) -> Any:  # fmt: skip
     """Draw ``scene`` on a 3-D axes: region, targets, obstacles and ports, arms
     (capsules, meshes, centre lines, axes, frames), marks, collisions; equal scales, axes
     labelled in ``unit``. ``limits``: points (k, 3) the axes must hold (default: the
     scene's own, :func:`scene_points`); the view is their :func:`view_box`, and the
-    obstacles are clipped to it (:func:`clipped_note` says which). Returns the targets'
-    colour mappable (None without reached targets)."""
+    obstacles are clipped to it (:func:`clipped_note` says which). ``clip``: the arms,
+    targets and marks are clipped to the view too (a view zoomed on the patient, where
+    the robots reach beyond it); ``zoom``: the 3-D box's scale within the axes
+    (matplotlib's ``set_box_aspect`` zoom). Returns the targets' colour mappable (None
+    without reached targets)."""
+    kw = {"axlim_clip": True} if clip else {}
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
     pts = scene_points(scene) if limits is None else np.asarray(limits, np.float64)
@@ -627,6 +631,8 @@ def draw_3d(ax: Any, scene: Scene, unit: str, legend: bool = True,
                 ax.plot(*np.clip(line, lo, hi).T, color=ANATOMY_EDGE, lw=2.2, zorder=1.9,
                         solid_capstyle="round")  # fmt: skip
             continue
+        if clip and ob.shape != "halfspace":  # its faces within the view, none flattened on it
+            Vo, Fo = _inside_faces(ob, lo, hi)
         ax.add_collection3d(Poly3DCollection(Vo[Fo], facecolor=obstacle_colour(ob),
                                              alpha=0.10 if is_wall(ob) else 0.18,
                                              edgecolor="none", zorder=1))  # fmt: skip
@@ -639,46 +645,57 @@ def draw_3d(ax: Any, scene: Scene, unit: str, legend: bool = True,
         xyz = np.asarray(t.xyz)
         if ok.any():
             mappable = ax.scatter(*xyz[ok].T, c=np.asarray(t.value)[ok], cmap="viridis", s=t.size, alpha=t.alpha,
-                       lw=0, depthshade=False, rasterized=True, zorder=2)  # fmt: skip
+                       lw=0, depthshade=False, rasterized=True, zorder=2, **kw)  # fmt: skip
         if (~ok).any():
             ax.scatter(*xyz[~ok].T, marker="x", c="0.5", s=6, lw=0.6, depthshade=False,
-                       rasterized=True, zorder=2)  # fmt: skip
+                       rasterized=True, zorder=2, **kw)  # fmt: skip
     rs = radii(scene.arms)
     polys, colours = [], []
     for arm, r in zip(scene.arms, rs, strict=True):
         col = COLLIDING if arm.colliding else arm.color
-        V, F = capsules(arm, r)
-        polys.append(V[F])
-        colours += [col] * len(F)
+        if clip:  # each link's part within the view, a thick line (an instrument's shaft)
+            P = arm.points()
+            for a, b in zip(P[:-1], P[1:], strict=True):
+                seg = clip_segment(a, b, lo, hi)
+                if seg is not None:
+                    ax.plot(*np.stack(seg).T, color=col, lw=4.5, alpha=0.8, zorder=3.5,
+                            solid_capstyle="round")  # fmt: skip
+                    ax.plot(*np.stack(seg).T, color="0.15", lw=1.0, zorder=4)
+        else:
+            V, F = capsules(arm, r)
+            polys.append(V[F])
+            colours += [col] * len(F)
         for Vm, Fm in arm.world().meshes:
             polys.append(Vm[Fm])
             colours += ["#b0b0b0"] * len(Fm)
     if polys:
         pc = Poly3DCollection(np.concatenate(polys), facecolors=colours, alpha=0.55, shade=True,
-                              edgecolor="none", zorder=3, rasterized=True)  # fmt: skip
-        ax.add_collection3d(pc)
+                              edgecolor="none", zorder=3, rasterized=True, **kw)  # fmt: skip
+        ax.add_collection3d(pc, **kw)
     for k_arm, (arm, r) in enumerate(zip(scene.arms, rs, strict=True)):
         P = arm.points()  # the centre line's data are the joints (gid: tests read them back)
-        ax.plot(*P.T, color="0.15", lw=1.0, marker="o", ms=2.5, zorder=4, gid=f"arm{k_arm}-joints")
+        ax.plot(*P.T, color="0.15", lw=1.0, marker="o", ms=2.5, zorder=4, gid=f"arm{k_arm}-joints",
+                **kw)  # fmt: skip
         L = max(4 * r, 0.08 * arm.length())
+        L = min(L, 0.1 * float(np.max(hi - lo))) if clip else L
         for seg in axis_arrows(arm, L):
             ax.quiver(*seg[0], *(seg[1] - seg[0]), color="0.2", lw=1.0, arrow_length_ratio=0.3,
-                      zorder=5)  # fmt: skip
+                      zorder=5, **kw)  # fmt: skip
         for tri in triads(arm, 0.75 * L):
             for k, seg in enumerate(tri):
-                ax.plot(*seg.T, color=FRAME_COLOURS[k], lw=1.6, zorder=5)
+                ax.plot(*seg.T, color=FRAME_COLOURS[k], lw=1.6, zorder=5, **kw)
         if arm.colliding:
-            ax.plot(*P.T, color=COLLIDING, lw=2.5, ls=":", zorder=4)
+            ax.plot(*P.T, color=COLLIDING, lw=2.5, ls=":", zorder=4, **kw)
     for p, col in scene.marks:
         ax.scatter(*np.asarray(p)[:, None], marker="*", s=90, c=col, edgecolors="k", lw=0.5,
-                   depthshade=False, zorder=6)  # fmt: skip
+                   depthshade=False, zorder=6, **kw)  # fmt: skip
     for a, b in scene.collisions:
         s = np.stack([a, b])
-        ax.plot(*s.T, color=COLLIDING, lw=1.5, marker="x", ms=8, zorder=6)
+        ax.plot(*s.T, color=COLLIDING, lw=1.5, marker="x", ms=8, zorder=6, **kw)
     ax.set_xlim(lo[0], hi[0])  # the view: robots, task and ports; obstacles clipped to it
     ax.set_ylim(lo[1], hi[1])
     ax.set_zlim(lo[2], hi[2])
-    ax.set_box_aspect(tuple((hi - lo) / (hi - lo).max()))
+    ax.set_box_aspect(tuple((hi - lo) / (hi - lo).max()), zoom=zoom)
     ax.set_xlabel(style.label("x", unit))
     ax.set_ylabel(style.label("y", unit))
     ax.set_zlabel(style.label("z", unit))
@@ -686,8 +703,8 @@ def draw_3d(ax: Any, scene: Scene, unit: str, legend: bool = True,
 
     for a_ in (ax.xaxis, ax.yaxis, ax.zaxis):
         a_.set_major_locator(MaxNLocator(4))
-    if scene.title:
-        ax.set_title(scene.title, fontsize=9, y=1.0)
+    if scene.title:  # above the box where it is zoomed beyond the axes
+        ax.set_title(scene.title, fontsize=9, y=1.0 + 0.5 * max(zoom - 1.0, 0.0))
     if legend and legend_handles(scene):
         ax.legend(handles=legend_handles(scene), loc="upper left", fontsize=7, framealpha=0.85)
     return mappable
@@ -781,37 +798,115 @@ def draw_obstacles_2d(ax: Any, scene: Scene, E: np.ndarray) -> None:
                 zorder=6)  # fmt: skip
 
 
-def figure(scenes: Sequence[Scene], unit: str, title: str = "", size: float = 5.0):
+def clip_segment(a: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray] | None:  # fmt: skip
+    """The part of the segment a–b within the box [lo, hi] (Liang–Barsky); None when
+    it misses the box."""
+    d = b - a
+    t0, t1 = 0.0, 1.0
+    for k in range(3):
+        for p, q in ((-d[k], a[k] - lo[k]), (d[k], hi[k] - a[k])):
+            if p == 0:
+                if q < 0:
+                    return None
+                continue
+            r = q / p
+            if p < 0:
+                t0 = max(t0, r)
+            else:
+                t1 = min(t1, r)
+            if t0 > t1:
+                return None
+    return a + t0 * d, a + t1 * d
+
+
+def _inside_faces(ob: Any, lo: np.ndarray, hi: np.ndarray):
+    """An obstacle's faces that lie within the box [lo, hi] (an ellipsoid finely
+    meshed), as (vertices, faces): a surface cut at the view's edge, not flattened on it."""
+    if ob.shape == "ellipsoid":
+        V, F = ball(np.zeros(3), 1.0, 72)
+        V = np.asarray(ob.center, np.float64) + V * np.asarray(ob.radii, np.float64)
+    else:
+        V, F = obstacle_mesh(ob, (lo + hi) / 2, 1.0)
+    inside = np.all((V >= lo) & (V <= hi), 1)
+    return V, F[np.all(inside[F], 1)]
+
+
+def figure(scenes: Sequence[Scene], unit: str, title: str = "", size: float = 5.0, *,
+           limits: np.ndarray | None = None, zoom: float = 1.0,
+           table: tuple[Sequence[str], Sequence[Sequence[str]]] | None = None,
+           notes: Sequence[str] = (), min_width: float = 0.0):  # fmt: skip
     """One 3-D panel per scene, side by side on common axis limits (so that arms compare
     by size; obstacles clipped to the view, :func:`clipped_note` added to the title), the
     legend below them, ``title`` wrapped to the width; laid out by hand in
     inches (constrained layout does not see a 3-D axes' labels). Returns the figure (save
-    it with ``designopt.figures.save``)."""
+    it with ``designopt.figures.save``).
+
+    ``limits``: points (k, 3) the common view holds (default: the scenes' own); given,
+    the arms, targets, marks and obstacles are clipped to it (a view zoomed on the
+    patient: the caller's notes say what it holds).
+    ``zoom``: the 3-D boxes' scale in their panels. ``table`` (column heads, rows) and
+    ``notes`` (lines): numbers under the legend, a matplotlib table then text rows; with
+    either, the clipping note joins the notes rather than the title. ``min_width``: the
+    figure's least width (inches; the panels centred)."""
     import textwrap
 
     from designopt.figures.canvas import plt
 
-    W = size * len(scenes) + 0.5
-    note = clipped_note(scenes, unit)
-    title = "\n".join(x for x in (title, note) if x)
+    n = len(scenes)
+    W = max(size * n + 0.5, min_width)
+    note = clipped_note(scenes, unit, limits) if limits is None else ""
+    below = table is not None or bool(notes)
+    if below:
+        notes = [*notes, note] if note else list(notes)
+    else:
+        title = "\n".join(x for x in (title, note) if x)
     lines = [ln for par in title.split("\n")
-             for ln in textwrap.wrap(par, int(W * 12.5), break_on_hyphens=False)]
+             for ln in textwrap.wrap(par, int(W * (10.5 if below else 12.5)),
+                                     break_on_hyphens=False)]  # fmt: skip
+    note_lines = [ln for par in notes for ln in textwrap.wrap(par, int(W * 14.5))]
     handles = list({h.get_label(): h for sc in scenes for h in legend_handles(sc)}.values())
     ncol = max(1, min(len(handles), int(W // 2.6)))
     rows = -(-len(handles) // ncol)
     rows_t = max((sc.title.count("\n") + 1 for sc in scenes if sc.title), default=1)
     top = 0.15 + 0.19 * len(lines) + 0.15 * rows_t  # the title, then the panels' own titles
-    bottom = 0.55 + (0.22 * rows + 0.15 if handles else 0.0)  # x, y labels hang below
+    top += 0.5 * max(zoom - 1.0, 0.0) * size  # a zoomed box's title sits higher
+    table_h = 0.24 * (len(table[1]) + 1) if table is not None else 0.0
+    under = table_h + (0.1 if table is not None else 0.0) + 0.17 * len(note_lines)
+    under += 0.1 if under else 0.0
+    bottom = 0.55 + (0.22 * rows + 0.15 if handles else 0.0) + under  # x, y labels hang below
     H = size + top + bottom
     fig = plt.figure(figsize=(W, H))
-    pts = np.vstack([scene_points(sc) for sc in scenes])
+    pts = np.vstack([scene_points(sc) for sc in scenes]) if limits is None else limits
+    x0 = 0.5 * (W - size * n - 0.5)
     for k, sc in enumerate(scenes):
-        ax = fig.add_axes(((0.1 + k * size) / W, bottom / H, (size - 0.45) / W, size / H),
+        ax = fig.add_axes(((x0 + 0.1 + k * size) / W, bottom / H, (size - 0.45) / W, size / H),
                           projection="3d")  # fmt: skip
-        draw_3d(ax, sc, unit, legend=False, limits=pts)
+        draw_3d(ax, sc, unit, legend=False, limits=pts, clip=limits is not None, zoom=zoom)
     if handles:
-        fig.legend(handles=handles, loc="lower center", bbox_to_anchor=(0.5, 0.1 / H),
+        fig.legend(handles=handles, loc="lower center", bbox_to_anchor=(0.5, (0.1 + under) / H),
                    ncol=ncol, fontsize=8, framealpha=0.9)  # fmt: skip
+    y = under - 0.05
+    if table is not None:
+        head, cells = table
+        tab_ax = fig.add_axes((0.3 / W, (y - table_h) / H, (W - 0.6) / W, table_h / H))
+        tab_ax.set_axis_off()
+        tab = tab_ax.table(cellText=[list(r) for r in cells], colLabels=list(head),
+                           cellLoc="center", bbox=(0, 0, 1, 1))  # fmt: skip
+        tab.auto_set_font_size(False)
+        tab.set_fontsize(8)
+        chars = [max(len(str(x)) for x in col) + 2 for col in zip(head, *cells, strict=True)]
+        for (r, c), cell in tab.get_celld().items():
+            cell.set_width(chars[c] / sum(chars))
+            cell.set_edgecolor("0.6")
+            if r == 0:
+                cell.set_facecolor("#eeeeee")
+                cell.get_text().set_weight("bold")
+        y -= table_h + 0.1
+    for ln in note_lines:
+        fig.text(0.3 / W, y / H, ln, fontsize=8, va="top")
+        y -= 0.17
     if lines:
-        fig.suptitle("\n".join(lines), fontsize=9.5, y=1 - 0.1 / H, va="top")
+        fig.suptitle("\n".join(lines), fontsize=9.5 if not below else 11, y=1 - 0.1 / H,
+                     va="top", weight="normal" if not below else "bold")  # fmt: skip
     return fig

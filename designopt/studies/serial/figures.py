@@ -132,7 +132,12 @@ def draw_run(rec: RunRecord, folder: Path, resolution: int = MAP_RESOLUTION) -> 
             X = _full(mech, designs["final"])
             z, P = _kernel(mech, s)(X, _uniform_q(mech, rec, 4000).astype(X.dtype))
             ws = _workspace(np.asarray(P[0]), np.asarray(z[0]), s, folder, rec)
-        return out + draw_task(rec, folder, sol) + ws + draw_robot(rec, folder, sol)
+        out += draw_task(rec, folder, sol) + ws + draw_robot(rec, folder, sol)
+        if has_ports(s):  # a planning run: the plan sheet (plansheet.py)
+            from designopt.studies.serial import plansheet
+
+            out += plansheet.run_plan(rec, folder)
+        return out
 
     rows_txt = ", ".join(ROWS[r] for r in s.indices.rows())
     lo, hi = mech.lower, mech.upper
@@ -377,37 +382,61 @@ def draw_front_robots(rec: Any, picks: Sequence[tuple[str, int]], folder: Path) 
     the two extremes and the knee) side by side on common axes, each with every arm at
     its base in the world, at one representative tuple of targets of its own IK
     solution (``drawing.design_pose``; the home pose without a task), with the task
-    region, obstacles and ports; the targets starred."""
+    region, obstacles and ports; the targets starred. A two-line title; the numbers
+    (objectives, design variables, the pose drawn, incision points and bases) in a table
+    and text rows under the panels. A planning study (instruments through ports) is
+    zoomed on the patient: the view holds the task region, the ports, the anatomy and the
+    starred targets, the robots clipped to it; its plan sheet (``plan.png``) follows."""
     s: SerialSettings = rec.config.study
     if not picks:
         return []
     mech = build(s)
     objs, cols, _ = front_columns(rec)
     region = s.task.region if s.task is not None else None
-    scenes, lines = [], []
+    u = length_unit(s)
+    ang = s.angle_names()
+    scenes, rows, notes = [], [], []
+    fr = getattr(rec, "groups", {}).get("front", {})
     for (name, i), col in zip(picks, ("#2ca02c", "#ff7f0e", "#9467bd"), strict=False):
         label, Q, tg = drawing.design_pose(s, mech, rec.X[i], rec.keys())
         arms = drawing.study_arms(s, mech, rec.X[i], Q, color=col,  # several: "arm k"
                                   label=f"design {i}" if s.arms is None else "")  # fmt: skip
-        val = ", ".join(f"{k} = {c[i]:.4g}" for (k, _), c in zip(objs, cols, strict=True))
         around = {"region": region, **drawing.obstacles_and_ports(s, rec.X[i])}  # its ports
-        scenes.append(robot.Scene(arms=arms, title=f"{name}: design {i}\n{val}",
+        scenes.append(robot.Scene(arms=arms, title=f"{name}: design {i}",
                                   marks=[(p, "#d62728") for p in tg], **around))  # fmt: skip
-        d = dict(zip(s.variables, rec.X[i], strict=True))
-        lines.append(f"{name} (design {i}): {_design(s, d)}; drawn at {label}")
-        fr = getattr(rec, "groups", {}).get("front", {})
+        rows.append([f"{name}: design {i}", *(f"{c[i]:.4g}" for c in cols),
+                     *(f"{v:.4g}" for v in rec.X[i])])  # fmt: skip
+        notes.append(f"{name} (design {i}): drawn at {label}")
         if "ports" in fr:  # the incision points and bases of this design, in numbers
-            lines.append(drawing.placement_text(s, {k: np.asarray(fr[k])[i] for k in ("ports", "bases")
-                                             if k in fr}))  # fmt: skip
-    where = ("one representative tuple of targets of its own IK solution (stars): " +
-             ("the tuple (one target per arm, as arms_ok draws them) of median gap between "
-              "the arms" if s.arms is not None else "the reached target of median 1/k")
-             if s.indices.measure == "task" else "the home pose")  # fmt: skip
-    head = (f"The front's extremes and knee ({len(rec.X)} designs of {rec.study}; the knee: "
-            "farthest from the line between the extremes, objectives normalised over the "
-            f"front), each at {where}")  # fmt: skip
-    fig = robot.figure(scenes, length_unit(s), "\n".join([head, *lines]))
-    return save(fig, folder, "front_robots")
+            notes.append("    " + drawing.placement_text(s, {k: np.asarray(fr[k])[i] for k in
+                                                         ("ports", "bases") if k in fr}))  # fmt: skip
+    units = rec.units() if hasattr(rec, "units") else {}
+    head = ["design", *(style.label(f"{k} ({sense})", units.get(k, "-")) for k, sense in objs),
+            *(style.label(k, "deg" if k in ang else u) for k in s.variables)]  # fmt: skip
+    where = ("at its tuple of targets of median gap between the arms (stars)" if s.arms is not None
+             else "at its reached target of median 1/k (star)"
+             ) if s.indices.measure == "task" else "at the home pose"  # fmt: skip
+    title = (f"The front's extremes and knee ({len(rec.X)} designs; knee: farthest from the "
+             f"extremes' line)\neach {where}")  # fmt: skip
+    limits = None
+    if has_ports(s):  # zoomed on the patient: region, ports, anatomy, the starred targets
+        pts = [np.vstack([robot.scene_points(robot.Scene(arms=[], region=sc.region,
+                                                         marks=sc.marks, ports=sc.ports)),
+                          *_inside(sc)]) for sc in scenes]  # fmt: skip
+        limits = np.vstack(pts)
+        notes.append("the view holds the task region, the ports (white circles), the anatomy and "
+                     "the starred targets; the robots, the body wall and the other obstacles are "
+                     "cut at its edge (each arm's links within it drawn as thick lines)")  # fmt: skip
+        title += "; zoomed on the patient"
+    fig = robot.figure(scenes, u, title, size=5.6 if limits is not None else 5.0,
+                       limits=limits, zoom=1.1 if limits is not None else 1.0,
+                       table=(head, rows), notes=notes, min_width=10.0)  # fmt: skip
+    out = save(fig, folder, "front_robots")
+    if has_ports(s):  # a planning front: the plan sheet of its knee (plansheet.py)
+        from designopt.studies.serial import plansheet
+
+        out += plansheet.front_plan(rec, picks, folder)
+    return out
 
 
 def front_columns(rec: Any) -> tuple[list[tuple[str, str]], list[np.ndarray], list[str]]:
@@ -488,7 +517,7 @@ def _task_caption(rec: RunRecord, sol_all: dict[str, np.ndarray], sol: dict[str,
     lead = (slice(None), None) if s.arms is not None else (None, None)  # (A, M = 1, N)
     per = {k: sol_all[k][lead].astype(np.float64) for k in ("success", "inv_k",
            "manipulability", "joint_margin")}  # fmt: skip
-    est = jax.jit(taskindex.estimates)(per)
+    est = jax.jit(taskindex.estimates, static_argnames="grp")(per, grp=taskindex.groups(s))
     est = {k: (float(v[0][0]), float(v[1][0])) for k, v in est.items()}
     des = ", ".join(f"{k} = {v:.4g} {units.get(k, L)}" for k, v in rec.x.items())
     line = f"reach {est['reach'][0]:.3f} ± {est['reach'][1]:.2g}, gci {est['gci'][0]:.3f} ± " \
