@@ -437,3 +437,31 @@ def test_bad_final_keys_in_a_run_config_exit_2_naming_the_key(tmp_path, capsys, 
     out, err = capsys.readouterr()
     assert err.startswith("designopt: error: ") and err.count("\n") == 1, err
     assert f"key '{key}'" in err and "Traceback" not in out + err
+
+
+@pytest.mark.parametrize("df", [1, 2, 3, 7.5, 30, 200])
+def test_student_t_tail_and_quantile_against_scipy(df):
+    for x in (-3.0, -0.5, 0.0, 1e-6, 0.3, 1.2, 4.0, 20.0):
+        assert abs(racing.t_sf(x, df) - stats.t.sf(x, df)) < 1e-9
+    for p in (1e-6, 0.01, 0.025, 0.3, 0.5, 0.9, 0.999):
+        q = stats.t.ppf(p, df)
+        assert abs(racing.t_ppf(p, df) - q) < 1e-8 * max(1.0, abs(q))
+    assert racing.t_ppf(0.975, math.inf) == racing.norm_ppf(0.975)
+
+
+def test_a_race_of_replication_means_uses_students_t():
+    """Units that are replication means (student=True, a first stage of 2 units): on the
+    same draws, a difference the normal approximation calls ((d − δ)/SE = 3 at the first
+    look) is not called with 1 degree of freedom; with more units it is."""
+    def fn(active, st):  # candidate 1 worse by 0.1 ± 0.03 per unit, a common unit effect
+        u = np.arange(st.start, st.stop)
+        common = 0.2 * np.sin(u)[None, :]
+        d = 0.1 + 0.03 * np.where(u % 2 == 0, 1.0, -1.0)[None, :]
+        return (np.array([[0.0], [1.0]])[active] * d + common)[..., None]
+
+    normal = racing.race(fn, 2, margin=0.01, max_samples=2, stage=1, first=2)
+    student = racing.race(fn, 2, margin=0.01, max_samples=2, stage=1, first=2, student=True)
+    assert normal.verdict.tolist() == ["best", "worse"]  # z = 3: p = 0.0013
+    assert student.verdict.tolist() == ["best", "equivalent"] and student.reason == "cap"
+    longer = racing.race(fn, 2, margin=0.01, max_samples=12, stage=1, first=2, student=True)
+    assert longer.verdict.tolist() == ["best", "worse"] and longer.n_samples[1] < 12

@@ -365,6 +365,15 @@ class Final(_Strict):
         "design space ((x − lower)/(upper − lower), Euclidean) are one candidate, the better "
         "one standing for both (0: only identical designs merge).",
     )
+    race: bool = Field(
+        False,
+        description="Run the final stage: the search's candidate layouts (non-dominated or best "
+        "few of every run, the polished ones) raced on the validation stream (`final.seed`), "
+        "stage by stage up to `final.max_samples`, giving a verdict table (best / equivalent "
+        "/ worse) and one recommendation or a tied set; a weighted run's final design is the "
+        "race's best, a front is formed from the race's survivors (docs/planning.md, \"The "
+        "final stage\").",
+    )
     alpha: float = Field(
         0.05,
         gt=0,

@@ -166,7 +166,7 @@ def groups(job: Any, problem: Problem, res: Any) -> dict[str, Any]:
     R = int(np.shape(pop.x)[0])
     X_runs, scale = rs.front_picks(res) if R >= 2 or cfg.refine is not None else (None, None)
     pick = "each run's recommended design: the compromise of its own non-dominated final population"
-    polished = None
+    polished, F_pol = None, None
     if cfg.refine is not None:  # each run's recommended design polished (compass)
         pol, F_pol, polished = polishing.front(problem, X_runs, scale, names, sg, cfg.refine)
         X_runs = pol.x
@@ -179,6 +179,10 @@ def groups(job: Any, problem: Problem, res: Any) -> dict[str, Any]:
             _, first = np.unique(Xc[nd], axis=0, return_index=True)
             nd = nd[np.sort(first)]
             X, F_opt, keep = Xc[nd], Fc[nd], nd
+    verdict_group = None
+    if cfg.final.race:  # the final stage: the front is formed from the race's survivors
+        verdict_group, X, F_opt, n_cand = raced(job, res, X_runs, F_pol, polished is not None, sg)
+        keep = np.arange(n_cand)
     X = X[thin(F_opt, cfg.front.max_points)]
     c, fresh, n_samples = rescoring(job)
     rescore = rs.problem(job, "front")
@@ -232,6 +236,8 @@ def groups(job: Any, problem: Problem, res: Any) -> dict[str, Any]:
     out = {"optimizer": opt, "front": fr, "problem": problem_group(problem)}
     if polished is not None:
         out["refine"] = polished
+    if verdict_group is not None:
+        out["verdict"] = verdict_group
     if runs is not None:
         out["runs"] = runs_group(job, problem, runs[0], runs[1], names, sg, F, na, pick)
     if job.study.targets is not None and len(X):  # every front design at every target
@@ -240,6 +246,38 @@ def groups(job: Any, problem: Problem, res: Any) -> dict[str, Any]:
         if tg is not None:
             out["targets"] = tg
     return out
+
+
+def raced(job: Any, res: Any, X_runs: np.ndarray | None, F_runs: np.ndarray | None,
+          polished: bool, sg: np.ndarray) -> tuple[dict[str, Any], np.ndarray, np.ndarray, int]:  # fmt: skip
+    """A front's final stage (``final.race``, ``designopt.app.verdict``): every run's
+    non-dominated final-population designs, each run's recommended (or polished) design
+    ``X_runs`` (with ``F_runs``, its search objectives, minimised, when polished), cleared
+    and raced on the validation stream. Returns the ``verdict`` group, the race's
+    surviving designs that are non-dominated on their validation means (those that
+    missed no share constraint first), those means (minimised, as the search's F) and the
+    number of candidates raced."""
+    from designopt.app import verdict
+    from designopt.numerics import pareto
+
+    if X_runs is not None and F_runs is None:  # a run's pick: a final-population design
+        D = np.shape(res.front.x)[-1]
+        Xp = np.asarray(res.front.x, np.float64).reshape(-1, D)
+        Fp = np.asarray(res.front.f, np.float64).reshape(len(Xp), -1)
+        F_runs = Fp[[int(np.argmin(np.abs(Xp - x).sum(-1))) for x in X_runs]]
+    Xc, _ = verdict.front_candidates(res, X_runs, F_runs)
+    Xc = verdict.clear(job, Xc)
+    pick = ["every run's non-dominated final-population designs"]
+    if X_runs is not None:
+        pick.append("each run's recommended design" + (", polished" if polished else ""))
+    g = verdict.race_candidates(job, Xc, sources=pick)
+    rows = verdict.survivors(g)
+    status = np.asarray(g["status"]).astype(str)[rows]
+    ok = ~(status == "missed").any(axis=1) if status.size else np.ones(len(rows), bool)
+    pool = rows[ok] if ok.any() else rows
+    Fp = np.asarray(g["mean"], np.float64)[pool] * sg
+    nd = pool[pareto.non_dominated(Fp)]
+    return g, np.asarray(g["x"], np.float64)[nd], np.asarray(g["mean"])[nd] * sg, len(Xc)
 
 
 def design_notes(job: Any, X: np.ndarray, vals: Mapping[str, np.ndarray], c: Any,

@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from designopt.app import checkpoint as ckpt
-from designopt.app import fronts, quoted, rescoring
+from designopt.app import fronts, quoted, rescoring, verdict
 from designopt.app.designs import Designs, matrix, scan_designs
 from designopt.app.job import Job, base_attrs, build_problem
 from designopt.app.optimise import optimise
@@ -126,6 +126,8 @@ class Single:
 
     def groups(self, job: Job, problem: Any, res: Any) -> dict[str, Any]:
         groups = run_groups(job.cfg, problem, res, job.dtype)
+        if job.cfg.final.race:  # the final stage: the race's best is the final design
+            groups = raced(job, problem, res, groups)
         # the final design (and each run's best) re-scored on the fresh ``final`` stream:
         # the quoted values; the search's own stay in best_run/final
         groups = rescoring.final_groups(job, problem, res, groups)
@@ -156,6 +158,27 @@ class Single:
         n = rescoring.plan(job, "final").n
         polish = ", polishing" if job.cfg.refine else ""
         return f"scoring the best run{polish} and re-scoring the final design on {n} fresh samples"
+
+
+def raced(job: Job, problem: Any, res: Any, groups: dict[str, Any]) -> dict[str, Any]:
+    """A weighted or constrained run's final stage (``final.race``): its candidates
+    raced on the validation stream (``designopt.app.verdict``), the archive's ``verdict``
+    group, and the race's best as the final design (its values on the search's samples
+    in ``final``, which ``rescoring.final_groups`` then re-scores on the fresh ``final``
+    stream as every quoted number)."""
+    X, _ = verdict.run_candidates(res, groups)
+    x0 = np.asarray(groups["final"]["x"], np.float64)
+    X = verdict.clear(job, np.concatenate([x0[None], X]))  # the search's final design first
+    g = verdict.race_candidates(job, X, like=problem,
+                                sources=["the search's best few designs of each run"])  # fmt: skip
+    groups["verdict"] = g
+    xb = verdict.best_x(g)
+    if not np.array_equal(xb, x0):  # the race's best: its values on the search's samples
+        fin = groups["final"]
+        vals = quoted.blocked(problem, xb[None])
+        groups["final"] = {k: np.asarray(v)[0] for k, v in vals.items()} | {
+            "x": xb, "attrs": dict(fin.get("attrs", {})) | {"stage": "race"}}
+    return groups
 
 
 class Front(Single):
@@ -207,6 +230,7 @@ def run(cfg: Any, text: str | None = None, where: str = "config", out: Path | No
         return _replay(job, out, dry_run)
     how = Single() if cfg.study.pareto is None else Front()
     rescoring.plan(job, how.kind if how.kind == "front" else "final")  # its samples checked now
+    verdict.check(job)  # the final stage's keys (final.margin names, the cap in stages)
     if dry_run:
         return _dry(out, cfg, job.estimate)
     o = cfg.optimizer
@@ -304,6 +328,10 @@ def sweep(cfg: Any, text: str | None = None, where: str = "config", out: Path | 
         raise ConfigError(f"{where}: key 'sweep': a sweep of Pareto fronts "
                           "(study.objective.pareto) is not supported; run each front with "
                           "`designopt run`")  # fmt: skip
+    if cfg.final.race:
+        raise ConfigError(f"{where}: key 'final.race': the final stage races one run's "
+                          "candidates; a sweep does not run it: run each member with "
+                          "`designopt run`, or set final.race: false")  # fmt: skip
     groups, cfgs, members = sw.groups(cfg, where)
     jobs = {k: Job.build(c, where, text, members=len(groups[k])) for k, c in cfgs.items()}
     est = max((j.estimate for j in jobs.values()), key=lambda e: e.memory)

@@ -108,13 +108,27 @@ def stream(cfg: Any, study: Any, keys: Mapping[str, Any], section: str = "final"
     program; a normalised objective probes only the fewest designs, as its bounds are
     replaced by the run's) and its keys (``samples``: the fresh stream). A sample count
     the study refuses: ConfigError naming ``<section>.n_samples``."""
-    from designopt.app import sweeps
-
     cost = study.cost(cfg.study)
     n = _samples(cfg, cost, section)
+    c, n = sized(cfg, cost, n, f"{section}.n_samples", where,
+                 norm=section == "final" and cfg.study.pareto is None)  # fmt: skip
+    fresh = dict(keys) | {"samples": jax.random.fold_in(jax.random.key(cfg.seed),
+                                                        STREAMS[section])}  # fmt: skip
+    return Fresh(section, c, fresh, n, int(cost.samples))
+
+
+def sized(cfg: Any, cost: Any, n: int, key: str, where: str = "config",
+          norm: bool = False) -> tuple[Any, int]:  # fmt: skip
+    """``cfg`` with ``n`` samples per design (the study's ``Cost.samples_key``; a study
+    scoring in blocks keeps its chunk; ``norm``: a normalised objective probes only the
+    fewest designs, its bounds being replaced by the run's) and the samples it scores
+    (a closed-form study: its own). A count the study refuses: ConfigError naming
+    ``key``."""
+    from designopt.app import sweeps
+
     c = cfg
     keep = {cost.chunk_key: int(cost.chunk)} if cost.designs else {}
-    if section == "final" and cost.norm_key and cfg.study.pareto is None:
+    if norm and cost.norm_key:
         keep[cost.norm_key] = 2  # the probe's bounds are replaced by the run's: probe little
     if cost.samples > 1:
         try:
@@ -122,12 +136,10 @@ def stream(cfg: Any, study: Any, keys: Mapping[str, Any], section: str = "final"
             c = sweeps.apply(cfg, {cost.samples_key: n} | keep, where, checks=False)
         except (ValueError, ConfigError) as e:
             why = str(e).removeprefix(where + ": ")
-            raise ConfigError(f"{where}: key '{section}.n_samples': {why}") from None
+            raise ConfigError(f"{where}: key '{key}': {why}") from None
     else:
         n = int(cost.samples)  # a closed-form study: the same numbers on any samples
-    fresh = dict(keys) | {"samples": jax.random.fold_in(jax.random.key(cfg.seed),
-                                                        STREAMS[section])}  # fmt: skip
-    return Fresh(section, c, fresh, n, int(cost.samples))
+    return c, n
 
 
 def blocked(prob: Problem, X: np.ndarray) -> dict[str, np.ndarray]:

@@ -17,7 +17,8 @@ Pieces, each usable on its own:
 - :func:`wilson`, :func:`constraint_status`: the Wilson score interval of a share
   (Wilson, "Probable inference, the law of succession, and statistical inference", 1927)
   and whether a share constraint is *met*, *missed* or *at its bound*.
-- :func:`paired`: the mean and standard error of a paired difference on common samples.
+- :func:`paired`: the mean and standard error of a paired difference on common samples;
+  :func:`t_sf`, :func:`t_ppf`: Student's t tail and quantile (numpy and ``math`` only).
 - :func:`race`: the sequential elimination (rules below); :class:`RaceResult` its answer.
 - :func:`differing_variables`, :func:`mirror`: how the layouts of a tied set differ, and
   whether two of them are mirror images under a symmetry the caller names.
@@ -36,7 +37,9 @@ The race's rules (every objective internally minimised; ``maximize`` flips an ob
   (:func:`designopt.numerics.statistics.holm`); decisions are final once taken. Over the
   whole race the family-wise error of each kind of decision (eliminations; equivalences
   and trade-offs) is then at most alpha. Tests use the normal approximation to the
-  paired mean (stages of at least 30 samples keep it honest).
+  paired mean (stages of at least 30 samples keep it honest), or, where each unit is
+  the mean of one replication (``student=True``: a few units of many samples each),
+  Student's t with N − 1 degrees of freedom, N the pair's common units.
 - **Constraints** (share constraints ``share ≥ bound`` or ``≤``, counted by the caller):
   the status of each candidate is read from its Wilson interval at the per-look level
   (z = Φ⁻¹(1 − alpha/(2S)), per candidate and constraint, not corrected across
@@ -142,6 +145,97 @@ def holm_reject(pvalues: np.ndarray, alpha: float) -> np.ndarray:
     if p.size == 0:
         return np.zeros(0, bool)
     return holm(p) < alpha
+
+
+def _betacf(a: float, b: float, x: float) -> float:
+    """The continued fraction of the regularised incomplete beta function (modified
+    Lentz), converging for x < (a + 1)/(a + b + 2)."""
+    tiny, qab, qap, qam = 1e-300, a + b, a + 1.0, a - 1.0
+    c, d = 1.0, 1.0 - qab * x / qap
+    d = 1.0 / (d if abs(d) > tiny else tiny)
+    h = d
+    for m in range(1, 400):
+        m2 = 2 * m
+        aa = m * (b - m) * x / ((qam + m2) * (a + m2))
+        d = 1.0 + aa * d
+        d = 1.0 / (d if abs(d) > tiny else tiny)
+        c = 1.0 + aa / c
+        c = c if abs(c) > tiny else tiny
+        h *= d * c
+        aa = -(a + m) * (qab + m) * x / ((a + m2) * (qap + m2))
+        d = 1.0 + aa * d
+        d = 1.0 / (d if abs(d) > tiny else tiny)
+        c = 1.0 + aa / c
+        c = c if abs(c) > tiny else tiny
+        de = d * c
+        h *= de
+        if abs(de - 1.0) < 1e-15:
+            break
+    return h
+
+
+def _betainc(a: float, b: float, x: float) -> float:
+    """The regularised incomplete beta function I_x(a, b), 0 ≤ x ≤ 1."""
+    if x <= 0.0:
+        return 0.0
+    if x >= 1.0:
+        return 1.0
+    lbt = (math.lgamma(a + b) - math.lgamma(a) - math.lgamma(b) + a * math.log(x)
+           + b * math.log1p(-x))  # fmt: skip
+    if x < (a + 1.0) / (a + b + 2.0):
+        return math.exp(lbt) * _betacf(a, b, x) / a
+    return 1.0 - math.exp(lbt) * _betacf(b, a, 1.0 - x) / b
+
+
+def _t_sf1(t: float, df: float) -> float:
+    if math.isnan(t):
+        return math.nan
+    if math.isinf(df):
+        return 0.5 * math.erfc(t / math.sqrt(2.0))
+    if math.isinf(t):
+        return 0.0 if t > 0 else 1.0
+    a, y = 0.5 * df, t * t / (df + t * t)  # x = 1 − y: near 1, take I from y's side
+    x = df / (df + t * t)
+    i_x = _betainc(a, 0.5, x) if x < (a + 1.0) / (a + 2.5) else 1.0 - _betainc(0.5, a, y)
+    tail = 0.5 * i_x  # P(T > |t|)
+    return tail if t >= 0 else 1.0 - tail
+
+
+_t_sf = np.frompyfunc(_t_sf1, 2, 1)
+
+
+def t_sf(x: np.ndarray | float, df: np.ndarray | float) -> np.ndarray:
+    """Student's t survival function P(T_df > x), elementwise (df = inf: the normal's;
+    ±inf give 0 and 1), from the regularised incomplete beta function,
+    P(T > |t|) = I_{df/(df+t²)}(df/2, 1/2)/2."""
+    x, df = np.broadcast_arrays(np.asarray(x, np.float64), np.asarray(df, np.float64))
+    return np.asarray(_t_sf(x, df), dtype=np.float64)
+
+
+def t_ppf(p: float, df: float) -> float:
+    """Student's t quantile with ``df`` > 0 degrees of freedom (bisection on :func:`t_sf`;
+    df = inf: :func:`norm_ppf`)."""
+    p, df = float(p), float(df)
+    if not 0.0 < p < 1.0:
+        raise ValueError(f"t_ppf: p must lie in (0, 1), not {p}")
+    if not df > 0:
+        raise ValueError(f"t_ppf: df must be > 0, not {df}")
+    if math.isinf(df):
+        return norm_ppf(p)
+    if p > 0.5:
+        return -t_ppf(1.0 - p, df)
+    lo, hi = -1.0, 0.0
+    while _t_sf1(-lo, df) > p:  # P(T < lo) = P(T > −lo): widen until it is below p
+        lo *= 2.0
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if mid in (lo, hi):
+            break
+        if _t_sf1(-mid, df) < p:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
 
 
 # ---------------------------------------------------------------- clearing
@@ -373,18 +467,20 @@ def _pair_stats(act, nS, Sx, Sxx, shift):
     return D, SE, N
 
 
-def _sf_margin(num: np.ndarray, se: np.ndarray) -> np.ndarray:
-    """P(Z > num/se); se = 0 gives 0 when num > 0 and 1 otherwise."""
+def _sf_margin(num: np.ndarray, se: np.ndarray, df: np.ndarray | None = None) -> np.ndarray:
+    """P(Z > num/se), or P(T_df > num/se) with ``df`` (broadcast with num); se = 0 gives 0
+    when num > 0 and 1 otherwise."""
     with np.errstate(divide="ignore", invalid="ignore"):
         t = np.where(se > 0, num / np.where(se > 0, se, 1.0), np.where(num > 0, np.inf, -np.inf))
-    return norm_sf(t)
+    return norm_sf(t) if df is None else t_sf(t, df)
 
 
 def race(sample_fn: Callable[[np.ndarray, Stage], object], n_candidates: int, *,
          margin: float | Sequence[float], max_samples: int, stage: int = 64,
          alpha: float = 0.05, maximize: bool | Sequence[bool] = False, primary: int = 0,
          bound: float | Sequence[float] | None = None,
-         sense: str | Sequence[str] = ">=") -> RaceResult:  # fmt: skip
+         sense: str | Sequence[str] = ">=", student: bool = False,
+         first: int | None = None) -> RaceResult:  # fmt: skip
     """Race ``n_candidates`` candidates on fresh samples (the module docstring gives the
     rules) and return a :class:`RaceResult`.
 
@@ -397,16 +493,21 @@ def race(sample_fn: Callable[[np.ndarray, Stage], object], n_candidates: int, *,
     draws min(stage, max_samples) ≥ 2). ``alpha``: the family-wise error of all the
     race's decisions. ``maximize``: which objectives are better larger (one bool or m).
     ``primary``: the objective that picks the leader. ``bound``/``sense``: each share
-    constraint's bound and its side (``">="``: share ≥ bound)."""
+    constraint's bound and its side (``">="``: share ≥ bound). ``student``: the values
+    are per-unit means (one replication of many samples each, a handful of units): the
+    tests use Student's t with N − 1 degrees of freedom, N the pair's common units,
+    instead of the normal approximation. ``first``: the first stage's size (default
+    ``stage``; e.g. ``first=2, stage=1`` for replications, as a paired SE needs two)."""
     C = int(n_candidates)
     if C < 1:
         raise ValueError("race: need at least one candidate")
     max_samples, stage = int(max_samples), int(stage)
-    if stage < 1 or min(stage, max_samples) < 2:
+    first = stage if first is None else int(first)
+    if stage < 1 or min(first, max_samples) < 2:
         raise ValueError("race: the first stage needs at least 2 samples")
     if not 0.0 < alpha < 1.0:
         raise ValueError(f"race: alpha must lie in (0, 1), not {alpha}")
-    n_looks = math.ceil(max_samples / stage)
+    n_looks = 1 + math.ceil(max(max_samples - first, 0) / stage)
     a_look = alpha / n_looks
     z = norm_ppf(1.0 - a_look / 2.0)
 
@@ -431,7 +532,7 @@ def race(sample_fn: Callable[[np.ndarray, Stage], object], n_candidates: int, *,
     while True:
         idx = np.flatnonzero(sampled)
         start = int(n[idx[0]])
-        size = min(stage, max_samples - start)
+        size = min(first if s == 0 else stage, max_samples - start)
         st = Stage(s, start, start + size)
         draw = _as_draw(sample_fn(idx.copy(), st), idx.size, size)
         if s == 0:
@@ -473,9 +574,10 @@ def race(sample_fn: Callable[[np.ndarray, Stage], object], n_candidates: int, *,
         s += 1
 
         act = np.stack(acts, axis=1)
-        D, SE, _ = _pair_stats(act, np.asarray(sizes, np.float64), np.stack(sx, axis=1),
+        D, SE, N = _pair_stats(act, np.asarray(sizes, np.float64), np.stack(sx, axis=1),
                                np.stack(sxx, axis=2), shift)  # fmt: skip
         codes = _status_codes(succ, trials, bnd, z, sns) if n_con else np.zeros((C, 0), int)
+        dfn = np.maximum(N - 1.0, 1.0) if student else None  # (C, C): the pairs' t df
         missed = (codes == _MISSED).any(axis=1)
         met = (codes == _MET).all(axis=1)
         if (live & ~missed).any():
@@ -487,7 +589,8 @@ def race(sample_fn: Callable[[np.ndarray, Stage], object], n_candidates: int, *,
         if m == 1 and ref_pool.any():
             r = _argbest(own[:, primary], ref_pool)
             cand = np.flatnonzero(live & (np.arange(C) != r))
-            p = _sf_margin(D[cand, r, 0] - delta[0], SE[cand, r, 0])
+            p = _sf_margin(D[cand, r, 0] - delta[0], SE[cand, r, 0],
+                           None if dfn is None else dfn[cand, r])  # fmt: skip
             out = cand[holm_reject(p, a_look)]
             why[out] = "margin"
             live[out] = False
@@ -495,8 +598,9 @@ def race(sample_fn: Callable[[np.ndarray, Stage], object], n_candidates: int, *,
             jj, ii = np.nonzero(ref_pool[:, None] & live[None, :] & ~np.eye(C, dtype=bool))
             if jj.size:
                 d, se = D[ii, jj], SE[ii, jj]  # (P, m): i − j, > 0 where j is better
-                p_noninf = _sf_margin(d + delta, se).max(axis=1)
-                p_better = np.minimum(m * _sf_margin(d - delta, se).min(axis=1), 1.0)
+                df = None if dfn is None else dfn[ii, jj][:, None]
+                p_noninf = _sf_margin(d + delta, se, df).max(axis=1)
+                p_better = np.minimum(m * _sf_margin(d - delta, se, df).min(axis=1), 1.0)
                 rej = holm_reject(np.maximum(p_noninf, p_better), a_look)
                 out = np.unique(ii[rej])
                 why[out] = "dominated"
@@ -505,13 +609,15 @@ def race(sample_fn: Callable[[np.ndarray, Stage], object], n_candidates: int, *,
         iu, ju = np.nonzero(np.triu(und))
         if iu.size:
             d, se = D[iu, ju], SE[iu, ju]  # (P, m): i − j
-            p_eq = np.maximum(_sf_margin(delta - d, se), _sf_margin(d + delta, se)).max(axis=1)
+            df = None if dfn is None else dfn[iu, ju][:, None]
+            p_eq = np.maximum(_sf_margin(delta - d, se, df),
+                              _sf_margin(d + delta, se, df)).max(axis=1)  # fmt: skip
             if m == 1:
                 rej = holm_reject(p_eq, a_look)
                 eq[iu[rej], ju[rej]] = eq[ju[rej], iu[rej]] = True
             else:  # equivalent, or a trade-off: each better than the other somewhere
-                p_i = m * _sf_margin(-d - delta, se).min(axis=1)  # i better by > δ somewhere
-                p_j = m * _sf_margin(d - delta, se).min(axis=1)
+                p_i = m * _sf_margin(-d - delta, se, df).min(axis=1)  # i better by > δ somewhere
+                p_j = m * _sf_margin(d - delta, se, df).min(axis=1)
                 p_tr = np.minimum(np.maximum(p_i, p_j), 1.0)
                 rej = holm_reject(np.minimum(2.0 * np.minimum(p_eq, p_tr), 1.0), a_look)
                 e, a = rej & (p_eq <= p_tr), rej & (p_eq > p_tr)

@@ -8,6 +8,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from designopt.results.base import SEARCH_LABEL, Record, names, runs_lines
+from designopt.results.verdict import lines as verdict_lines
 
 SHOWN = 12
 """Front designs printed by the summary (the archive holds them all)."""
@@ -182,7 +183,8 @@ class FrontRecord(Record):
         n = len(self.F)
         lines = [self.timing_line(),
                  f"Pareto front of {', '.join(f'{k} ({s})' for k, s in obj.items())}: {n} "
-                 f"designs (of {at['n_candidates']} non-dominated candidates), re-scored on "
+                 f"designs (of {at['n_candidates']} "
+                 f"{'candidates raced in the final stage' if 'verdict' in self.groups else 'non-dominated candidates'}), re-scored on "
                  f"{at['n_samples']} fresh samples each",
                  f"hypervolume {self.hypervolume:.6g} against the reference point "
                  f"{np.round(self.reference, 6).tolist()}; {len(self.ambiguous)} pairs "
@@ -217,6 +219,7 @@ class FrontRecord(Record):
                          f"{int(at['evaluations'])} designs scored)")  # fmt: skip
         lines += self.coverage_lines
         lines += runs_lines(self.runs, self.names, self.units())
+        lines += verdict_lines(self.groups.get("verdict"), self.names, self.units())
         warns = self.warnings
         lines += [f"warning: {w}" for w in warns[:SHOWN]]
         if len(warns) > SHOWN:  # a front trading reach: a line per design; all archived

@@ -13,6 +13,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from designopt.results.base import SEARCH_LABEL, Record, runs_lines, value_text
+from designopt.results.verdict import lines as verdict_lines
 
 
 def _unit(u: str | None) -> str:
@@ -244,6 +245,7 @@ class RunRecord(Record):
         lines += list(self.hint("extra_lines", []))
         lines += [f"  {ln}" for ln in self.target_lines]
         lines += [f"  {ln}" for ln in runs_lines(self.runs, self.names, units)]
+        lines += [f"  {ln}" for ln in verdict_lines(self.groups.get("verdict"), self.names, units)]
         lines += [f"  warning: {w}" for w in self.warnings]
         return lines
 
@@ -280,6 +282,7 @@ class RunRecord(Record):
                          f"{self.n_samples_search} per design: f = "
                          f"{value_text(srch['f'], srch.get('f_se'))})")  # fmt: skip
         lines += runs_lines(self.runs, self.names, units)
+        lines += verdict_lines(self.groups.get("verdict"), self.names, units)
         lines += [f"warning: {w}" for w in self.warnings]
         return lines
 

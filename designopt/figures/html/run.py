@@ -68,6 +68,8 @@ def _run_sections(tree: Mapping[str, Any], ids: _Ids, units: dict[str, str],
         out.append(PageSection("final", "Final design", [_final_tables(tree, units)]))
     if isinstance(tree.get("runs"), Mapping) and "agree" in tree["runs"]:
         out.append(_runs(tree, units))
+    if isinstance(tree.get("verdict"), Mapping) and "verdict" in tree["verdict"]:
+        out.append(_verdict(tree, units))
     r = tree.get("refine")
     if isinstance(r, Mapping) and ("f0" in r or "d0" in r):
         k0, k1, what = ("f0", "f", "f") if "f0" in r else ("d0", "d", "distance to the ideal")
@@ -285,6 +287,54 @@ def _runs(tree: Mapping[str, Any], units: dict[str, str]) -> PageSection:
             f"objective is within {z:g} √(SE² + SE_ref²) of the reference run's.")  # fmt: skip
     return PageSection("runs", "Runs that agree", [f"<p class='note'>{esc(note)}</p>"
                        f"<p>{esc(verdict)}</p>" + _table(head, rows)])  # fmt: skip
+
+
+def _verdict(tree: Mapping[str, Any], units: dict[str, str]) -> PageSection:
+    """The final stage's verdict table (``verdict``): each candidate layout raced on the
+    validation stream, its objectives ± their interval, the paired difference from the
+    best ± SE, each share constraint's status, the samples it used and its verdict; then
+    the race's one line (one recommendation, or a tied set and how its layouts differ)."""
+    g, prob = tree["verdict"], tree.get("problem", {})
+    at = g.get("attrs", {})
+    objs = [_s(k) for k in (_attr_obj(at.get("objectives")) or ["f"])]
+    cons = [_s(k) for k in (_attr_obj(at.get("constraints")) or [])]
+    X = np.atleast_2d(_f(g["x"]))
+    names = _names(prob["names"]) if "names" in prob else [f"x{i}" for i in range(X.shape[1])]
+    mean, half = np.atleast_2d(_f(g["mean"])), np.atleast_2d(_f(g["half"]))
+    diff, dse = np.atleast_2d(_f(g["diff"])), np.atleast_2d(_f(g["diff_se"]))
+    verdict = [_s(v) for v in np.atleast_1d(g["verdict"])]
+    status = np.asarray(g["status"]).reshape(len(X), -1) if cons else np.zeros((len(X), 0))
+    ns = np.atleast_1d(_f(g["n_samples"]))
+    place = [k for k in _names(at.get("placement", []) or []) if k in g and np.ndim(g[k]) == 3
+             and not k.endswith("_points")]  # fmt: skip
+    rows = []
+    for i in range(len(X)):
+        where = "; ".join(f"{k} " + " ".join("(" + ", ".join(f"{v:.3f}" for v in p) + ")"
+                                            for p in np.asarray(_f(g[k]))[i]) for k in place)  # fmt: skip
+        rows.append((str(i), *(f"{v:.4g}" for v in X[i]),
+                     *(f"{mean[i, j]:.4f} ± {half[i, j]:.4f}" for j in range(len(objs))),
+                     *(f"{diff[i, j]:+.4f} ± {dse[i, j]:.4f}" for j in range(len(objs))),
+                     *(_s(status[i, c]) for c in range(len(cons))), str(int(ns[i])),
+                     verdict[i], *( [where] if place else [])))  # fmt: skip
+    head = ["#", *(style.label(n, style.unit_of(n, units)) for n in names),
+            *(f"{k} ± interval" for k in objs), *(f"Δ {k} from the best ± SE" for k in objs),
+            *cons, "samples", "verdict", *(["where it puts the robot"] if place else [])]  # fmt: skip
+    margins = ", ".join(f"{k} {float(m):g}" for k, m in zip(objs, _attr_obj(at.get("margin")) or [],
+                                                              strict=False))  # fmt: skip
+    note = (f"The search's candidate layouts ({'; '.join(_s(x) for x in _attr_obj(at.get('sources')) or [])}), "
+            f"cleared at radius {_s(at.get('radius', '?'))} and raced on the validation stream "
+            f"(final.seed = {_s(at.get('seed', '?'))}, independent of the run's seed), "
+            f"{_s(at.get('stage', '?'))} samples a stage up to {_s(at.get('max_samples', '?'))}: "
+            "each stage is one replication, common to the candidates it scores; intervals and "
+            "differences use the stage means (Student's t), decisions are Holm-corrected with "
+            f"the equivalence margins {margins}; a share constraint is met / missed when its "
+            "Wilson interval clears / misses its bound, else at its bound.")  # fmt: skip
+    line = f"Verdict: {_s(at.get('summary', ''))} (best: #{_s(at.get('best', '?'))})."
+    tie = _s(at.get("tie_note", "") or "")
+    if tie:
+        line += f" {tie[0].upper()}{tie[1:]}."
+    return PageSection("verdict", "The final stage", [f"<p class='note'>{esc(note)}</p>"
+                       f"<p>{esc(line)}</p>" + _table(head, rows)])  # fmt: skip
 
 
 def _teleop(t: Mapping[str, Any], ids: _Ids) -> list[PageSection]:
