@@ -123,7 +123,7 @@ def test_a_fronts_csv_has_every_design_with_its_ports_and_bases(front, tmp_path,
     P, A, N = ok.shape
     assert len(rows) == P * A * N and list(rows[0])[:3] == ["design", "arm", "target"]
     for r in rows[:: max(1, len(rows) // 17)]:
-        d, a, t = int(r["design"]), int(r["arm"]), int(r["target"]) - 1
+        d, a, t = int(r["design"]), int(r["arm"]), int(r["target"])
         got = [float(r[f"port_{c} [m]"]) for c in "xyz"]
         np.testing.assert_array_equal(got, ports[d, a])
         base = [float(r[f"base_{c} [m]"]) for c in "xyz"]

@@ -49,6 +49,7 @@ def test_targets_group_and_show_csv(tmp_path, capsys):
     assert rows[0] == ["arm", "target", "x [L]", "y [L]", "z [L]", "reached", "q1 [deg]",
                        "q2 [deg]", "inv_k"]  # fmt: skip
     assert len(rows) == 1 + len(p)
+    assert [int(r[1]) for r in rows[1:]] == list(range(len(p)))  # targets from 0, as arms
     assert [int(r[5]) for r in rows[1:]] == ok.astype(int).tolist()
     got = np.array([[float(r[6]), float(r[7])] for r, o in zip(rows[1:], ok, strict=True) if o])
     np.testing.assert_allclose(got, np.rad2deg(q[ok]), rtol=0, atol=1e-12)

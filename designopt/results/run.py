@@ -36,8 +36,8 @@ def _pm(name: str, v: float, se: float | None, fin: Any = None, unit: str | None
 def targets_csv_text(g: Mapping[str, Any]) -> str:
     """The ``targets`` group (a design at every target) as CSV: one row per arm and
     target, each column headed with its unit: arm (from 0, as ``reach_<k>``), target
-    (from 1, as ``designopt ik``'s rows), x, y, z, reached (0/1), the joints (degrees for
-    a revolute joint; the archive keeps radians), inv_k, clearance, the last three empty
+    (from 0, its row in the archive's ``target_p``), x, y, z, reached (0/1), the joints
+    (degrees for a revolute joint; the archive keeps radians), inv_k, clearance, the last three empty
     where the target is not reached, then the arm's own values on every row (the study's
     ``arm_values`` with their ``arm_columns`` headings: the serial study's port on the
     body wall and base pose); full float precision (``repr``). A front's group (every
@@ -78,7 +78,7 @@ def targets_csv_text(g: Mapping[str, Any]) -> str:
             own = [] if av is None else [repr(float(c)) for c in av[d, a]]
             for i in range(N):
                 hit = bool(ok[d, a, i])  # an unreached target has no solution: empty cells
-                w.writerow([*([d] if front else []), a, i + 1, *(repr(float(c)) for c in p[i]),
+                w.writerow([*([d] if front else []), a, i, *(repr(float(c)) for c in p[i]),
                             int(hit), *(repr(float(c)) if hit else "" for c in q[d, a, i]),
                             *(repr(float(ev[k][d, a, i])) if hit else "" for k, _ in extra),
                             *own])  # fmt: skip
