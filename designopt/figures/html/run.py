@@ -305,6 +305,9 @@ def _verdict(tree: Mapping[str, Any], units: dict[str, str]) -> PageSection:
     verdict = [_s(v) for v in np.atleast_1d(g["verdict"])]
     status = np.asarray(g["status"]).reshape(len(X), -1) if cons else np.zeros((len(X), 0))
     ns = np.atleast_1d(_f(g["n_samples"]))
+    settled = np.asarray(g.get("settled", np.ones(len(X))), bool).reshape(-1)
+    verdict = [v + ("*" if v == "equivalent" and not settled[i] else "")
+               for i, v in enumerate(verdict)]  # fmt: skip
     place = [k for k in _names(at.get("placement", []) or []) if k in g and np.ndim(g[k]) == 3
              and not k.endswith("_points")]  # fmt: skip
     rows = []
@@ -333,6 +336,9 @@ def _verdict(tree: Mapping[str, Any], units: dict[str, str]) -> PageSection:
     tie = _s(at.get("tie_note", "") or "")
     if tie:
         line += f" {tie[0].upper()}{tie[1:]}."
+    if any(v.endswith("*") for v in verdict):
+        line += (" * not shown equivalent within the cap: the data cannot separate it from "
+                 "the best (more samples, final.max_samples, may).")
     return PageSection("verdict", "The final stage", [f"<p class='note'>{esc(note)}</p>"
                        f"<p>{esc(line)}</p>" + _table(head, rows)])  # fmt: skip
 
