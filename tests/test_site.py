@@ -112,7 +112,7 @@ def test_the_api_page_renders_the_public_functions_and_records(site):
 def test_the_changelog_page_includes_CHANGELOG_md(site):
     text = _text(site / "changelog.html")
     assert "--8<--" not in text
-    assert "Unreleased" in text and "0.1.0" in text
+    assert "0.2.0" in text and "0.1.0" in text
 
 
 class _Loads(HTMLParser):

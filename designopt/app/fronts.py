@@ -109,18 +109,6 @@ def candidates(res: Any) -> np.ndarray:
     return keep[np.sort(first)]
 
 
-def thin(F: np.ndarray, n: int) -> np.ndarray:
-    """Indices of at most ``n`` rows of a front F, dropping the most crowded first
-    (the extremes, with infinite crowding distance, always stay)."""
-    from designopt.numerics import pareto
-
-    keep = np.arange(len(F))
-    while len(keep) > n:
-        d = pareto.crowding_distance_np(F[keep], np.zeros(len(keep), np.int32))
-        keep = np.delete(keep, int(np.argmin(d)))
-    return keep
-
-
 def ambiguous(F: np.ndarray, se: np.ndarray, z: float = Z) -> np.ndarray:
     """(p, 2) pairs (i < j) whose order in some objective is within ``z`` standard errors
     of their difference (|F_i − F_j| ≤ z √(se_i² + se_j²))."""
@@ -183,7 +171,7 @@ def groups(job: Any, problem: Problem, res: Any) -> dict[str, Any]:
     if cfg.final.race:  # the final stage: the front is formed from the race's survivors
         verdict_group, X, F_opt, n_cand = raced(job, res, X_runs, F_pol, polished is not None, sg)
         keep = np.arange(n_cand)
-    X = X[thin(F_opt, cfg.front.max_points)]
+    X = X[pareto.thin(F_opt, cfg.front.max_points)]
     c, fresh, n_samples = rescoring(job)
     rescore = rs.problem(job, "front")
     n_front = len(X)
@@ -265,7 +253,7 @@ def raced(job: Any, res: Any, X_runs: np.ndarray | None, F_runs: np.ndarray | No
         Xp = np.asarray(res.front.x, np.float64).reshape(-1, D)
         Fp = np.asarray(res.front.f, np.float64).reshape(len(Xp), -1)
         F_runs = Fp[[int(np.argmin(np.abs(Xp - x).sum(-1))) for x in X_runs]]
-    Xc, _ = verdict.front_candidates(res, X_runs, F_runs)
+    Xc, _ = verdict.front_candidates(res, candidates(res), X_runs, F_runs)
     Xc = verdict.clear(job, Xc)
     pick = ["every run's non-dominated final-population designs"]
     if X_runs is not None:

@@ -46,7 +46,7 @@ import numpy as np
 from designopt.app import quoted
 from designopt.app import rescoring as rs
 from designopt.core.errors import ConfigError
-from designopt.numerics import racing
+from designopt.numerics import pareto, racing
 
 VALIDATION_STREAM = 0x56414C49  # "VALI"
 """The validation stream: ``fold_in(key(final.seed), VALIDATION_STREAM)``, then the stage."""
@@ -133,15 +133,12 @@ def _ordered(X: np.ndarray, F: np.ndarray, V: np.ndarray, first: np.ndarray | No
     return np.lexsort(keys)
 
 
-def front_candidates(res: Any, X_runs: np.ndarray | None = None,
+def front_candidates(res: Any, keep: np.ndarray, X_runs: np.ndarray | None = None,
                      F_runs: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
-    """A front's candidates: every run's non-dominated final-population designs
-    (``fronts.candidates``) and each run's recommended (or polished) design ``X_runs``
-    with its search objectives ``F_runs`` (minimised); (X, F) in priority order, not yet
-    cleared."""
-    from designopt.app import fronts
-
-    keep = fronts.candidates(res)
+    """A front's candidates: every run's non-dominated final-population designs (``keep``,
+    indices into the pooled final populations: ``fronts.candidates``) and each run's
+    recommended (or polished) design ``X_runs`` with its search objectives ``F_runs``
+    (minimised); (X, F) in priority order, not yet cleared."""
     m = np.shape(res.front.f)[-1]
     D = np.shape(res.front.x)[-1]
     X = np.asarray(res.front.x, np.float64).reshape(-1, D)[keep]
@@ -156,7 +153,7 @@ def front_candidates(res: Any, X_runs: np.ndarray | None = None,
     if len(X) > MAX_CANDIDATES:  # thin the search's non-dominated set by crowding
         rest = np.flatnonzero(first == 0)
         n_keep = max(MAX_CANDIDATES - int(first.sum()), 2)
-        kept = rest[fronts.thin(F[rest], n_keep)]
+        kept = rest[pareto.thin(F[rest], n_keep)]
         sel = np.sort(np.concatenate([kept, np.flatnonzero(first > 0)]))
         X, F, V, first = X[sel], F[sel], V[sel], first[sel]
     order = np.lexsort([*F.T[::-1], (V > 0).astype(float)])

@@ -413,3 +413,13 @@ def igd_plus(F, reference_front, chunk: int = 1024) -> float:
         diff = np.maximum(F[None, :, :] - Z[s : s + chunk, None, :], 0.0)
         d[s : s + chunk] = np.sqrt(np.sum(diff * diff, axis=-1)).min(axis=1)
     return float(d.mean())
+
+
+def thin(F: np.ndarray, n: int) -> np.ndarray:
+    """Indices of at most ``n`` rows of a front F, dropping the most crowded first
+    (the extremes, with infinite crowding distance, always stay)."""
+    keep = np.arange(len(F))
+    while len(keep) > n:
+        d = crowding_distance_np(F[keep], np.zeros(len(keep), np.int32))
+        keep = np.delete(keep, int(np.argmin(d)))
+    return keep

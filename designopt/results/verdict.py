@@ -58,8 +58,8 @@ def lines(g: Mapping[str, Any] | None, variables: Sequence[str],
            + ", ".join(f"{k} {m:g}" for k, m in zip(objs, at["margin"], strict=True))
            + f"; ± the {100 * (1 - float(at['alpha'])):g} % interval of the stage means)"]  # fmt: skip
     out += ["  " + "  ".join(head)] + ["  " + r for r in rows]
-    # where each candidate puts the robot: the study's placement of points (e.g. the serial
-    # study's ports and bases; not the design's own points, which its variables give)
+    # where each candidate puts the robot: the study's placement of points (e.g. a chain's
+    # ports and bases; not the design's own points, which its variables give)
     place = [k for k in _names(at.get("placement", [])) if k in g and not k.endswith("_points")
              and np.ndim(g[k]) == 3]  # fmt: skip
     for i in range(len(X)):
