@@ -141,6 +141,47 @@ def test_parallel_coordinates_scale_to_the_box_and_the_front(front2, record, tmp
     assert cb.get_ylabel() == "gci (max) [-]"
 
 
+def _wide(rec, k: int):
+    """``rec`` with its design variables repeated ``k`` times under long names (no new
+    run: the same front, more and longer axes to lay out)."""
+    g = dict(rec.groups)
+    pr, fr = dict(g["problem"]), dict(g["front"])
+    D = len(rec.names)
+    pr["names"] = np.array([f"arm{i}_joint_{j}.origin.xyz_offset" for i in range(k) for j in range(D)])
+    pr["lower"], pr["upper"] = np.tile(rec.lower, k), np.tile(rec.upper, k)
+    fr["x"] = np.tile(rec.X, k)
+    return dataclasses.replace(rec, groups=g | {"problem": pr, "front": fr})
+
+
+def test_parallel_coordinates_labels_read(front2, record, tmp_path):
+    """Every text of ``front_designs`` lies inside the figure and overlaps no other (the
+    figure checker's text test), with the study's two variables and with twelve long
+    names, whose labels are turned to fit; the HTML twin turns its axis names too, with
+    short numbers on its axes."""
+    from figcheck import text_problems
+
+    from designopt.figures.html.front import _front
+    from designopt.figures.html.model import _Ids
+
+    _, rec = front2
+    units = {"gci": "-", "volume": "L^2"}
+    for r, turned in ((rec, False), (_wide(rec, 6), True)):
+        record.clear()
+        front_figs.designs(r, tmp_path, units | {k: "L" for k in r.names})
+        fig = _fig(record, "front_designs")
+        assert text_problems(fig) == []
+        ax = fig.axes[0]
+        assert len(ax.get_xticklabels()) == len(r.names) + 2
+        assert {t.get_rotation() != 0 for t in ax.get_xticklabels()} == {turned}
+        assert fig.get_figwidth() <= 16.0
+        (sec,) = _front(r.to_tree(), _Ids(), dict(units))
+        (tr,) = [p.fig["data"][0] for p in sec.items
+                 if getattr(p, "fig", None) and p.fig["data"][0]["type"] == "parcoords"]  # fmt: skip
+        if turned:  # twelve long names do not fit side by side
+            assert tr["labelangle"] != 0
+        assert {d["tickformat"] for d in tr["dimensions"]} == {".4~g"}
+
+
 def test_hypervolume_runs_median_unit_and_reference(front2, record, tmp_path):
     _, rec = front2
     front_figs.hypervolume(rec, tmp_path, {"gci": "-", "volume": "L^2"})

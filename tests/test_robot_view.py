@@ -313,6 +313,54 @@ def test_front_view_precomputes_each_designs_robot(front):
                                drawing.arms(s, mech, [rec.X[0]], drawing.home(mech))[0][0].points())  # fmt: skip
 
 
+def _names_of(fig) -> list[str]:
+    return [str(t.get("name", "")) for t in fig["data"]]
+
+
+def test_front_view_draws_the_original_only_where_links_are_variables(front):
+    """The faint original robot (the URDF's numbers) stays beside designs that change the
+    links (l_upper, l_fore here) and is left out, with its note, where every design has
+    the file's links: a planning case that moves only ports and bases, made here from the
+    original robot itself at other joints and on another base."""
+    import dataclasses
+
+    _, rec = front
+    fv = report.front_view(rec)
+    s = rec.config.study
+    mech = build(s)
+    (ref,) = fv.reference
+    assert not hrobot.same_links(ref, fv.robots[0][0])  # the design's l_upper, l_fore
+    _, rplot = hrobot.front_plots(fv, _Ids())
+    assert any("original" in n for n in _names_of(rplot.fig))
+    assert "original robot" in hrobot._note(fv)
+    rng = np.random.default_rng(4)
+    base = np.eye(4)
+    base[:3, :3] = np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]])
+    base[:3, 3] = [0.3, -0.2, 0.1]
+    robots = []
+    for i in range(len(rec.X)):
+        q = mech.lower + (mech.upper - mech.lower) * rng.uniform(size=mech.n)
+        (arm,) = drawing.original_arms(s, mech, rec.X[i], q, label="design")
+        robots.append([dataclasses.replace(arm, base=base)])
+    assert hrobot.same_links(ref, robots[0][0])
+    planned = dataclasses.replace(fv, robots=robots)
+    assert planned.shown_reference() == []
+    fplot, rplot = hrobot.front_plots(planned, _Ids())
+    assert not any("original" in n for n in _names_of(rplot.fig))
+    assert "original robot" not in hrobot._note(planned)
+    assert hrobot._note(planned).startswith("each design")
+    page = hrobot.robot_section(front=planned)
+    assert not any("original robot" in it for it in page.items if isinstance(it, str))
+    # the front beside: ± 2 SE bars, the archived SEs (report.front_view passes them); none
+    # without standard errors
+    tr = fplot.fig["data"][0]
+    nose = dataclasses.replace(planned, x_se=None, y_se=None)
+    assert "error_x" not in hrobot.front_plots(nose, _Ids())[0].fig["data"][0]
+    np.testing.assert_allclose(tr["error_x"]["array"], 2 * rec.F_se[:, 0], rtol=1e-12)
+    np.testing.assert_allclose(tr["error_y"]["array"], 2 * rec.F_se[:, 1], rtol=1e-12)
+    assert "± 2 SE" in fplot.fig["layout"]["title"]["text"]
+
+
 def test_front_page_draws_the_hovered_designs_robot(front, tmp_path):
     """The report of the front in headless Chromium: no console error, the robot's WebGL
     canvas has a size, and moving the mouse onto design i draws design i's robot (its

@@ -23,6 +23,7 @@ from __future__ import annotations
 import re
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from matplotlib.collections import LineCollection
@@ -302,7 +303,11 @@ def designs(rec: FrontRecord, folder: Path, units: Mapping[str, str]) -> list[Pa
             lo, hi = F[:, a - D].min(), F[:, a - D].max()
             ticks.append(f"{objective_label(k, s, units)}\nfront {lo:.3g} … {hi:.3g}")
     K = len(axis_names)
-    fig, ax = style.subplots(figsize=(max(6.5, 1.45 * K + 2.2), 4.4))
+    # each axis as wide as its longest label line (7 pt: about 0.06 in a character), the
+    # canvas at most 16 in wide; labels that still collide are turned (``_fit_ticks``)
+    chars = max(len(line) for t in ticks for line in t.split("\n"))
+    per = max(1.1, 0.06 * chars + 0.25)
+    fig, ax = style.subplots(figsize=(min(16.0, max(6.5, per * K + 2.2)), 4.8))
     x = np.arange(K, dtype=np.float64)
     for a in x:
         ax.axvline(a, color="0.3", lw=0.8, zorder=1)
@@ -316,6 +321,7 @@ def designs(rec: FrontRecord, folder: Path, units: Mapping[str, str]) -> list[Pa
     ax.set_xlim(-0.4, K - 0.6)
     ax.set_ylim(-0.04, 1.04)
     ax.set_xticks(x, ticks, fontsize=7)
+    _fit_ticks(fig, ax)
     ax.set_xlabel("design variable (box) | objective (range over the front) (category)")
     ax.set_ylabel(style.label("scaled value", style.DIMENSIONLESS))
     k0, s0 = obj[0]
@@ -325,6 +331,25 @@ def designs(rec: FrontRecord, folder: Path, units: Mapping[str, str]) -> list[Pa
     fig.suptitle(f"The front's {len(F)} designs of {rec.study}: 0 = the box's lower bound "
                  f"or the front's least value{note}", fontsize=9)  # fmt: skip
     return save(fig, folder, "front_designs")
+
+
+def _fit_ticks(fig: Any, ax: Any) -> None:
+    """Turn the x tick labels (30°, then 60°, then 90°, anchored at their axis) until no
+    two of them overlap; constrained layout then keeps them on the canvas."""
+    labels = ax.get_xticklabels()
+    for angle in (0, 30, 60, 90):
+        if angle:
+            fig.set_figheight(max(fig.get_figheight(), 4.8 + 1.6 * angle / 90))
+            for t in labels:
+                t.set_rotation(angle)
+                t.set_ha("right" if angle < 90 else "center")
+                t.set_rotation_mode("anchor" if angle < 90 else "default")
+        fig.canvas.draw()
+        r = fig.canvas.get_renderer()
+        b = [t.get_window_extent(r) for t in labels if t.get_text()]
+        if all(min(p.x1, q.x1) - max(p.x0, q.x0) <= 1.0 or min(p.y1, q.y1) - max(p.y0, q.y0) <= 1.0
+               for i, p in enumerate(b) for q in b[i + 1 :]):  # fmt: skip
+            return
 
 
 def indices(rec: FrontRecord, folder: Path, units: Mapping[str, str]) -> list[Path]:

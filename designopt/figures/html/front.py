@@ -6,6 +6,7 @@ populations' own beside it)."""
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping
 from typing import Any
 
@@ -29,6 +30,18 @@ from designopt.figures.html.model import (
 )
 from designopt.figures.html.plots import _convergence, _index_names, _lab, _layout, _rgba
 from designopt.figures.html.run import notes_html, placement_table
+
+DESIGNS_HEIGHT = 560
+"""Pixels of the parallel coordinates of the front's designs."""
+PARCOORDS_WIDTH = 1000
+"""About the pixels the page gives the parallel coordinates' axes (a wide plot)."""
+CHAR_PX = 6.2
+"""About the pixels of one character of an axis name (10 px font)."""
+
+
+def _plain(label: str) -> str:
+    """An axis name as read: no HTML tags or entities."""
+    return re.sub(r"&[#\w]+;", "x", re.sub(r"<[^>]+>", "", label))
 
 
 def _pairs(amb: Any, n: int) -> np.ndarray:
@@ -109,16 +122,27 @@ def _designs(fr: Mapping[str, Any], prob: Mapping[str, Any], X: np.ndarray,
         dims.append(d)
     dims += [{"label": axl[i], "values": vals[keep, i]} for i in range(vals.shape[1])]
     dims += [{"label": _lab(k, units), "values": _f(fr[k])[keep]} for k in others]
-    # the page keeps a plot's top margin small: the axis names sit inside the plot area
-    tr = {"type": "parcoords", "dimensions": dims, "domain": {"y": [0.0, 0.84]},
+    for d in dims:  # short numbers on the axes and their range ends
+        d["tickformat"] = ".4~g"
+    # the page keeps a plot's top margin small: the axis names sit inside the plot area,
+    # turned where side by side they would not fit the space between two axes
+    gap = PARCOORDS_WIDTH / max(len(dims), 1)
+    longest = max((len(_plain(d["label"])) for d in dims), default=0)
+    turn = CHAR_PX * longest > 0.9 * gap
+    rise = min(0.5, (CHAR_PX * longest * 0.6 + 30) / DESIGNS_HEIGHT) if turn else 0.16
+    top = 1.0 - rise
+    tr = {"type": "parcoords", "dimensions": dims, "domain": {"y": [0.0, top]},
+          "labelangle": -35 if turn else 0, "labelside": "top",
+          "labelfont": {"size": 10}, "rangefont": {"size": 9}, "tickfont": {"size": 9},
           "line": {"color": vals[keep, 0], "colorscale": "Viridis", "showscale": True,
                    "colorbar": {"title": {"text": axl[0], "side": "right"}, "thickness": 12,
-                                "len": 0.84, "y": 0.0, "yanchor": "bottom"}}}  # fmt: skip
+                                "len": top, "y": 0.0, "yanchor": "bottom"}}}  # fmt: skip
     title = (f"The front's {len(keep)} designs: variables (on their box), objectives and every "
              f"other index (on their range over the front); colour: the first objective; drag "
              f"along an axis to pick designs")  # fmt: skip
-    lay = _layout(esc(title), height=480)
-    lay["margin"] = {"l": 60, "r": 40, "b": 24}
+    lay = _layout(esc(title), height=DESIGNS_HEIGHT)
+    # the first axis' range numbers sit left of it, a turned last name runs right of it
+    lay["margin"] = {"l": 70, "r": 40 + (int(CHAR_PX * longest * 0.82) if turn else 0), "b": 30}
     return Plot(ids("designs"), {"data": [tr], "layout": lay}, wide=True)
 
 

@@ -13,6 +13,7 @@ base origin first): ``tests/test_robot_view.py`` reads them back against the kin
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -20,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from designopt.figures import style
-from designopt.figures.html.model import PageSection, Plot, _Ids, esc
+from designopt.figures.html.model import PageSection, Plot, Z, _Ids, esc
 from designopt.figures.html.plots import _layout
 from designopt.figures.robot import (
     ANATOMY_EDGE,
@@ -45,6 +46,14 @@ from designopt.figures.robot import (
     view_box,
 )
 
+HEIGHT = 760
+"""Pixels of a front's plot and of its robot's view (side by side, one height)."""
+VIEW_HEIGHT = 780
+"""Pixels of the robot's view in its task (the page's width)."""
+SCENE = {"x": [0.0, 1.0], "y": [0.0, 0.8]}
+"""The front robot's scene in its plot area: the design's label above it."""
+LABEL_WIDTH = 72
+"""Characters a line of the front robot's design label."""
 TRIANGLES = 20_000
 """Mesh triangles of a page's robot views, all frames and designs together (a study
 decimates its meshes to this budget, ``designopt.kinematics.meshes.decimate``)."""
@@ -79,7 +88,8 @@ class FrontView:
     labels, one robot (list of arms, each at its base in the world) per design at one
     pose per design (a representative tuple of targets, or the home pose), each design's
     hover text, reference arms (the original robot of a URDF chain), and what stays:
-    the task region, obstacles and ports."""
+    the task region, obstacles and ports; ``x_se``, ``y_se`` (n,) the objectives'
+    standard errors (None: no bars; drawn ± 2 SE like the front's own plot)."""
 
     title: str
     unit: str
@@ -94,6 +104,50 @@ class FrontView:
     note: str = ""
     obstacles: list[Any] = field(default_factory=list)
     ports: list[np.ndarray] = field(default_factory=list)
+    x_se: np.ndarray | None = None
+    y_se: np.ndarray | None = None
+
+    def shown_reference(self) -> list[Arm]:
+        """The reference arms worth drawing: none when every design's arms have the
+        reference's link geometry (:func:`same_links`: no link of the chain is a design
+        variable, e.g. a planning case that moves only ports and bases)."""
+        ref = list(self.reference)
+        if ref and all(len(rb) == len(ref) and all(same_links(a, b) for a, b in zip(ref, rb, strict=True))
+                       for rb in self.robots):  # fmt: skip
+            return []
+        return ref
+
+
+def _link_invariants(arm: Arm) -> np.ndarray:
+    """What an arm's link geometry fixes whatever its joint values and base: the first
+    joint's origin and axis in the base frame, then per joint i the angle between its axis
+    and the next's (cosine), the part of the step to the next origin (the tip last)
+    across a prismatic joint's axis (the whole step across a revolute one: its length
+    and its component along the joint's own axis) and that part along the next axis."""
+    O = np.asarray(arm.origins, np.float64)
+    A = np.asarray(arm.axes, np.float64)
+    A = A / np.maximum(np.linalg.norm(A, axis=1, keepdims=True), 1e-300)
+    n = len(A)
+    out = [O[0], A[0]] if n else [O[:1].ravel()]
+    for i in range(n):
+        v = O[i + 1] - O[i]
+        prismatic = i < len(arm.types) and arm.types[i] == "P"
+        w = v - (v @ A[i]) * A[i] if prismatic else v
+        row = [np.linalg.norm(w), 0.0 if prismatic else v @ A[i]]
+        if i + 1 < n:
+            row += [A[i] @ A[i + 1], w @ A[i + 1]]
+        out.append(np.asarray(row))
+    return np.concatenate(out)
+
+
+def same_links(a: Arm, b: Arm, rtol: float = 1e-6) -> bool:
+    """Whether arms ``a`` and ``b`` (any joint values, any bases) have the same link
+    geometry: the same joints (number and types) and :func:`_link_invariants`."""
+    if len(a.axes) != len(b.axes) or a.types != b.types:
+        return False
+    ia, ib = _link_invariants(a), _link_invariants(b)
+    scale = max(a.length(), b.length(), 1e-300)
+    return ia.shape == ib.shape and bool(np.all(np.abs(ia - ib) <= rtol * scale + 1e-12))
 
 
 def _segments(segs: Sequence[np.ndarray]) -> np.ndarray:
@@ -300,7 +354,7 @@ def view_plot(view: View, ids: _Ids) -> Plot:
             m = _mark_trace(p.mark)
             upd.append({k: m[k] for k in ("x", "y", "z")})
         frames.append({"name": p.label, "data": upd, "traces": idx})
-    lay = _layout(esc(view.title), scene=_scene_layout(view.unit, box, points), height=640)
+    lay = _layout(esc(view.title), scene=_scene_layout(view.unit, box, points), height=VIEW_HEIGHT)
     lay["legend"] |= {"x": 0.0, "y": 1.0, "xanchor": "left", "yanchor": "top"}
     lay["uirevision"] = "robot"
     if len(view.poses) > 1:
@@ -327,13 +381,20 @@ def front_plots(fv: FrontView, ids: _Ids) -> list[Plot]:
              "text": [esc(h) for h in fv.hover],
              "hovertemplate": "<b>design %{customdata[0]}</b><br>%{text}<extra></extra>",
              "marker": {"size": 9, "color": "#1f77b4", "line": {"width": 0.5, "color": "#333"}}}  # fmt: skip
-    lay = _layout(esc(f"{fv.title}: hover or click a design to draw its robot beside"),
-                  esc(fv.xlabel), esc(fv.ylabel), showlegend=False, height=520)  # fmt: skip
+    bars = fv.x_se is not None and fv.y_se is not None
+    for a, se in (("error_x", fv.x_se), ("error_y", fv.y_se)):
+        if bars:  # ± 2 SE, as the front's own plot
+            front[a] = {"type": "data", "array": Z * np.asarray(se, np.float64), "visible": True,
+                        "thickness": 1, "width": 0, "color": "#999"}  # fmt: skip
+    what = "; bars ± 2 SE" if bars else ""
+    lay = _layout(esc(f"{fv.title}{what}: hover or click a design to draw its robot beside"),
+                  esc(fv.xlabel), esc(fv.ylabel), showlegend=False, height=HEIGHT)  # fmt: skip
+    lay["margin"] = lay["margin"] | {"b": 64}
     fplot = Plot(fid, {"data": [front], "layout": lay})
     scene = front_scene(fv)
     box, points = _box(scene, [a for rb in fv.robots for a in rb])
     static = _static(scene, fv.unit, box)
-    rs = radii([a for rb in fv.robots for a in rb] + list(fv.reference))
+    rs = radii([a for rb in fv.robots for a in rb] + fv.shown_reference())
     r = rs[0]
     dyn: list[dict[str, Any]] = []
     for arm in fv.robots[0]:
@@ -349,9 +410,10 @@ def front_plots(fv: FrontView, ids: _Ids) -> list[Plot]:
         )
     lay = _layout(esc("the robot of the design hovered or clicked on the front (common axes: "
                       "the designs compare by size)"),
-                  scene=_scene_layout(fv.unit, box, points), height=520)  # fmt: skip
-    lay["legend"] |= {"orientation": "h", "x": 0.0, "y": 0.0, "xanchor": "left",
-                      "yanchor": "bottom"}  # fmt: skip  # the design's label goes on top
+                  scene=_scene_layout(fv.unit, box, points, domain=SCENE), height=HEIGHT)  # fmt: skip
+    # the design's label on top, the legend under the scene (the margin grows to hold it)
+    lay["legend"] |= {"orientation": "h", "x": 0.0, "y": -0.01, "xanchor": "left",
+                      "yanchor": "top"}  # fmt: skip
     lay["uirevision"] = "robot"
     lay["annotations"] = [{"text": _label(0, fv.hover[0]), "xref": "paper",
                            "yref": "paper", "x": 0.0, "y": 1.0, "xanchor": "left",
@@ -365,7 +427,7 @@ def front_plots(fv: FrontView, ids: _Ids) -> list[Plot]:
 
 def front_scene(fv: FrontView) -> Scene:
     """What stays beside a front's robots: the reference arms, region, obstacles, ports."""
-    return Scene(arms=list(fv.reference), region=fv.region, obstacles=list(fv.obstacles),
+    return Scene(arms=fv.shown_reference(), region=fv.region, obstacles=list(fv.obstacles),
                  ports=list(fv.ports))  # fmt: skip
 
 
@@ -380,9 +442,20 @@ def clipped(view: View | None = None, front: FrontView | None = None) -> str:
                       for n in clipped_obstacles(sc.obstacles, *_box(sc, arms)[0], u)[1]])  # fmt: skip
 
 
+def _note(v: View | FrontView) -> str:
+    """A view's note, less its parts (``; ``) on the faint original robot where that is
+    not drawn (:meth:`FrontView.shown_reference`)."""
+    if not isinstance(v, FrontView) or not v.reference or v.shown_reference():
+        return v.note
+    return "; ".join(p for p in v.note.split("; ") if "original robot" not in p)
+
+
 def _label(i: int, hover: str) -> str:
-    """The robot's label of design i: its hover text, one part (``; ``) a line."""
-    return "<br>".join(esc(part) for part in f"design {i}: {hover}".split("; "))
+    """The robot's label of design i: its hover text, one part (``; ``) a line, a long
+    part wrapped at ``LABEL_WIDTH`` characters (the label stays within the plot)."""
+    parts = f"design {i}: {hover}".split("; ")
+    return "<br>".join(esc(line) for part in parts
+                       for line in textwrap.wrap(part, LABEL_WIDTH, subsequent_indent="  ") or [""])  # fmt: skip
 
 
 def robot_section(view: View | None = None, front: FrontView | None = None,
@@ -393,7 +466,7 @@ def robot_section(view: View | None = None, front: FrontView | None = None,
     sec = PageSection("robot", "Robot")
     for v in (view, front):
         if v is not None and v.note:
-            sec.items.append(f"<p class='note'>{esc(v.note)}</p>")
+            sec.items.append(f"<p class='note'>{esc(_note(v))}</p>")
     note = clipped(view, front)
     if note:
         sec.items.append(f"<p class='note'>{esc(note)}</p>")

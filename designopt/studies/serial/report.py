@@ -158,6 +158,7 @@ def front_view(rec: Any):
     mn = meshes_note(s, dict(zip(s.variables, X[0], strict=True)), q0, budget)
     return FrontView(title=f"Pareto front ({n} designs)", unit=length_unit(s), x=cols[0],
                      y=cols[1], xlabel=labels[0], ylabel=labels[1], robots=robots, hover=hov,
+                     x_se=rec.F_se[:, 0], y_se=rec.F_se[:, 1],  # the front's ± (F's order)
                      reference=ref, region=s.task.region if s.task is not None else None,
                      note=note + (f"; {mn}" if mn else ""), **_front_scene(s, X))  # fmt: skip
 
