@@ -167,7 +167,7 @@ def _robot_study(robot: str, n: int) -> dict:
     return {
         "name": "serial", "chain": chain, "variables": var,
         "task": {"region": {"shape": "box", "center": center, "size": [0.2, 0.2, 0.2]},
-                 "ik": {"n_best": 1}},
+                 "ik": {"n_best": 1, "climb": 0, "neighbours": 0}},
         "collision": {"links": "urdf", "self": True},
         "indices": {"jacobian": "position", "norm": "2", "measure": "task", "n_samples": n},
         "objective": {"gci": -1.0},

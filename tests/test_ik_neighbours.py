@@ -185,7 +185,7 @@ def test_the_chunk_holds_whole_runs():
     def chunk(over):
         return taskindex.chunk(designopt.load_config(cfg, over).study)
 
-    assert chunk({"study.indices.n_samples": 1000}) == 1000
+    assert chunk({"study.indices.n_samples": 1000, "study.task.ik.neighbours": 0}) == 1000
     assert chunk(nb | {"study.indices.n_samples": 1000}) == 1008
     assert chunk(nb | {"study.indices.n_samples": 5000}) == 1024
     assert chunk(nb | {"study.indices.n_samples": 30, "study.indices.chunk": 40}) == 32

@@ -35,13 +35,13 @@ def test_memory_terms_by_hand():
 
 
 def test_study_costs_by_hand():
-    """The serial task study's IK (PUMA 560: 6 joints, 6×6 Jacobian, tool axis, n_best 2,
+    """The serial task study's IK (PUMA 560: 6 joints, 6×6 Jacobian, tool axis, n_best 8,
     4096 database entries; a block of 16 designs × 1024 targets: 4096 slots, three slot
     phases) and master9's fused chunk."""
     cfg = load(ROOT / "configs/puma560_task.yaml")[0]
     c = get("serial").cost(cfg.study)
     assert (c.samples, c.chunk, c.designs) == (2048, 1024, 16)
-    assert preflight.extra(c) == (8 * 3 * (9 + 2 * 36), 8 * 12 * 4096,
+    assert preflight.extra(c) == (8 * 9 * (9 + 2 * 36), 8 * 12 * 4096,
                                   int((250 + 3 * (40 + 4.6 * 36)) * MiB))  # fmt: skip
     joint = load(ROOT / "configs/planar2r.yaml")[0]
     assert preflight.extra(get("serial").cost(joint.study)) == (24 * 2 * 2, 0, 0)

@@ -333,13 +333,15 @@ def test_tool_axes_fill_their_cone():
 
 def test_the_task_schema_defaults_are_the_solvers():
     """``study.task.ik`` names every solver option, with the solver's defaults but for
-    ``n_best`` (the task compares 2 converged seeds, the solver alone keeps the first)."""
+    ``n_best``, ``climb`` and ``neighbours``: the task's defaults keep the index's
+    definition, the best free solution (8 distinct solutions, each climbed 12 steps, a
+    second pass from 4 neighbours'; issue #65), the solver alone keeps the first."""
     from designopt.studies.serial.settings import TaskIK
 
     schema = {k: f.default for k, f in TaskIK.model_fields.items() if k != "best"}
     assert set(schema) == set(ik.IKOptions._fields)  # (``best`` picks the score: the study's)
-    assert schema | {"n_best": 1} == ik.DEFAULTS._asdict()
-    assert schema["n_best"] == 2
+    assert schema | {"n_best": 1, "climb": 0, "neighbours": 0} == ik.DEFAULTS._asdict()
+    assert (schema["n_best"], schema["climb"], schema["neighbours"]) == (8, 12, 4)
 
 
 def test_the_task_schema_refuses_more_nearest_seeds_than_the_window():

@@ -1078,6 +1078,12 @@ around 1e-7 instead of converging, and about half the climb's steps were refused
 move is ≤ 1e-7 |e| and the corrections converge quadratically (3.5e-3, 3e-5, 1e-9,
 2e-16); a direction is slowed only where σ(J) < 3e-5 (a solution at a singularity,
 where the climb's step then does not stand and the converged joints are kept)."""
+CLIMB_FLAT = 1e-7
+"""The climb stops at a row whose projected gradient (the largest joint component, per
+unit of score) is below this: the score is flat along the self-motion there (a straight
+instrument's roll about its own axis; the forward differences' noise is about 1e-8)."""
+CLIMB_SMALLEST = 1e-6
+"""... or whose step factor α has shrunk below this (steps that did not stand)."""
 NULL_EPS = 1e-12
 """The regularisation of J Jᵀ in the null-space projector (the task rows of an ``axis``
 target have rank 5 of 6: J Jᵀ is singular, and the regularised solve stays exact there,
@@ -1135,9 +1141,19 @@ def _climb(ch: _Chain, xr: list, pt: list, Rt: list | None, L: jax.Array, mode: 
         done = near(e, cz, 0.5 * opts.tol_pos, 0.5 * opts.tol_rot)
         return [jnp.where(done, a, c) for a, c in zip(qc, new, strict=True)]
 
+    h_fd = math.sqrt(float(jnp.finfo(dtype).eps))
+
     def value_grad(qa):
-        v, vjp = jax.vjp(score, qa)
-        g = vjp(jnp.ones_like(v))[0]
+        """The score and its gradient by forward differences, one joint at a time in a
+        loop: one copy of the score in the program (its reverse-mode derivative, through
+        the condition number's eigen- or singular values, compiled several times longer)."""
+        def col(j, S):  # j = 0: the score at qa; j ≥ 1: qa with joint j − 1 moved by h_fd
+            e = (jnp.arange(1, n + 1) == j).astype(dtype)
+            return S.at[j].set(score(qa + h_fd * e))
+
+        S = jax.lax.fori_loop(0, n + 1, col, jnp.zeros((n + 1, B), dtype))
+        v = S[0]
+        g = ((S[1:] - v) / h_fd).T
         return jnp.nan_to_num(v, nan=-jnp.inf), jnp.nan_to_num(g, nan=0.0, posinf=0.0,
                                                                 neginf=0.0)  # fmt: skip
 
@@ -1191,7 +1207,24 @@ def _climb(ch: _Chain, xr: list, pt: list, Rt: list | None, L: jax.Array, mode: 
 
     z = jnp.zeros((B,), dtype)
     c0 = (q0, z - jnp.inf, jnp.zeros_like(q0), z + CLIMB_STEP, z, z + jnp.inf)
-    qa, s, _, _, s0, _ = jax.lax.fori_loop(0, opts.climb + 1, step, c0)
+
+    def live(i, c):  # a row stops where the projected gradient vanishes (a self-motion
+        # the score does not see, or none) or its step has shrunk to nothing
+        _, _, d, al, _, _ = c
+        return (i == 0) | ((jnp.max(jnp.abs(d), -1) > CLIMB_FLAT) & (al > CLIMB_SMALLEST))
+
+    def going(ic):
+        i, c = ic
+        return (i <= opts.climb) & jnp.any(live(i, c))
+
+    def body(ic):  # a stopped row stays as it is, however long the others climb: its
+        i, c = ic  # result does not depend on the rows beside it
+        on = live(i, c)
+        new = step(i, c)
+        return i + 1, tuple(jnp.where(on.reshape((-1,) + (1,) * (a.ndim - 1)), a, b)
+                            for a, b in zip(new, c, strict=True))
+
+    _, (qa, s, _, _, s0, _) = jax.lax.while_loop(going, body, (jnp.int32(0), c0))
     qc = jax.lax.fori_loop(0, 2 * CLIMB_CORRECT, lambda _, q: lm(q, freeze=True), [qa[:, j] for j in range(n)])
     qa = jnp.stack(qc, -1)
     R, p, _ = ch.fk(xr, qc, ch.trig_q(qc, exact=True), tx, None)

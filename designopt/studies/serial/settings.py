@@ -382,8 +382,11 @@ AnyConstraint = Annotated[
 
 
 class TaskIK(Section):
-    """The IK behind ``measure: task`` (``designopt.kinematics.ik.IKOptions``, whose
-    defaults these are): LM steps per seed, rounds of random seeds, FK-database size,
+    """The IK behind ``measure: task`` (``designopt.kinematics.ik.IKOptions``). The
+    defaults keep the index's definition, the best free solution at every target
+    (docs/task.md): 8 distinct converged solutions compared, each climbed 12 steps
+    along its self-motion, and a second pass from 4 neighbours' solutions; a search may
+    rank with cheaper settings (``optimizer.fidelity``). LM steps per seed, rounds of random seeds, FK-database size,
     seeds per target (nearest database entries spread over the arm's branches, then
     random draws), distinct converged solutions compared (``n_best``: the best by
     ``best``, the study's 1/k (``dexterity``) or the ``clearance``, is kept), the
@@ -414,20 +417,20 @@ class TaskIK(Section):
         description="Uniform random seeds per round (at least one seed in all).",
     )
     n_best: int = Field(
-        2,
+        8,
         ge=1,
         le=64,
         description="Distinct converged seeds compared per target; the one with the best `best` "
         "score is kept (1: the first).",
     )
     climb: int = Field(
-        0,
+        12,
         ge=0,
         le=200,
         description="Null-space ascent steps of the score from each candidate solution (0: none).",
     )
     neighbours: int = Field(
-        0,
+        4,
         ge=0,
         le=15,
         description="A second pass seeded with the kept solutions of this many nearest reached "
