@@ -458,6 +458,8 @@ SKIP: dict[str, str] = {
     "python benchmarks/best_solution.py": BENCH + " (its comparison is tests/test_best_solution.py)",
     "python benchmarks/se_honesty.py": BENCH + ": one design at 16 seeds per case, minutes (the "
     "replicated SE's formula and a seeds check: tests/test_se_replications.py)",
+    "python benchmarks/plan_seeds.py": BENCH + ": three planning runs and eight common "
+    "seeds' scoring, minutes (the race itself: tests/test_verdict.py)",
     "python benchmarks/mo_nsga2.py": BENCH + "; needs pymoo (.[bench])",
     "python benchmarks/mo_nsga2.py [--runs 11] [--repeat 3] [--problems …] [--float32] "
     "[--survival pruning|crowding]": BENCH + "; needs pymoo (.[bench])",
