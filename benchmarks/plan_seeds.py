@@ -15,6 +15,7 @@ covers every pooled design.
     python benchmarks/plan_seeds.py                                # the shipped planning case
     python benchmarks/plan_seeds.py --seed 0 --seed 1 --seed 2 --check 8
     python benchmarks/plan_seeds.py --config my_case.yaml --json out.json
+    python benchmarks/plan_seeds.py --keep runs/ --also other/run_1.h5   # a stricter pool
 """
 
 from __future__ import annotations
@@ -61,6 +62,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--samples", type=int, default=256, help="targets per check seed (256)")
     ap.add_argument("--json", help="also write the numbers here")
     ap.add_argument("--keep", help="keep the runs' archives in this folder and reuse them")
+    ap.add_argument("--also", action="append", default=[],
+                    help="another run's archive (repeat): its answer joins the pool as a "
+                         "design to cover (a stricter check), but need not cover itself")
     a = ap.parse_args(argv)
     seeds = a.seed or [0, 1, 2]
     import designopt
@@ -92,7 +96,13 @@ def main(argv: list[str] | None = None) -> int:
                 print("    " + ", ".join(f"{n}={val:.4f}" for n, val in zip(names, x, strict=True))
                       + f"  [{v}]")  # fmt: skip
             out["runs"][s] = {"wall_s": wall, "X": X.tolist(), "verdict": verdict}
-    pool = np.unique(np.round(np.concatenate(list(answers.values())), 12), axis=0)
+    extra = []
+    for path in a.also:  # reference answers: pooled, not judged
+        names, X, verdict, senses = answer(Path(path))
+        extra.append(X)
+        print(f"also {path}: {len(X)} design(s) ({', '.join(sorted(set(verdict)))}) join the pool")
+    out["also"] = list(a.also)
+    pool = np.unique(np.round(np.concatenate(list(answers.values()) + extra), 12), axis=0)
     objs = list(senses)
     sign = np.array([1.0 if senses[k] == "max" else -1.0 for k in objs])
     margins = cfg0.final.margin or {}

@@ -220,7 +220,12 @@ def groups(job: Any, problem: Problem, res: Any) -> dict[str, Any]:
                     "n_samples": n_samples, "n_candidates": int(len(keep)), "z": Z,
                     "units": linear_units(front, job.study.units(cfg.study))}}  # fmt: skip
     with_placement(fr, placement(job.study, cfg.study, X), None)  # ports, bases: (n, ...)
-    fr["attrs"] |= design_notes(job, X, idx, c, fresh)
+    tg = None
+    if job.study.targets is not None and len(X):  # every front design at every target
+        # the re-scoring's targets and seeds (their means are the front's indices), and
+        # each design's IK coverage, all designs in one batch
+        tg = job.study.targets(c.study, X, fresh, job.dtype)
+    fr["attrs"] |= design_notes(job, X, idx, tg)
     out = {"optimizer": opt, "front": fr, "problem": problem_group(problem)}
     if polished is not None:
         out["refine"] = polished
@@ -228,11 +233,8 @@ def groups(job: Any, problem: Problem, res: Any) -> dict[str, Any]:
         out["verdict"] = verdict_group
     if runs is not None:
         out["runs"] = runs_group(job, problem, runs[0], runs[1], names, sg, F, na, pick)
-    if job.study.targets is not None and len(X):  # every front design at every target
-        # the re-scoring's targets and seeds: their means are the front's indices
-        tg = job.study.targets(c.study, X, fresh, job.dtype)
-        if tg is not None:
-            out["targets"] = tg
+    if tg is not None:
+        out["targets"] = tg
     return out
 
 
@@ -268,23 +270,20 @@ def raced(job: Any, res: Any, X_runs: np.ndarray | None, F_runs: np.ndarray | No
     return g, np.asarray(g["x"], np.float64)[nd], np.asarray(g["mean"])[nd] * sg, len(Xc)
 
 
-def design_notes(job: Any, X: np.ndarray, vals: Mapping[str, np.ndarray], c: Any,
-                 keys: Mapping[str, Any]) -> dict[str, Any]:  # fmt: skip
+def design_notes(job: Any, X: np.ndarray, vals: Mapping[str, np.ndarray],
+                 tg: Mapping[str, Any] | None) -> dict[str, Any]:  # fmt: skip
     """The front's attrs on its designs X (n, D) with their re-scored ``vals``, as a
     weighted run says them of its final design: ``warnings`` (each distinct line of
     ``quoted.warnings`` once, naming the designs it concerns) and, for a task, each
-    design's IK coverage figure (``quoted.coverage`` on the re-scoring's config ``c`` and
-    ``keys``): ``ik_better`` (n,), ``ik_better_n`` and ``coverage_lines``, the lines of
-    the design whose share is the largest (the worst; its warning, if any, is among the
-    warnings)."""
+    design's IK coverage figure read from the front's ``targets`` group ``tg`` (the
+    study's hook on the re-scoring's targets; its IK solves every design in one batch,
+    ``quoted.coverages``): ``ik_better`` (n,), ``ik_better_n`` and ``coverage_lines``,
+    the lines of the design whose share is the largest (the worst; its warning, if any,
+    is among the warnings)."""
     from designopt.app import quoted
 
     n = len(X)
-    # each design's coverage solves it again (two solves): at most COVERAGE_DESIGNS of
-    # them, evenly along the front where there are more
-    rows = set(range(n)) if n <= COVERAGE_DESIGNS else set(
-        np.unique(np.linspace(0, n - 1, COVERAGE_DESIGNS).round().astype(int)).tolist())
-    covers = [quoted.coverage(job, c.study, X[i], keys) if i in rows else {} for i in range(n)]
+    covers = quoted.coverages(job, None, X, {}, tg) if tg is not None else [{} for _ in X]
     per = [quoted.warnings(job, {k: np.asarray(v)[i] for k, v in vals.items()}, X[i],
                            covers[i]) for i in range(n)]  # fmt: skip
     out: dict[str, Any] = {}
@@ -294,19 +293,10 @@ def design_notes(job: Any, X: np.ndarray, vals: Mapping[str, np.ndarray], c: Any
     if n and any(cv and "ik_better" in cv for cv in covers):
         share = [float(cv["ik_better"]) if cv else float("nan") for cv in covers]
         w = int(np.nanargmax(share))
-        of = (f"the worst of the {n}" if len(rows) == n else
-              f"the worst of the {len(rows)} checked, evenly along the {n}")  # fmt: skip
         out |= {"ik_better": share, "ik_better_n": float(covers[w]["ik_better_n"]),
-                "coverage_lines": [f"front design #{w}, {of}: {ln}" if n > 1 else ln
-                                   for ln in covers[w]["lines"]]}  # fmt: skip
+                "coverage_lines": [f"front design #{w}, the worst of the {n}: {ln}" if n > 1
+                                   else ln for ln in covers[w]["lines"]]}  # fmt: skip
     return out
-
-
-COVERAGE_DESIGNS = 6
-"""A front's IK coverage figure (:func:`design_notes`) is measured for at most this many
-of its designs, evenly along the front where it holds more: each is solved twice more
-through the study's one-design ``targets`` hook (about 5 s a design on the shipped
-planning case, configs/port_placement.yaml, on a 2-core CPU)."""
 
 
 def runs_group(job: Any, problem: Problem, vals: dict[str, np.ndarray], X: np.ndarray,

@@ -481,11 +481,12 @@ def compare(cfg: Any, designs: list[Mapping[str, float]], where: str = "config",
     placed = placement(job.study, cfg.study, X)
     out: dict[str, Any] = {"designs": [], "differences": [], "replicas": int(replicas),
                            "n_samples": n_used, "stream": stream}  # fmt: skip
+    covers = quoted.coverages(job, base_cfg.study, X, base_keys)  # every design in one batch
     for i, d in enumerate(designs):
         vals = {k: float(v[i]) for k, v in res.items()}
         x = dict(zip(problem.names, X[i].tolist(), strict=True))
         pl = {k: placed[k][i] for k in placed.get("attrs", {}).get("placement", [])}
-        cover = quoted.coverage(job, base_cfg.study, X[i], base_keys)
+        cover = covers[i]
         warns = quoted.warnings(job, vals, X[i], cover)
         lines = list(job.study.extra_lines(cfg.study, pl)) if pl else []
         out["designs"].append({"design": x, "filled": [n for n in problem.names if n not in d],

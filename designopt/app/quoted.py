@@ -65,19 +65,33 @@ def coverage(job: Any, settings: Any, x: np.ndarray, keys: Mapping[str, Any]) ->
     study settings ``settings`` (the study's ``targets`` hook for one design: attrs
     ``ik_better``, ``ik_better_n``, ``lines``, ``warnings``); {} for a study or a
     measure without one."""
-    if job.study.targets is None:
-        return {}
-    tg = job.study.targets(settings, np.asarray(x, np.float64), keys, job.dtype)
-    if not tg:
-        return {}
-    at = dict(tg.get("attrs", {}))
+    return coverages(job, settings, np.asarray(x, np.float64)[None], keys)[0]
+
+
+def coverages(job: Any, settings: Any, X: np.ndarray, keys: Mapping[str, Any],
+              tg: Mapping[str, Any] | None = None) -> list[dict[str, Any]]:
+    """:func:`coverage` of designs X (P, D), all from one call of the study's ``targets``
+    hook (its IK solves every design in one batch), or read from ``tg``, that hook's
+    answer for X when the caller has it (a front's archived ``targets`` group)."""
+    X = np.atleast_2d(np.asarray(X, np.float64))
+    if tg is None:
+        if job.study.targets is None:
+            return [{} for _ in X]
+        tg = job.study.targets(settings, X if len(X) > 1 else X[0], keys, job.dtype)
+    at = dict((tg or {}).get("attrs", {}))
     if "ik_better" not in at:
-        return {}
-    out = {k: at[k] for k in ("ik_better", "ik_better_n") if k in at}
-    for k in ("lines", "warnings"):
-        v = at.get(k, [])
-        out[k] = [v] if isinstance(v, str) else [str(w) for w in v]
-    return out
+        return [{} for _ in X]
+    if len(X) == 1 and "coverage_lines" not in at:  # one design's attrs
+        out = {k: at[k] for k in ("ik_better", "ik_better_n")}
+        for k in ("lines", "warnings"):
+            v = at.get(k, [])
+            out[k] = [v] if isinstance(v, str) else [str(w) for w in v]
+        return [out]
+    share = np.atleast_1d(np.asarray(at["ik_better"], np.float64))
+    lines, warns = list(at["coverage_lines"]), list(at["coverage_warnings"])
+    return [{"ik_better": float(share[i]), "ik_better_n": float(at["ik_better_n"]),
+             "lines": [str(lines[i])], "warnings": [str(warns[i])] if warns[i] else []}
+            for i in range(len(X))]  # fmt: skip
 
 
 def warnings(job: Any, values: Mapping[str, Any], x: Any = None,

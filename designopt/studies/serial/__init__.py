@@ -44,35 +44,6 @@ def _front_figures(record: Any, picks: Any, folder: Path) -> list[Path]:
     return figures.draw_front_robots(record, picks, folder)
 
 
-def _solutions(s: SerialSettings, X: Any, keys: Any, dtype: Any) -> dict[str, Any]:
-    """The per-target solutions of designs ``X`` (P, D) on a run's targets: each array
-    (A, P, N, ...) (``target_p`` (N, 3)), from the run's own block program in blocks of
-    ``blocks.DESIGNS`` designs (the last padded with its last design), as
-    ``blocks.solution`` gives them for one design."""
-    import jax.numpy as jnp
-    import numpy as np
-
-    from designopt.studies.serial import blocks
-
-    if len(X) == 1:  # one design: the figures' own call, bit for bit
-        one = blocks.solution(s, X[0], keys, dtype)
-        return {k: (v if k in ("target_p", "target_R") else
-                    (v[None, None] if s.arms is None else v[:, None]))
-                for k, v in one.items()}  # fmt: skip
-    _, p = blocks.host_params(s, keys, dtype)
-    dt = np.dtype(jnp.dtype(dtype))
-    B, P, N = blocks.DESIGNS, len(X), p["target_p"].shape[0]
-    pad = np.concatenate([X, np.repeat(X[-1:], -P % B, 0)]).astype(dt)
-    run = blocks.values(s, dtype)
-    parts = []
-    for b in range(0, len(pad), B):  # one block program call per 16 designs
-        chunks = [{k: np.asarray(v) for k, v in c.items()} for c in run(p, pad[b : b + B])]
-        parts.append(blocks.assembled(s, chunks, B, N, np))
-    out = {k: np.concatenate([q[k] for q in parts], 1)[:, :P] for k in parts[0]}
-    out["success"] = out["success"] > 0.5
-    return out | {k: np.asarray(p[k]) for k in ("target_p", "target_R") if k in p}
-
-
 def _targets(s: SerialSettings, x: Any, keys: Any, dtype: Any) -> dict[str, Any] | None:
     """The final design at every target of a task run (``Study.targets``): per arm (A = 1
     without ``arms``) and target ``success`` (A, N) 0/1, ``q`` (A, N, n) in the kernel's
@@ -81,10 +52,12 @@ def _targets(s: SerialSettings, x: Any, keys: Any, dtype: Any) -> dict[str, Any]
     in the world frame; the run's own targets and IK seeds (``blocks.solution``, the
     program the figures use). ``arm_values`` (A, K): each arm's port and base
     (:func:`_placement`), written on every row of ``show --csv``. Designs ``x`` (P, D)
-    (a front's): every array but ``target_p`` with a leading design axis P. For one
-    design, attrs ``ik_better`` and ``ik_better_n``: the IK's coverage figure
-    (``blocks.coverage``), with its summary ``lines`` and ``warnings`` (a share above
-    ``blocks.COVERAGE_WARN``)."""
+    (a front's): every array but ``target_p`` with a leading design axis P. Attrs
+    ``ik_better`` and ``ik_better_n``: the IK's coverage figure (``blocks.coverage``, all
+    designs in one batched solve); for one design with its summary ``lines`` and
+    ``warnings`` (a share above ``blocks.COVERAGE_WARN``), for several ``ik_better`` (P,)
+    with each design's line (``coverage_lines``) and warning (``coverage_warnings``, ""
+    where none)."""
     if s.indices.measure != "task":
         return None
     import numpy as np
@@ -95,7 +68,9 @@ def _targets(s: SerialSettings, x: Any, keys: Any, dtype: Any) -> dict[str, Any]
     xa = np.asarray([x[k] for k in s.variables] if hasattr(x, "keys") else x, np.float64)
     many = xa.ndim == 2
     X = np.atleast_2d(xa)
-    sol = _solutions(s, X, keys, dtype)  # (A, P, N, ...)
+    from designopt.studies.serial import blocks
+
+    sol = blocks.solutions(s, X, keys, dtype)  # (A, P, N, ...)
 
     def per_design(v: Any) -> Any:  # (A, P, N, ...) → (P, A, N, ...), or (A, N, ...)
         v = np.moveaxis(np.asarray(v), 1, 0)
@@ -109,15 +84,21 @@ def _targets(s: SerialSettings, x: Any, keys: Any, dtype: Any) -> dict[str, Any]
     types = [j.type for j in s.chain.joints]
     out["attrs"] = {"joints": list(joint_names(s)), "types": types, "length_unit": u,
                     "q_units": ["rad" if t == "R" else u for t in types]}  # fmt: skip
-    if not many:  # the final design: how often a second, independent set of IK seeds
-        # finds a better solution (blocks.coverage; attrs ik_better, ik_better_n)
-        from designopt.studies.serial import blocks
-
-        one = {k: (v if k in ("target_p", "target_R") else v[:, 0] if s.arms is not None
-                   else v[0, 0]) for k, v in sol.items()}  # fmt: skip
-        cov = blocks.coverage(s, X[0], keys, one, dtype)
-        lines, warns = blocks.coverage_lines(s, cov)
-        out["attrs"] |= cov | {"lines": lines} | ({"warnings": warns} if warns else {})
+    # how often a second, independent set of IK seeds finds a better solution: every
+    # design's in one batched solve (blocks.coverage)
+    cov = blocks.coverage(s, X, keys, sol, dtype)
+    per = [blocks.coverage_lines(s, {"ik_better": float(b), "ik_better_n": cov["ik_better_n"]})
+           for b in cov["ik_better"]]  # fmt: skip
+    if not many:  # attrs ik_better, ik_better_n, lines, warnings
+        lines, warns = per[0]
+        out["attrs"] |= {"ik_better": float(cov["ik_better"][0]),
+                         "ik_better_n": cov["ik_better_n"], "lines": lines} | \
+            ({"warnings": warns} if warns else {})  # fmt: skip
+    else:  # per design: ik_better (P,), its line and its warning ("" where none)
+        out["attrs"] |= {"ik_better": [float(b) for b in cov["ik_better"]],
+                         "ik_better_n": cov["ik_better_n"],
+                         "coverage_lines": [ln[0] for ln, _ in per],
+                         "coverage_warnings": [w[0] if w else "" for _, w in per]}  # fmt: skip
     pl = _placement(s, X)
     if pl is not None:
         cols, vals = [], []

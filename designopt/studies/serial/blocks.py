@@ -164,25 +164,58 @@ COVERAGE_STREAM)``); a target where that solve finds a solution better by more t
 :data:`COVERAGE_BETTER` counts; a share above :data:`COVERAGE_WARN` is warned about."""
 
 
-def coverage(s: SerialSettings, x: Any, keys: Any, sol: dict[str, np.ndarray],
-             dtype: Any = jnp.float64) -> dict[str, float]:  # fmt: skip
+def solutions(s: SerialSettings, X: Any, keys: Any, dtype: Any = jnp.float64,
+              ik_key: Any = None, first: int | None = None) -> dict[str, np.ndarray]:  # fmt: skip
+    """:func:`solution` of several designs X (P, D) at once: each array (A, P, N, ...)
+    (``target_p`` (N, 3)), from the block program in blocks of :data:`DESIGNS` designs
+    (the last padded with its last design; a design's values do not depend on the others
+    of its block). One design: :func:`solution`'s own call, bit for bit. ``ik_key``,
+    ``first``: as :func:`solution`."""
+    X = np.atleast_2d(np.asarray(X, np.float64))
+    if len(X) == 1:
+        one = solution(s, X[0], keys, dtype, ik_key=ik_key, first=first)
+        return {k: (v if k in ("target_p", "target_R") else
+                    (v[None, None] if s.arms is None else v[:, None]))
+                for k, v in one.items()}  # fmt: skip
+    _, p = host_params(s, keys, dtype)
+    if ik_key is not None:
+        p["sample_key"] = ik_key
+    if first is not None:
+        p = p | {k: p[k][:first] for k in ("target_p", "target_R") if k in p}
+    dt = np.dtype(jnp.dtype(dtype))
+    B, P, N = DESIGNS, len(X), p["target_p"].shape[0]
+    pad = np.concatenate([X, np.repeat(X[-1:], -P % B, 0)]).astype(dt)
+    run = values(s, dtype)
+    parts = []
+    for b in range(0, len(pad), B):  # one block program call per 16 designs
+        chunks = [{k: np.asarray(v) for k, v in c.items()} for c in run(p, pad[b : b + B])]
+        parts.append(assembled(s, chunks, B, N, np))
+    out = {k: np.concatenate([q[k] for q in parts], 1)[:, :P] for k in parts[0]}
+    out["success"] = out["success"] > 0.5
+    return out | {k: np.asarray(p[k]) for k in ("target_p", "target_R") if k in p}
+
+
+def coverage(s: SerialSettings, X: Any, keys: Any, sol: dict[str, np.ndarray],
+             dtype: Any = jnp.float64) -> dict[str, Any]:  # fmt: skip
     """How often the IK's kept solution is not the best it could have kept: the run's
     first chunk of targets (at least :data:`COVERAGE_MIN`, at most the task's) solved
-    again for the design ``x`` with an independent set of seeds, and compared target by
-    target (and arm by arm) with the run's own solution ``sol`` (:func:`solution`) by
-    the score the IK maximises (``study.task.ik.best``: 1/k, or the clearance): the
-    share of those targets where the second solve is better by more than
+    again for the designs ``X`` (P, D) with an independent set of seeds, all designs in
+    one batched solve (:func:`solutions`), and compared target by target (and arm by
+    arm) with the run's own solutions ``sol`` (:func:`solutions`: (A, P, N, ...)) by the
+    score the IK maximises (``study.task.ik.best``: 1/k, or the clearance): per design,
+    the share of those targets where the second solve is better by more than
     :data:`COVERAGE_BETTER` (or reaches a target the first did not). {"ik_better": the
-    share, "ik_better_n": targets compared (× arms)}."""
+    shares (P,), "ik_better_n": targets compared per design (× arms)}."""
     N = int(np.asarray(sol["target_p"]).shape[0])
     K = min(N, max(COVERAGE_MIN, taskindex.chunk(s)))
     key = jax.random.fold_in(keys["samples"], COVERAGE_STREAM)
-    alt = solution(s, x, keys, dtype, ik_key=key, first=K)
+    alt = solutions(s, X, keys, dtype, ik_key=key, first=K)
     name = "clearance" if s.task.ik.best == "clearance" else "inv_k"  # type: ignore[union-attr]
     a_ok, b_ok = np.asarray(alt["success"]), np.asarray(sol["success"])[..., :K]
     a_v, b_v = np.asarray(alt[name], np.float64), np.asarray(sol[name], np.float64)[..., :K]
-    better = a_ok & (~b_ok | (a_v > b_v + COVERAGE_BETTER))
-    return {"ik_better": float(np.mean(better)), "ik_better_n": float(better.size)}
+    better = a_ok & (~b_ok | (a_v > b_v + COVERAGE_BETTER))  # (A, P, K)
+    shares = np.mean(np.moveaxis(better, 1, 0).reshape(better.shape[1], -1), -1)
+    return {"ik_better": shares, "ik_better_n": float(better.shape[0] * better.shape[2])}
 
 
 def coverage_lines(s: SerialSettings, cov: dict[str, float]) -> tuple[list[str], list[str]]:
