@@ -340,9 +340,11 @@ SMALL: dict[str, dict] = {
                        "optimizer": NSGA},
     "two_ur5_front": {"study": {"indices": {"n_samples": 32}}, "front": {"n_samples": 64},
                       "optimizer": NSGA},
-    # the sizes of tests/test_ports_numbers.py's TINY: the same programs, compiled once
+    # the sizes of tests/test_ports_numbers.py's TINY and the final stage of
+    # tests/test_verdict.py's tiny planning run: the same programs, compiled once
     "port_placement": {"study": {"indices": {"n_samples": 32}}, "front": {"n_samples": 32},
-                       "optimizer": {"n_particles": 4, "n_iters": 2, "n_runs": 1}},
+                       "optimizer": {"n_particles": 4, "n_iters": 2, "n_runs": 1},
+                       "final": {"stage": 32, "max_samples": 64}},
     "urdf_arm": {"study": {"indices": {"n_samples": 512}}, "optimizer": OPT,
                  "scan": {"vary": {"l_wrist": {"num": 2}, "l_jaw": {"num": 2}}}} | _final(512),
     "urdf_mesh_arm": {"study": {"indices": {"n_samples": 512}}, "optimizer": OPT} | _final(512),

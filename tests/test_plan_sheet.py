@@ -164,6 +164,36 @@ def test_plan_png_of_a_run_prints_the_archived_incisions(run):
     assert text_problems(fig) == []
 
 
+def test_the_sheet_and_the_html_report_carry_the_final_stages_verdict(run):
+    """The run raced its candidates (final.race): plan.png's rows say the race's answer
+    and this layout's own verdict, read from the archive's verdict/ group; the HTML
+    report has a "Port plan" section with the sheet as a PNG and the same rows."""
+    from designopt.app import reporting
+    from designopt.studies.serial import plansheet
+
+    rec, _, figs = run
+    g = rec.groups["verdict"]
+    summary = g["attrs"]["summary"]
+    summary = summary.decode() if isinstance(summary, bytes) else str(summary)
+    X = np.atleast_2d(np.asarray(g["x"], np.float64))
+    x = np.asarray(list(rec.x.values()), np.float64)
+    j = int(np.flatnonzero(np.all(np.isclose(X, x), axis=1))[0])  # the final design raced
+    mine = np.atleast_1d(g["verdict"])[j]
+    mine = mine.decode() if isinstance(mine, bytes) else str(mine)
+    plan, _ = plansheet.run_sheet(rec)
+    assert f"final stage (the candidates raced on fresh samples): {summary}" in plan.rows[
+        -2 - len(rec.warnings)]
+    assert f"this layout in the final stage: {mine} (candidate #{j} of {len(X)})" in plan.rows
+    texts = " ".join(t.get_text() for t in drawn_texts(figs["plan"]))
+    assert "this layout in the final stage" in texts
+    rec, paths, _ = run
+    out = reporting.write_html(paths[0].parent.parent / "pp.h5", rec)  # the fixture's archive
+    html = out.read_text()
+    assert '<section id="plan"' in html or 'id="plan"' in html
+    assert "Port plan" in html and 'src="data:image/png;base64,iVBOR' in html
+    assert "this layout in the final stage" in html
+
+
 def test_front_plan_is_the_knees_and_front_robots_reads(front):
     """A front's plan.png is its knee's (the design front_robots singles out), its
     numbers the knee's archived ports; front_robots has a title of at most two lines,

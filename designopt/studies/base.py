@@ -248,7 +248,9 @@ class Study:
     """``robot(record)``: the robot in 3-D for the interactive report, {"view":
     ``designopt.figures.html.View``} for a run (the final design, a slider through
     representative poses) or {"front": ``designopt.figures.html.FrontView``} for a Pareto
-    front (the robot of the design hovered or clicked); None: the study draws none."""
+    front (the robot of the design hovered or clicked), either with an optional "plan"
+    ({"title", "png": PNG bytes, "rows": text lines}: a planning run's plan sheet, shown
+    as a section of its own); None: the study draws none."""
     front_figures: Callable[[Any, Sequence[tuple[str, int]], Path], list[Path]] | None = None
     """``front_figures(front record, picks, folder)``: the study's drawings of a front's
     chosen designs (``picks``: [(name, design number)], the extremes and the knee,

@@ -50,11 +50,26 @@ def sections(tree: Mapping[str, Any], *, cloud: Mapping[str, Any] | None = None,
         out.append(_cloud(cloud, ids))
     if robot and (robot.get("view") is not None or robot.get("front") is not None):
         out.append(robot_section(robot.get("view"), robot.get("front"), ids))
+    if robot and robot.get("plan"):
+        out.append(_plan(robot["plan"]))
     cfg = _config(tree)
     if cfg is not None:
         out.append(cfg)
     out.append(_contents(tree))
     return out
+
+
+def _plan(plan: Mapping[str, Any]) -> PageSection:
+    """The plan sheet (a planning run's ``plan.png``, docs/figures.md): the image, then
+    its text rows (the distances, angles, indices, constraints and the final stage's
+    verdict) as a list that reads without the image."""
+    img = base64.b64encode(bytes(plan["png"])).decode("ascii")
+    rows = "".join(f"<li>{esc(str(r))}</li>" for r in plan.get("rows", []))
+    body = (f'<img class="plan" alt="{esc(str(plan.get("title", "the plan sheet")))}: the patient '
+            f'from above and from the side, the incision points, the bases and the distances" '
+            f'src="data:image/png;base64,{img}" style="max-width:100%;height:auto">'
+            + (f"<ul>{rows}</ul>" if rows else ""))  # fmt: skip
+    return PageSection("plan", "Port plan", [body])
 
 
 def _meta(tree: Mapping[str, Any]) -> str:

@@ -512,21 +512,51 @@ def title_of(what: str, s: SerialSettings) -> str:
     )
 
 
-def run_plan(rec: Any, folder: Path) -> list[Path]:
-    """``plan.png`` of a run's final design (its ``final/`` placement values)."""
+def verdict_rows(rec: Any, x: np.ndarray) -> list[str]:
+    """The final stage's lines for the layout ``x`` (D,) of a run with ``final.race``
+    (its archived ``verdict`` group): the race's one-line answer and this layout's own
+    verdict (*best*, *equivalent*, *worse*) with its row in the race; [] without a race."""
+    g = rec.groups.get("verdict") if hasattr(rec, "groups") else None
+    if not g or "x" not in g:
+        return []
+    at = g.get("attrs", {})
+    text = lambda v: v.decode() if isinstance(v, bytes) else str(v)  # noqa: E731
+    summary = text(at.get("summary", ""))
+    out = [f"final stage (the candidates raced on fresh samples): {summary}"
+           + (f"; {text(at['tie_note'])}" if at.get("tie_note") else "")]  # fmt: skip
+    X = np.atleast_2d(np.asarray(g["x"], np.float64))
+    near = np.flatnonzero(np.all(np.isclose(X, np.asarray(x, np.float64), rtol=1e-9,
+                                            atol=1e-12), axis=1))  # fmt: skip
+    if near.size:
+        j = int(near[0])
+        v = text(np.atleast_1d(g["verdict"])[j])
+        out.append(f"this layout in the final stage: {v} (candidate #{j} of {len(X)})")
+    return out
+
+
+def run_sheet(rec: Any) -> tuple[Plan, str]:
+    """(the plan, the title) of a run's final design (its ``final/`` placement values)."""
     s: SerialSettings = rec.config.study
-    g = _placed(s, rec.groups.get("final", {}), np.asarray(list(rec.x.values()), np.float64))
+    x = np.asarray(list(rec.x.values()), np.float64)
+    g = _placed(s, rec.groups.get("final", {}), x)
     obj = [k for k, w in s.objective.items() if not isinstance(w, bool) and k not in ("n_norm",)]
     plan = plan_of(s, g, rec.indices, obj)
+    plan.rows += verdict_rows(rec, x)
     plan.rows += [f"warning: {w}" for w in rec.warnings]  # the final stage's, as the summary's
-    return draw(s, plan, folder, title_of("the final design", s))
+    return plan, title_of("the final design", s)
 
 
-def front_plan(rec: Any, picks: Sequence[tuple[str, int]], folder: Path) -> list[Path]:
-    """``plan.png`` of a front's recommended design: the knee of ``picks``
+def run_plan(rec: Any, folder: Path) -> list[Path]:
+    """``plan.png`` of a run's final design (:func:`run_sheet`)."""
+    plan, title = run_sheet(rec)
+    return draw(rec.config.study, plan, folder, title)
+
+
+def front_sheet(rec: Any, picks: Sequence[tuple[str, int]]) -> tuple[Plan, str] | None:
+    """(the plan, the title) of a front's recommended design: the knee of ``picks``
     (``figures.front.extremes_and_knee``; the first pick where there is no knee)."""
     if not picks:
-        return []
+        return None
     s: SerialSettings = rec.config.study
     name, i = next(((n, i) for n, i in picks if n == "knee"), picks[0])
     fr = rec.groups.get("front", {})
@@ -539,12 +569,44 @@ def front_plan(rec: Any, picks: Sequence[tuple[str, int]], folder: Path) -> list
             continue
         se = rec.values.get(f"{k}_se")
         ind[k] = (float(v[i]), None if se is None else float(np.asarray(se)[i]))
-    return draw(
-        s,
-        plan_of(s, g, ind, list(rec.objectives)),
-        folder,
-        title_of(f"the front's {name} (design {i} of {len(rec.X)})", s),
-    )
+    plan = plan_of(s, g, ind, list(rec.objectives))
+    plan.rows += verdict_rows(rec, np.asarray(rec.X[i], np.float64))
+    return plan, title_of(f"the front's {name} (design {i} of {len(rec.X)})", s)
+
+
+def front_plan(rec: Any, picks: Sequence[tuple[str, int]], folder: Path) -> list[Path]:
+    """``plan.png`` of a front's recommended design (:func:`front_sheet`)."""
+    sheet = front_sheet(rec, picks)
+    if sheet is None:
+        return []
+    return draw(rec.config.study, sheet[0], folder, sheet[1])
+
+
+def report_plan(rec: Any) -> dict[str, Any] | None:
+    """The plan sheet for the HTML report (``Study.robot``'s ``plan``): {"title": the
+    sheet's title, "png": the sheet as PNG bytes, "rows": its text rows}, for a run's
+    final design or a front's knee; None where the run places no port."""
+    import io
+
+    from designopt.results import FrontRecord
+
+    s: SerialSettings = rec.config.study
+    if s.task is None or s.ports()[0] is None:  # no port: no plan to pin up
+        return None
+    if isinstance(rec, FrontRecord):
+        from designopt.figures.front import extremes_and_knee
+
+        sheet = front_sheet(rec, extremes_and_knee(rec))
+        if sheet is None:
+            return None
+    else:
+        sheet = run_sheet(rec)
+    fig = figure(s, sheet[0], sheet[1])
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    plt.close(fig)
+    return {"title": sheet[1].replace("\n", "; "), "png": buf.getvalue(),
+            "rows": list(sheet[0].rows)}
 
 
 def _placed(s: SerialSettings, g: Mapping[str, Any], x: np.ndarray) -> dict[str, Any]:

@@ -174,11 +174,13 @@ def _front_scene(s: SerialSettings, X: Any) -> dict[str, Any]:
 
 
 def report(rec: Any) -> dict[str, Any] | None:
-    """``Study.robot``: the run's view or the front's (None for other records)."""
+    """``Study.robot``: the run's view or the front's, and for a planning run its plan
+    sheet (``plan``: ``plansheet.report_plan``) (None for other records)."""
     from designopt.results import FrontRecord, RunRecord
+    from designopt.studies.serial.plansheet import report_plan
 
     if isinstance(rec, FrontRecord):
-        return {"front": front_view(rec)}
+        return {"front": front_view(rec), "plan": report_plan(rec)}
     if isinstance(rec, RunRecord):
-        return {"view": run_view(rec)}
+        return {"view": run_view(rec), "plan": report_plan(rec)}
     return None
