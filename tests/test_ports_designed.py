@@ -88,6 +88,9 @@ def _puma(port, variables=None, wall=None) -> dict:
     s["chain"]["urdf"] = str(ROOT / "configs/robots/puma560.urdf")
     s["indices"]["n_samples"] = 24
     s["task"]["port"] = port
+    # the ports are the point here, not the IK's definition: no neighbour pass, a smaller
+    # program to compile (each of these configs' fused programs is compiled once)
+    s["task"].setdefault("ik", {})["neighbours"] = 0
     s["variables"] |= variables or {}
     if wall is not None:
         s["task"]["body_wall"] = wall

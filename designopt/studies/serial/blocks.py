@@ -136,22 +136,10 @@ def solution(s: SerialSettings, x: Any, keys: Any, dtype: Any = jnp.float64,
     another key for the IK's seeds (the same targets, an independent set of seeds:
     :func:`coverage`); ``first``: only the first that many targets."""
 
-    if jnp.dtype(dtype) == jnp.float64 and not jax.config.jax_enable_x64:
-        raise ValueError("the task's inverse kinematics needs float64: call "
-                         "jax.config.update('jax_enable_x64', True) first")  # fmt: skip
-    mech, p = host_params(s, keys, dtype)
-    if ik_key is not None:  # the IK's seeds come from the sample key (taskindex.chunk_values)
-        p["sample_key"] = ik_key
-    if first is not None:
-        p = p | {k: p[k][:first] for k in ("target_p", "target_R") if k in p}
-    dt = np.dtype(jnp.dtype(dtype))
-    xv = np.asarray([x[k] for k in s.variables] if hasattr(x, "keys") else x, dt)
-    X = np.repeat(xv[None], DESIGNS, 0)
-    chunks = [{k: np.asarray(v) for k, v in c.items()} for c in values(s, dtype)(p, X)]
-    per = assembled(s, chunks, DESIGNS, p["target_p"].shape[0], np)
-    out = {k: np.asarray(v[0, 0] if s.arms is None else v[:, 0]) for k, v in per.items()}
-    out["success"] = out["success"] > 0.5
-    return out | {k: np.asarray(p[k]) for k in ("target_p", "target_R") if k in p}
+    xv = np.asarray([x[k] for k in s.variables] if hasattr(x, "keys") else x, np.float64)
+    per = solutions(s, xv[None], keys, dtype, ik_key=ik_key, first=first)
+    return {k: (v if k in ("target_p", "target_R") else v[0, 0] if s.arms is None else v[:, 0])
+            for k, v in per.items()}  # fmt: skip
 
 
 COVERAGE_STREAM = 0x434F5645  # "COVE"
@@ -168,17 +156,15 @@ def solutions(s: SerialSettings, X: Any, keys: Any, dtype: Any = jnp.float64,
               ik_key: Any = None, first: int | None = None) -> dict[str, np.ndarray]:  # fmt: skip
     """:func:`solution` of several designs X (P, D) at once: each array (A, P, N, ...)
     (``target_p`` (N, 3)), from the block program in blocks of :data:`DESIGNS` designs
-    (the last padded with its last design; a design's values do not depend on the others
-    of its block). One design: :func:`solution`'s own call, bit for bit. ``ik_key``,
-    ``first``: as :func:`solution`."""
+    (the last padded with its last design: one design fills its block; a design's values
+    do not depend on the others of its block). ``ik_key``, ``first``: as
+    :func:`solution`."""
+    if jnp.dtype(dtype) == jnp.float64 and not jax.config.jax_enable_x64:
+        raise ValueError("the task's inverse kinematics needs float64: call "
+                         "jax.config.update('jax_enable_x64', True) first")  # fmt: skip
     X = np.atleast_2d(np.asarray(X, np.float64))
-    if len(X) == 1:
-        one = solution(s, X[0], keys, dtype, ik_key=ik_key, first=first)
-        return {k: (v if k in ("target_p", "target_R") else
-                    (v[None, None] if s.arms is None else v[:, None]))
-                for k, v in one.items()}  # fmt: skip
     _, p = host_params(s, keys, dtype)
-    if ik_key is not None:
+    if ik_key is not None:  # the IK's seeds come from the sample key (taskindex.chunk_values)
         p["sample_key"] = ik_key
     if first is not None:
         p = p | {k: p[k][:first] for k in ("target_p", "target_R") if k in p}
