@@ -78,6 +78,17 @@ MISTAKES = [
                             "the box of py0 [-140, 140]", "write [-0.14, 0.14]", "arms.0.port"]),
     ("bases-inside-the-abdomen", lambda r: r["study"]["variables"].update(b=[0, 0.1]),
      "study.arms.0.base", ["inside task.body_wall", "narrow the box of b, by"]),
+    ("base-column-through-the-wall",  # the UR5's 0.089 m column from bases below the skin
+     lambda r: r["study"]["variables"].update(b=[0.15, 0.8])
+     or [a["base"]["xyz"].__setitem__(2, -0.08) for a in r["study"]["arms"]],
+     "study.arms.0.base", ["the arm's base column (from the base at [-0.15, 0, -0.08] m to its "
+                           "first joint, 0.08916 m long) passes through task.body_wall",
+                           "in some designs of the box (e.g. b = 0.15, by = 0)",
+                           "narrow the box of b, by"]),
+    ("camera-port-in-mm",
+     lambda r: r["study"]["task"].update(camera={"port": [0, -120, 300], "band": [0.04, 0.16]}),
+     "study.task.camera.port.1", ["-120 looks like millimetres", "write -0.12",
+                                  "300 looks like millimetres", "write 0.3"]),
     ("organ-outside-the-wall", lambda r: _obstacle(2)(r).update(xyz=[0, 0.5, 0.05]),
      "study.collision.obstacles.2", ["inside: true", "entirely outside task.body_wall"]),
     ("vessel-outside-the-wall",
@@ -185,6 +196,48 @@ def test_the_incisions_of_a_design_are_its_projected_ports():
     (line,) = plancheck.warnings(s, {"x": x})
     d = float(np.linalg.norm(want[0] - want[1]))
     assert f"are {d:.3g} m apart" in line and d < 0.05
+
+
+def test_port_gap_is_an_index_equal_to_the_incisions_distance():
+    """``port_gap``: the least distance between the arms' incision points, exact (SE 0),
+    equal to the distance of the projected ports ``Study.placement`` archives (NumPy), a
+    bound usable as a constraint, finite in value and gradient where the ports meet;
+    no index where the arms share one port."""
+    import jax
+    import jax.numpy as jnp
+
+    from designopt.studies.serial import _placement, incisions, taskindex
+    from designopt.studies.serial.mechanism import build
+    from designopt.studies.serial.settings import units
+
+    s = _study(lambda r: r["study"]["constraints"].append({"index": "port_gap", "ge": 0.05}))
+    assert "port_gap" in s.index_names() and units(s)["port_gap"] == "m"
+    X = np.array([[0.6, 0.0, 0.011, 0.0, 0.0], [0.5, 0.1, 0.1, -0.12, 0.13],
+                  [0.7, -0.1, 0.02, 0.1, -0.1], [0.6, 0.0, 0.0, 0.05, 0.05]])  # fmt: skip
+    P = _placement(s, X)["ports"]  # (4, 2, 3)
+    want = np.linalg.norm(P[:, 0] - P[:, 1], axis=-1)
+    mech = build(s)
+    params = taskindex.scene_params(s, jnp.float64, mech) | {
+        "fixed": jnp.asarray(mech.fixed), "scale": jnp.asarray(mech.scale)}  # fmt: skip
+
+    def gap(X):
+        return incisions.port_gap(params, taskindex.design_full(params, X, jnp.float64), "ellipsoid")
+
+    with jax.enable_x64(True):
+        got = np.asarray(gap(jnp.asarray(X)))
+        g = np.asarray(jax.grad(lambda X: gap(X).sum())(jnp.asarray(X)))
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
+    assert want[-1] == 0.0 and want[0] < 0.05 < want[1]  # the last design's ports meet
+    assert np.all(np.isfinite(g)) and np.any(g[0] != 0)
+
+    def one_port(r):
+        for a in r["study"]["arms"]:
+            a.pop("port")
+        r["study"]["task"]["port"] = ["px", "py0", 0.3]
+        r["study"]["variables"].pop("py1")
+
+    shared = _study(one_port)
+    assert "port_gap" not in shared.index_names()
 
 
 def test_the_share_of_targets_inside_the_anatomy_against_numpy():

@@ -375,6 +375,25 @@ def _cap(frame: jax.Array, cos_c: jax.Array, key: jax.Array, n: int) -> jax.Arra
     return local @ frame.T
 
 
+def region_center_radius(region: Any) -> tuple[np.ndarray, float]:
+    """The centre and radius of a ball that holds the task region."""
+    if isinstance(region, Box):
+        return np.asarray(region.center, np.float64), float(np.linalg.norm(region.size)) / 2
+    if isinstance(region, Ball):
+        return np.asarray(region.center, np.float64), float(region.radius)
+    if isinstance(region, Cylinder):
+        return np.asarray(region.center, np.float64), math.hypot(region.radius,
+                                                                 region.height / 2)  # fmt: skip
+    if isinstance(region, Cone):
+        a = np.asarray(region.axis, np.float64) / np.linalg.norm(region.axis)
+        d0, d1 = region.depth
+        c = np.asarray(region.apex, np.float64) + a * (d0 + d1) / 2
+        return c, math.hypot((d1 - d0) / 2, d1 * math.tan(math.radians(region.half_angle)))
+    p = np.asarray(region.xyz(), np.float64)
+    lo, hi = p.min(0), p.max(0)
+    return (lo + hi) / 2, float(np.linalg.norm(hi - lo)) / 2
+
+
 def nearest_distance(region: Any, origin: Vec3 = (0.0, 0.0, 0.0)) -> float:
     """The distance from ``origin`` (the chain's base) to the region's nearest point:
     exact for a box, ball, cylinder and points; for a cone, to the ball that bounds the

@@ -126,14 +126,15 @@ def _extra_lines(s: SerialSettings, fin: Any) -> list[str]:
 
     from designopt.studies.serial.settings import length_unit
 
-    if "ports" not in fin and "bases" not in fin:
+    if "ports" not in fin and "bases" not in fin and "camera" not in fin:
         return []
     u = length_unit(s)
     wall = None if s.task is None or s.task.body_wall is None else s.task.body_wall.shape
     ports = None if "ports" not in fin else np.asarray(fin["ports"], np.float64).reshape(-1, 3)
     bases = None if "bases" not in fin else np.asarray(fin["bases"], np.float64).reshape(-1, 6)
-    A = len(ports) if ports is not None else len(bases)  # type: ignore[arg-type]
-    what = " and ".join(w for w, v in (("ports", ports), ("bases", bases)) if v is not None)
+    A = len(ports) if ports is not None else len(bases) if bases is not None else 0
+    what = " and ".join(w for w, v in (("ports", ports), ("bases", bases),
+                                       ("the camera", fin.get("camera"))) if v is not None)  # fmt: skip
     head = f"  {what} in the world frame ({u}; angles in deg)" + (
         f"; a port is the incision point, the design's point projected onto the {wall} "
         "body wall" if ports is not None and wall is not None else "")  # fmt: skip
@@ -151,6 +152,10 @@ def _extra_lines(s: SerialSettings, fin: Any) -> list[str]:
         if bases is not None:
             parts.append(f"base xyz {_vec(bases[k][:3])} {u}, rpy {_vec(bases[k][3:], '.2f')} deg")
         lines.append(f"{arm}: " + "; ".join(parts))
+    if "camera" in fin:
+        cam = np.asarray(fin["camera"], np.float64).reshape(6)
+        lines.append(f"  camera: port {_vec(cam[:3])} {u}, its tip at {_vec(cam[3:])} {u}, "
+                     f"{float(np.linalg.norm(cam[3:] - cam[:3])):.4f} {u} in")  # fmt: skip
     return lines
 
 

@@ -49,7 +49,7 @@ import numpy as np
 from jax.typing import ArrayLike
 
 from designopt.kinematics import collision as col
-from designopt.studies.serial.mechanism import Mechanism
+from designopt.studies.serial.mechanism import Mechanism, home
 from designopt.studies.serial.settings import SerialSettings
 
 
@@ -400,15 +400,26 @@ def pair_lines(s: SerialSettings, mech: Mechanism | None = None,
 # ------------------------------------------------------------------- base frames
 
 
-def rpy_matrix(r: Any, p: Any, y: Any) -> jax.Array:
-    """R = Rz(y)·Ry(p)·Rx(r) (radians), (..., 3, 3)."""
-    cr, sr, cp, sp, cy, sy = (jnp.cos(r), jnp.sin(r), jnp.cos(p), jnp.sin(p), jnp.cos(y),
-                              jnp.sin(y))  # fmt: skip
-    return jnp.stack([
-        jnp.stack([cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr], -1),
-        jnp.stack([sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr], -1),
-        jnp.stack([-sp, cp * sr, cp * cr], -1),
+def rpy_matrix(r: Any, p: Any, y: Any, xp: Any = jnp) -> Any:
+    """R = Rz(y)·Ry(p)·Rx(r) (radians), (..., 3, 3) (``xp``: jnp, or np on the host)."""
+    cr, sr, cp, sp, cy, sy = (xp.cos(r), xp.sin(r), xp.cos(p), xp.sin(p), xp.cos(y),
+                              xp.sin(y))  # fmt: skip
+    return xp.stack([
+        xp.stack([cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr], -1),
+        xp.stack([sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr], -1),
+        xp.stack([-sp, cp * sr, cp * cr], -1),
     ], -2)  # fmt: skip
+
+
+def base_column(s: SerialSettings, mech: Mechanism) -> np.ndarray:
+    """The base column's top (3,): where the chain's first joint acts, in the base frame,
+    at the middle of the design box (``links: auto``'s capsules start there: the column
+    from the base origin to it is the base link, checked at set-up by
+    ``plancheck``). The origin itself when the first joint acts at the base."""
+    with contextlib.nullcontext() if jax.config.jax_enable_x64 else jax.enable_x64(True):
+        P = _origins(mech.model, jnp.asarray(_middle(mech, s)[None]),
+                     jnp.asarray(home(mech)[None]))  # fmt: skip
+    return np.asarray(P, np.float64)[0, 0, 0]
 
 
 def _entries(names: tuple[str, ...], rows: list[tuple[Any, ...]], angles: tuple[int, ...] = ()

@@ -31,7 +31,7 @@ from designopt.kinematics.conditioning import inv_cond
 from designopt.numerics import montecarlo as mc
 from designopt.problems import normalise
 from designopt.problems.base import Problem, Staged, na_worst, reads_indices
-from designopt.studies.serial import blocks, taskindex
+from designopt.studies.serial import blocks, camera, incisions, taskindex
 from designopt.studies.serial.mechanism import Mechanism, build
 from designopt.studies.serial.settings import IndexConstraint, SerialSettings
 from designopt.studies.serial.taskindex import design_full
@@ -72,20 +72,37 @@ def build_task_fn(mech: Mechanism, s: SerialSettings, dtype: Any) -> tuple[Any, 
     weights = s.weights()
     names, w = list(weights), list(weights.values())
 
+    gap = s.has_port_gap()
+    shared = s.arms is None or any(a.port is None for a in s.arms)  # one task.port
+    view = s.task is not None and s.task.camera is not None
+    wall = None if s.task is None or s.task.body_wall is None else s.task.body_wall.shape
+
     def fn(params, X, key):
         per = taskindex.per_target(mech, s, params, design_full(params, X, dtype), dtype)
-        return from_per(params, per)
+        return from_per(params, per, X)
 
     def reduce(params, X, key, chunks):
         return from_per(params, blocks.assembled(s, chunks, X.shape[0],
-                                                 params["target_p"].shape[0]))  # fmt: skip
+                                                 params["target_p"].shape[0]), X)  # fmt: skip
 
-    def from_per(params, per):
+    def from_per(params, per, X):
         est = taskindex.estimates_of(s, mech, per, params)
+        full = design_full(params, X, dtype)
+        if gap:  # exact: a function of the design alone (no samples, SE 0)
+            g = incisions.port_gap(params, full, wall, shared)
+            est["port_gap"] = (g, jnp.zeros_like(g))
+        seen = None
+        if view:  # the endoscope's view of the targets: no IK
+            seen = camera.seen(params, full, wall, params["target_p"]).astype(dtype)
+            G, run = taskindex.groups(s)
+            est["view_ok"] = taskindex.share(seen, taskindex.labels(seen.shape[-1], (G, run)), G)
         out = {}
         for k, (v, se) in est.items():
             out[k], out[k + "_se"] = v, se
-        for k, (n, of) in taskindex.counts_of(s, mech, per, params).items():
+        cnt = taskindex.counts_of(s, mech, per, params)
+        if seen is not None:  # a share of the targets: counted for the final stage's race
+            cnt["view_ok"] = (jnp.sum(seen, -1), seen.shape[-1])
+        for k, (n, of) in cnt.items():
             out[k + "_n"], out[k + "_of"] = n.astype(dtype), jnp.full_like(n, of, dtype)
         b = params["bounds"]
         f = normalise.weighted_sum([search_value(k, est[k][0], wk > 0)

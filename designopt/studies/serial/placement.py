@@ -66,6 +66,9 @@ def placement(s: SerialSettings, X: Any) -> dict[str, Any] | None:
             on = np.asarray(kw.project(wall.shape, kw.wall_params(wall, dt), jnp.asarray(raw, dt)),
                             np.float64)  # fmt: skip
         out |= {"ports": on, "port_points": raw, "port_shift": np.linalg.norm(on - raw, axis=-1)}
+    cam = None if s.task is None else s.task.camera
+    if cam is not None:
+        out["camera"] = camera_at(s, X)
     if s.arms is not None:
         out["bases"] = np.stack([np.concatenate([entries(s, a.base.xyz, X),
                                                  entries(s, a.base.rpy, X)], -1)
@@ -75,16 +78,40 @@ def placement(s: SerialSettings, X: Any) -> dict[str, Any] | None:
     u = length_unit(s)
     xyz = [f"{c} [{u}]" for c in "xyz"]
     cols = {"ports": xyz, "port_points": xyz, "port_shift": [f"moved [{u}]"],
-            "bases": xyz + [f"{c} [deg]" for c in ("roll", "pitch", "yaw")]}  # fmt: skip
+            "bases": xyz + [f"{c} [deg]" for c in ("roll", "pitch", "yaw")],
+            "camera": [f"port {c} [{u}]" for c in "xyz"] + [f"tip {c} [{u}]" for c in "xyz"]}  # fmt: skip
     titles = {"ports": "port: the incision point on the body wall", "port_points":
               "the design's port point (before projection)", "port_shift":
-              "port moved by the projection", "bases": "base pose"}  # fmt: skip
+              "port moved by the projection", "bases": "base pose",
+              "camera": "the endoscope: its incision point and its tip"}  # fmt: skip
     wall = None if s.task is None or s.task.body_wall is None else s.task.body_wall.shape
     if wall is None:  # no projection: the design's point is the port
         titles["ports"] = "port: the incision point"
     return out | {"attrs": {"length_unit": u, "wall": wall,
                             "columns": {k: cols[k] for k in out},
                             "titles": {k: titles[k] for k in out}}}  # fmt: skip
+
+
+def camera_at(s: SerialSettings, X: Any) -> Any:
+    """The endoscope of designs ``X`` (n, D): (n, 6), its incision point (x, y, z) and
+    its tip (``camera.pose``: the same function the index reads)."""
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    from designopt.kinematics import wall as kw
+    from designopt.studies.serial import camera
+
+    dt = jnp.float64 if jax.config.jax_enable_x64 else jnp.float32
+    X = np.atleast_2d(np.asarray(X, np.float64))
+    fixed = np.broadcast_to(np.asarray([s.fixed[k] for k in s.fixed], np.float64),
+                            (len(X), len(s.fixed)))  # fmt: skip
+    full = jnp.asarray(np.concatenate([X, fixed], 1), dt)  # a port's columns are lengths
+    wall = s.task.body_wall  # type: ignore[union-attr]
+    params = camera.camera_params(s, dt) | ({} if wall is None else
+                                            {"scene_wall": kw.wall_params(wall, dt)})  # fmt: skip
+    inc, tip, _ = camera.pose(params, full, None if wall is None else wall.shape)
+    return np.concatenate([np.asarray(inc, np.float64), np.asarray(tip, np.float64)], -1)
 
 
 def ports_of(s: SerialSettings, k: int, designs: list[dict[str, float] | None]) -> Any:

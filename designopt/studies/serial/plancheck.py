@@ -4,8 +4,8 @@ once, before any solve), and the lines said after a run and on ``eval``.
 
 Refused before any solve (:func:`check`, a ``ValueError`` naming the key):
 
-- a port point farther from ``task.body_wall`` than the wall's own size in some design
-  of the box (:func:`wall_size`; the port's entries at the corners of their box): a
+- a port point (an arm's or the camera's) farther from ``task.body_wall`` than the
+  wall's own size in some design of the box (:func:`wall_size`; the port's entries at the corners of their box): a
   unit slip, said with the unit it looks like (``300`` in a chain in m: millimetres,
   write ``0.3``);
 - an ``inside: true`` obstacle that lies entirely outside the body wall;
@@ -13,7 +13,9 @@ Refused before any solve (:func:`check`, a ``ValueError`` naming the key):
   obstacles);
 - an arm's base inside the body wall (an ellipsoid or a mesh) or inside an ``inside``
   obstacle in some design of the box (the middle, the corners of the box of the
-  variables its ``xyz`` names, and that box's points nearest each solid).
+  variables its ``xyz`` names, and that box's points nearest each solid), or its base
+  column (from the base to where the first joint acts: the base link, which
+  ``links: auto``'s capsules leave out) passing through one.
 
 Said after a run and on ``eval`` (:func:`warnings`): incision points closer than
 ``task.port_gap`` (:func:`port_gap`), and the share of the task region's targets that
@@ -34,6 +36,8 @@ from typing import Any
 import numpy as np
 
 from designopt.kinematics import task as tk
+from designopt.kinematics.task import region_center_radius
+from designopt.studies.serial import bodies
 from designopt.studies.serial.placement import entry_range, ports_of
 from designopt.studies.serial.settings import SerialSettings, entry_value, length_unit
 
@@ -132,25 +136,6 @@ def wall_size(wall: Any, region: Any = None) -> tuple[float, str]:
     h = abs(float(wall_distance(wall, c[None])[0]))
     return HALFSPACE_FACTOR * (r + h), (f"{HALFSPACE_FACTOR:g} × (the task region's radius + "
                                         "its distance from the plane)")  # fmt: skip
-
-
-def region_center_radius(region: Any) -> tuple[np.ndarray, float]:
-    """The centre and radius of a ball that holds the task region."""
-    if isinstance(region, tk.Box):
-        return np.asarray(region.center, np.float64), float(np.linalg.norm(region.size)) / 2
-    if isinstance(region, tk.Ball):
-        return np.asarray(region.center, np.float64), float(region.radius)
-    if isinstance(region, tk.Cylinder):
-        return np.asarray(region.center, np.float64), math.hypot(region.radius,
-                                                                 region.height / 2)  # fmt: skip
-    if isinstance(region, tk.Cone):
-        a = np.asarray(region.axis, np.float64) / np.linalg.norm(region.axis)
-        d0, d1 = region.depth
-        c = np.asarray(region.apex, np.float64) + a * (d0 + d1) / 2
-        return c, math.hypot((d1 - d0) / 2, d1 * math.tan(math.radians(region.half_angle)))
-    p = np.asarray(region.xyz(), np.float64)
-    lo, hi = p.min(0), p.max(0)
-    return (lo + hi) / 2, float(np.linalg.norm(hi - lo)) / 2
 
 
 def _segment_distance(P: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -344,7 +329,10 @@ def _check_port_units(s: SerialSettings) -> None:
     else:
         c, _ = region_center_radius(s.task.region)  # type: ignore[union-attr]
         bound = np.abs(c) + size
-    for k, entries in enumerate(s.ports()):
+    cam = s.task.camera  # type: ignore[union-attr]
+    rows = [(_port_key(s, k), p) for k, p in enumerate(s.ports())]
+    rows += [] if cam is None else [("task.camera.port", cam.port)]
+    for key, entries in rows:
         if entries is None:
             continue
         corners = _corners(s, entries)
@@ -352,7 +340,6 @@ def _check_port_units(s: SerialSettings) -> None:
         j = int(np.argmax(d))
         if d[j] <= size:
             continue
-        key = _port_key(s, k)
         frm = "the task region's centre" if wall.shape == "halfspace" else "task.body_wall"
         some = " in some designs of the box" if len(corners) > 1 else ""
         where = (f"the port {_fmt(corners[j])} lies {d[j]:.4g} {u} from {frm}{some}, "
@@ -476,9 +463,10 @@ def _check_bases(s: SerialSettings) -> None:
     if not solids:
         return
     u = length_unit(s)
-    rows = [(f"arms.{k}.base", a.base.xyz) for k, a in enumerate(s.arms)] if s.arms \
-        else [(None, (0.0, 0.0, 0.0))]  # fmt: skip
-    for arm_key, xyz in rows:
+    rows = [(f"arms.{k}.base", a.base.xyz, a.base.rpy) for k, a in enumerate(s.arms)] \
+        if s.arms else [(None, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))]  # fmt: skip
+    top = _column_top(s)
+    for arm_key, xyz, rpy in rows:
         var = [v.removeprefix("-") if isinstance(v, str) and v.removeprefix("-") in s.variables
                else None for v in xyz]  # fmt: skip
         named = sorted({n for n in var if n is not None})
@@ -495,6 +483,26 @@ def _check_bases(s: SerialSettings) -> None:
                                                for i, n in enumerate(var) if n is not None})  # fmt: skip
             P = np.asarray([[entry_value(s, v, d) for v in xyz] for d in tried], np.float64)
             inside = sd(P) < 0
+            if not np.any(inside) and top is not None:
+                R = np.radians([[entry_value(s, v, d) for v in rpy] for d in tried])
+                R = bodies.rpy_matrix(R[:, 0], R[:, 1], R[:, 2], np)  # (K, 3, 3)
+                f = np.linspace(0.0, 1.0, CAPSULE_POINTS)
+                col = P[:, None] + f[None, :, None] * (R @ top)[:, None]  # (K, T, 3)
+                through = (sd(col.reshape(-1, 3)) < 0).reshape(col.shape[:2])
+                if np.any(through):
+                    j = int(np.argmax(through.any(1)))
+                    c = col[j, int(np.argmax(through[j]))]
+                    at = ", ".join(f"{n} = {tried[j][n]:.4g}" for n in named)
+                    every = "in every design of the box" if np.all(through.any(1)) else \
+                        f"in some designs of the box (e.g. {at})"  # fmt: skip
+                    fix = f"narrow the box of {', '.join(named)}" if named and not \
+                        np.all(through.any(1)) else "move the base"  # fmt: skip
+                    raise ValueError(
+                        f"{arm_key or solid_key}: the arm's base column (from the base at "
+                        f"{_fmt(P[j])} {u} to its first joint, {np.linalg.norm(top):.4g} {u} "
+                        f"long) passes through {what} at {_fmt(c)} {u} {every}; a robot "
+                        f"stands outside the patient: {fix}"
+                    )
             if not np.any(inside):
                 continue
             j = int(np.argmax(inside))
@@ -509,6 +517,15 @@ def _check_bases(s: SerialSettings) -> None:
                 f"{key}: {whose} stands inside {what} {every}: at {_fmt(P[j])} {u}; a "
                 f"robot's base stands outside the patient: {fix}"
             )
+
+
+def _column_top(s: SerialSettings) -> np.ndarray | None:
+    """Where the chain's first joint acts in the base frame (``bodies.base_column``),
+    None when it acts at the base (no column)."""
+    from designopt.studies.serial.mechanism import build
+
+    top = bodies.base_column(s, build(s))
+    return None if float(np.linalg.norm(top)) <= 1e-12 else top
 
 
 # ------------------------------------------------------------------ after a run
@@ -549,6 +566,22 @@ def incisions(s: SerialSettings, final: Mapping[str, Any]) -> np.ndarray | None:
     return np.stack([ports_of(s, k, [design])[0] for k in range(len(ports))])
 
 
+def camera_incision(s: SerialSettings, final: Mapping[str, Any]) -> np.ndarray | None:
+    """The camera's incision point (3,) of the design ``final`` holds: its ``camera``
+    (the final record's placement), else computed from its design ``x``; None without a
+    camera or a design."""
+    if s.task is None or s.task.camera is None:
+        return None
+    if "camera" in final:
+        return np.asarray(final["camera"], np.float64).reshape(-1)[:3]
+    x = final.get("x")
+    if x is None or np.asarray(x).size != len(s.variables):
+        return None
+    from designopt.studies.serial.placement import camera_at
+
+    return camera_at(s, np.asarray(x, np.float64).reshape(1, -1))[0, :3]
+
+
 def warnings(s: SerialSettings, final: Mapping[str, Any]) -> list[str]:
     """Lines for a run's final design (and each design ``eval`` scores): incision points
     closer than :func:`port_gap`, and the share of the task region's targets inside each
@@ -559,11 +592,20 @@ def warnings(s: SerialSettings, final: Mapping[str, Any]) -> list[str]:
     u = length_unit(s)
     g = port_gap(s)
     p = incisions(s, final) if g is not None else None
+    if p is not None and (s.arms is None or any(a.port is None for a in s.arms)):
+        p = p[:1]  # one task.port, which the arms share
+    names = [] if p is None else [f"arm {k}" if s.arms is not None else "the port"
+                                  for k in range(len(p))]  # fmt: skip
+    cam = None if g is None else camera_incision(s, final)
+    if cam is not None:  # the endoscope's incision point
+        p = cam[None] if p is None else np.concatenate([p, cam[None]])
+        names.append("the camera")
     if p is not None and len(p) > 1:
         for i, j in itertools.combinations(range(len(p)), 2):
             d = float(np.linalg.norm(p[i] - p[j]))
             if d < g:  # type: ignore[operator]
-                who = f"arms {i} and {j}" if s.arms is not None else f"ports {i} and {j}"
+                arms = names[i].startswith("arm ") and names[j].startswith("arm ")
+                who = f"arms {i} and {j}" if arms else f"{names[i]} and {names[j]}"
                 out.append(f"task.port_gap: the incision points of {who} are {d:.3g} {u} "
                            f"apart, closer than {g:.3g} {u}: the trocars and the instruments "
                            "crowd each other (keep ports at least about 5 cm apart)")  # fmt: skip

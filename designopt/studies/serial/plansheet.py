@@ -6,7 +6,8 @@ the anatomy (the obstacles ``inside`` the patient) and the task region, each inc
 point (the port on the body wall, as the archive holds it: ``final/ports``, or one
 front design's ``front/ports``) marked and labelled with its coordinates, the arms'
 bases (an arrow at the view's edge where a base lies outside it: the view is zoomed on
-the patient), a dimension line between every pair of incisions (their distance in 3-D)
+the patient), the camera's incision point ``C`` and its scope to the tip
+(``task.camera``), a dimension line between every pair of incisions (their distance in 3-D)
 and the lines from the incisions to the task region's centre with the angle between
 them. Under the drawing a table: each arm's incision point, how far the projection
 onto the wall moved it, its base; then the distances, the instruments' angle as the
@@ -38,6 +39,7 @@ from designopt.studies.serial.settings import SerialSettings, length_unit
 SKIN = "#fde0d2"  # the body wall's fill (opaque: a mesh's triangles do not add up)
 SKIN_EDGE = "#d6604d"
 LINE = "0.25"  # the lines from the incisions to the task's centre
+CAMERA = "#238b45"  # the camera port and the scope
 FONT = 9.0
 VIEW_W, VIEW_H = 5.3, 5.0  # inches: each view's box
 
@@ -51,7 +53,8 @@ class Plan:
     [(i, j, |p_i − p_j|)], ``line_angle`` the angle (deg) between the lines from
     incisions 0 and 1 to the region's centre (None: one port, or no region),
     ``angle`` the index ``instrument_angle`` (value, SE) in deg (None where not
-    archived), ``band`` ``task.instrument_angle``, ``rows`` more (label, text) lines."""
+    archived), ``band`` ``task.instrument_angle``, ``rows`` more (label, text) lines,
+    ``camera`` the endoscope's incision point and tip (6,) or None."""
 
     unit: str
     shown: str
@@ -65,6 +68,7 @@ class Plan:
     angle: tuple[float, float | None] | None = None
     band: tuple[float, float] | None = None
     rows: list[str] = field(default_factory=list)
+    camera: np.ndarray | None = None  # (6,): the endoscope's incision point and its tip
 
 
 def display_unit(unit: str) -> tuple[str, float]:
@@ -121,6 +125,8 @@ def plan_of(s: SerialSettings, g: Mapping[str, Any],
     band = s.task.instrument_angle if s.task is not None else None
     plan = Plan(unit, shown, f, ports, pp, bases, dist, c, la, ang,
                 None if band is None else (float(band[0]), float(band[1])))  # fmt: skip
+    if "camera" in g:
+        plan.camera = np.asarray(g["camera"], np.float64).reshape(6)
     plan.rows = _rows(s, plan, ind, objectives)
     return plan
 
@@ -139,6 +145,13 @@ def _rows(s: SerialSettings, p: Plan, ind: Mapping[str, tuple[float, float | Non
     if p.distances:
         out.append("distance between incision points (3-D): " + ", ".join(
             f"P{i}–P{j} {d * f:.1f} {u}" for i, j, d in p.distances))  # fmt: skip
+    if p.camera is not None:
+        inc, tip = p.camera[:3], p.camera[3:]
+        near = ", ".join(f"P{k} {np.linalg.norm(inc - q) * f:.1f} {u}" for k, q in enumerate(p.ports))
+        seen = f"; it sees {_pm(ind['view_ok'])} of the targets (view_ok)" if "view_ok" in ind \
+            else ""  # fmt: skip
+        out.append(f"camera C: its tip at {_fmt(tip, f)} {u}, {np.linalg.norm(tip - inc) * f:.1f} "
+                   f"{u} past its incision; from C to {near}{seen}")  # fmt: skip
     ang = []
     if p.angle is not None:
         a, se = p.angle
@@ -294,9 +307,10 @@ def figure(s: SerialSettings, plan: Plan, title: str) -> Any:
     region = s.task.region if s.task is not None else None
     wall = s.task.body_wall if s.task is not None else None
     views = _views(ports)
-    P = _patient(s, ports)
+    cam = plan.camera
+    P = _patient(s, ports if cam is None else np.vstack([ports, cam.reshape(2, 3)]))
     rows = plan.rows
-    table_h = 0.26 * (A + 1) + 0.2
+    table_h = 0.26 * (A + 1 + (plan.camera is not None)) + 0.2
     text_h = 0.19 * sum(len(textwrap.wrap(r, 150)) for r in rows) + 0.15
     W, view_h, top = 12.5, VIEW_H, 0.75
     bottom = 0.25 + table_h + text_h + 0.5  # the tables, the legend
@@ -337,16 +351,26 @@ def figure(s: SerialSettings, plan: Plan, title: str) -> Any:
             _bases(ax, plan, E, p2, lo, hi, span, v == 0, P)
             kinds["base"] = Line2D([], [], color="0.3", lw=1.0, ls=":", marker="s", ms=6,
                                    label="arm: base to incision (arrow: base off the view)")  # fmt: skip
+        if cam is not None:  # the scope from its incision to its tip
+            c2 = cam.reshape(2, 3) @ E
+            ax.plot(*c2.T, color=CAMERA, lw=2.2, zorder=5.5, solid_capstyle="round")
+            ax.plot(*c2[1], marker=".", ms=7, color=CAMERA, ls="none", zorder=5.6)
+            ax.plot(*c2[0], marker="D", ms=8, mfc="white", mec=CAMERA, mew=1.8, ls="none",
+                    zorder=6)  # fmt: skip
+            kinds["camera"] = Line2D([], [], color=CAMERA, lw=2.2, marker="D", ms=7, mfc="white",
+                                     mec=CAMERA, label="camera port C and the scope to its tip")  # fmt: skip
         for k in range(A):
             ax.plot(*p2[k], marker="o", ms=9, mfc="white", mec="k", mew=1.8, ls="none", zorder=6)
         kinds["port"] = Line2D([], [], marker="o", ms=8, mfc="white", mec="k", mew=1.6, ls="none",
                                label="incision point (port on the body wall)")  # fmt: skip
         if v == 0:
-            _labels(ax, plan, p2)
+            _labels(ax, plan, p2, None if cam is None else cam[:3] @ E)
             _dimensions(ax, plan, p2, span)
         else:
-            for k in range(A):
-                ax.annotate(f"P{k}", p2[k], xytext=(0, 9), textcoords="offset points",
+            marks = [(f"P{k}", p2[k]) for k in range(A)]
+            marks += [] if cam is None else [("C", cam[:3] @ E)]
+            for name, q in marks:
+                ax.annotate(name, q, xytext=(0, 9), textcoords="offset points",
                             ha="center", va="bottom", fontsize=FONT, weight="bold", zorder=7)  # fmt: skip
         ax.set_xlabel(f"{names[0]} [{u}]", fontsize=FONT + 0.5)
         ax.set_ylabel(f"{names[1]} [{u}]", fontsize=FONT + 0.5)
@@ -373,19 +397,24 @@ def figure(s: SerialSettings, plan: Plan, title: str) -> Any:
     return fig
 
 
-def _labels(ax: Any, plan: Plan, p2: np.ndarray) -> None:
-    """Each incision's label (``P0 (x, y, z) mm``) in the strip above the patient, an
-    arrow to its mark; left to right as the incisions lie."""
-    A = len(p2)
-    order = np.argsort(p2[:, 0], kind="stable")
+def _labels(ax: Any, plan: Plan, p2: np.ndarray, c2: np.ndarray | None = None) -> None:
+    """Each incision's label (``P0 (x, y, z) mm``; the camera's ``C``, at ``c2``) in the
+    strip above the patient, an arrow to its mark; left to right as the incisions lie."""
+    items = [(f"P{k} {_fmt(plan.ports[k], plan.factor)} {plan.shown}", p2[k], f"incision-{k}")
+             for k in range(len(p2))]  # fmt: skip
+    if c2 is not None and plan.camera is not None:
+        items.append((f"C {_fmt(plan.camera[:3], plan.factor)} {plan.shown}", c2, "incision-camera"))
+    A = len(items)
+    order = np.argsort([q[0] for _, q, _ in items], kind="stable")
     per_row = 2 if A > 2 else A
     for slot, k in enumerate(order):
         col, row = slot % per_row, slot // per_row
         x = (col + 0.5) / per_row
         y = 0.975 - 0.075 * row
-        ax.annotate(f"P{k} {_fmt(plan.ports[k], plan.factor)} {plan.shown}", p2[k],
+        text, q, gid = items[k]
+        ax.annotate(text, q,
                     xytext=(x, y), textcoords="axes fraction", ha="center", va="top",
-                    fontsize=FONT + 0.5, weight="bold", zorder=8, gid=f"incision-{k}",
+                    fontsize=FONT + 0.5, weight="bold", zorder=8, gid=gid,
                     bbox={"boxstyle": "round,pad=0.25", "fc": "white", "ec": "0.3", "lw": 0.6},
                     arrowprops={"arrowstyle": "-", "color": "0.45", "lw": 0.7,
                                 "shrinkA": 0, "shrinkB": 5})  # fmt: skip
@@ -486,6 +515,8 @@ def _table(fig: Any, plan: Plan, W: float, H: float, top: float, height: float) 
         if plan.bases is not None:
             row += [_fmt(plan.bases[k][:3], f), _fmt(plan.bases[k][3:], 1.0)]
         cells.append(row)
+    if plan.camera is not None:  # the camera's row: its incision point (its tip: the rows)
+        cells.append(["C: camera", _fmt(plan.camera[:3], f)] + ["–"] * (len(head) - 2))
     ax = fig.add_axes((0.75 / W, (top - height) / H, (W - 1.5) / W, height / H))
     ax.set_axis_off()
     tab = ax.table(cellText=cells, colLabels=head, loc="upper center", cellLoc="center",
@@ -560,8 +591,8 @@ def front_sheet(rec: Any, picks: Sequence[tuple[str, int]]) -> tuple[Plan, str] 
     s: SerialSettings = rec.config.study
     name, i = next(((n, i) for n, i in picks if n == "knee"), picks[0])
     fr = rec.groups.get("front", {})
-    g = _placed(s, {k: np.asarray(fr[k])[i] for k in ("ports", "port_points", "bases") if k in fr},
-                rec.X[i])  # fmt: skip
+    g = _placed(s, {k: np.asarray(fr[k])[i] for k in ("ports", "port_points", "bases", "camera")
+                    if k in fr}, rec.X[i])  # fmt: skip
     ind = {}
     for k, v in rec.values.items():
         v = np.asarray(v)

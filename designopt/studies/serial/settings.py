@@ -502,6 +502,77 @@ Entry = float | str
 """A number, or the name of a design variable or fixed value."""
 
 
+class Camera(Section):
+    """``study.task.camera``: an endoscope through its own port, aimed at the task region
+    (docs/planning.md, "The endoscope"). Its tip lies on the line from the incision
+    point to ``aim``, at the depth that puts ``aim`` in the middle of the working band
+    (within ``insertion``); a target is seen when it lies in the field-of-view cone and
+    the band and the line of sight from the tip misses the anatomy (``view_ok``)."""
+
+    port: tuple[Entry, Entry, Entry] = Field(
+        description="[x, y, z]: the camera port (numbers, variable or fixed names, or "
+        "`-name`), placed on `task.body_wall` like the arms' ports.",
+    )
+    fov: float = Field(
+        70.0,
+        gt=0,
+        le=180,
+        allow_inf_nan=False,
+        description="The field of view's full angle (deg): a target is in view within half "
+        "of it from the scope's axis (a laparoscope's is typically 70-90 deg).",
+    )
+    band: tuple[float, float] = Field(
+        description="[near, far]: the working distances from the tip at which the image is "
+        "sharp and bright enough (length unit), 0 ≤ near < far.",
+    )
+    aim: tuple[float, float, float] | None = Field(
+        None,
+        description="The point the scope looks at (length unit); unset: the task region's "
+        "centre.",
+    )
+    insertion: tuple[float, float] | None = Field(
+        None,
+        description="[d0, d1]: the tip's depth past the port (length unit; d0 = d1 holds it at "
+        "one depth); unset: [0, ∞).",
+    )
+
+    _port_numbers = field_validator("port", mode="before")(
+        classmethod(lambda cls, v: _number_or_name(v))
+    )
+
+    @field_validator("port")
+    @classmethod
+    def _port(cls, v: Any) -> Any:
+        bad = validation.first_bad([x for x in v if not isinstance(x, str)])
+        if bad is not None:
+            raise ValueError(bad[1])
+        return v
+
+    @field_validator("band")
+    @classmethod
+    def _band(cls, v: tuple[float, float]) -> tuple[float, float]:
+        if not (math.isfinite(v[0]) and math.isfinite(v[1]) and 0 <= v[0] < v[1]):
+            raise ValueError(f"needs 0 ≤ near < far (lengths), got {list(v)}")
+        return v
+
+    @field_validator("insertion")
+    @classmethod
+    def _insertion(cls, v: tuple[float, float] | None) -> tuple[float, float] | None:
+        if v is not None and not (math.isfinite(v[0]) and math.isfinite(v[1])
+                                  and 0 <= v[0] <= v[1]):  # fmt: skip
+            raise ValueError(f"needs 0 ≤ d0 ≤ d1 (lengths; d0 = d1: a fixed depth), got {list(v)}")
+        return v
+
+    @field_validator("aim")
+    @classmethod
+    def _aim(cls, v: tuple[float, float, float] | None) -> tuple[float, float, float] | None:
+        if v is not None:
+            bad = validation.first_bad(list(v))
+            if bad is not None:
+                raise ValueError(bad[1])
+        return v
+
+
 class SerialTask(Task):
     """``study.task``: the region, the optional tool-axis cone, the port (numbers, or the
     names of design variables or fixed values, or minus one), the body wall the ports lie
@@ -522,6 +593,11 @@ class SerialTask(Task):
         None,
         description="[lo, hi] (deg): the band of the angle between arms 0 and 1's instruments that "
         "`instrument_ok` counts.",
+    )
+    camera: Camera | None = Field(
+        None,
+        description="An endoscope through its own port, `{port, band, fov, aim, insertion}`: "
+        "adds the index `view_ok`, the share of targets it sees (docs/planning.md).",
     )
     ik: TaskIK = Field(TaskIK(), description="The batched IK that solves every target.")
     replications: int = Field(
@@ -867,20 +943,25 @@ class SerialSettings(StudySettings):
             for kind, row in (("length", a.base.xyz), ("angle", a.base.rpy),
                               ("length", a.port or ())):  # fmt: skip
                 used |= {v.removeprefix("-"): kind for v in row if isinstance(v, str)}
-        for i, v in enumerate(self.task.port or () if self.task is not None else ()):
-            if not isinstance(v, str):
-                continue
-            v = v.removeprefix("-")
-            if v not in known:
-                raise ValueError(f"task.port.{i}: '{v}' is neither a design variable (give it "
-                                 f"bounds under variables) nor a fixed value (variables: "
-                                 f"{sorted(self.variables)}, fixed: {sorted(self.fixed)})")  # fmt: skip
-            if used.setdefault(v, "length") != "length":
-                raise ValueError(f"task.port.{i}: '{v}' is used as an angle and as a length")
+        cam = None if self.task is None else self.task.camera
+        rows = [("task.port", self.task.port or () if self.task is not None else ()),
+                ("task.camera.port", cam.port if cam is not None else ())]  # fmt: skip
+        for where, row in rows:
+            for i, v in enumerate(row):
+                if not isinstance(v, str):
+                    continue
+                v = v.removeprefix("-")
+                if v not in known:
+                    raise ValueError(f"{where}.{i}: '{v}' is neither a design variable (give "
+                                     f"it bounds under variables) nor a fixed value (variables: "
+                                     f"{sorted(self.variables)}, fixed: {sorted(self.fixed)})")  # fmt: skip
+                if used.setdefault(v, "length") != "length":
+                    raise ValueError(f"{where}.{i}: '{v}' is used as an angle and as a length")
         where = "chain.set entry" if isinstance(self.chain, UrdfChain) else \
             "DH entry of the chain"  # fmt: skip
         extra = " or arm base" if self.arms else ""
-        if any(isinstance(v, str) for p in self.ports() if p is not None for v in p):
+        if any(isinstance(v, str) for p in self.ports() if p is not None for v in p) or \
+                (cam is not None and any(isinstance(v, str) for v in cam.port)):  # fmt: skip
             extra += " or port"
         unused = sorted(set(self.variables) - set(used))
         if unused:
@@ -917,8 +998,28 @@ class SerialSettings(StudySettings):
                 out += tuple(f"reach_{k}" for k in range(len(self.arms))) + ARM_INDEX_NAMES
                 if self.task.instrument_angle is not None:  # type: ignore[union-attr]
                     out += ("instrument_ok",)
+                if self.has_port_gap():
+                    out += ("port_gap",)
+            if self.task.camera is not None:  # type: ignore[union-attr]
+                out += ("view_ok",)
             return out
         return tuple(k for k in INDEX_NAMES if k != "volume" or self.has_volume())
+
+    def incision_count(self) -> int:
+        """The distinct incision points under ``measure: task``: each arm's own port (one
+        for ``task.port``, which the arms share) and the camera's."""
+        if self.indices.measure != "task" or self.task is None:
+            return 0
+        n = 0
+        if self.ports()[0] is not None:
+            own = self.arms is not None and all(a.port is not None for a in self.arms)
+            n = len(self.arms) if own else 1  # type: ignore[arg-type]
+        return n + (self.task.camera is not None)
+
+    def has_port_gap(self) -> bool:
+        """Whether ``port_gap`` (the least distance between two incision points: the arms'
+        and the camera's) is an index: at least two of them (:meth:`incision_count`)."""
+        return self.incision_count() > 1
 
     def weights(self) -> dict[str, float]:
         names = self.index_names()
@@ -1079,5 +1180,7 @@ def units(s: SerialSettings) -> dict[str, str]:
                 "joint_margin": "-"}  # fmt: skip
         out |= {"clearance": u, "collision_free": "-"} if s.collision is not None else {}
         out |= {"instrument_angle": "deg", "instrument_ok": "-"} if s.arms is not None else {}
+        out |= {"port_gap": u} if s.has_port_gap() else {}
+        out |= {"view_ok": "-"} if s.task.camera is not None else {}  # type: ignore[union-attr]
         return out | {k: "-" for k in s.index_names() if k.startswith(("reach_", "arms_"))}
     return out | {"gci": "-", "gcsei": "-", "manipulability": man, "volume": vol}

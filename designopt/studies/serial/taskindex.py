@@ -161,7 +161,9 @@ def scene_params(s: SerialSettings, dtype: Any, mech: Mechanism | None = None) -
         from designopt.studies.serial.mechanism import build
 
         out |= bodies.geometry_params(bodies.geometry(s, mech or build(s)), dtype)
-    return out | bodies.port_params(s, dtype)
+    from designopt.studies.serial.camera import camera_params
+
+    return out | bodies.port_params(s, dtype) | camera_params(s, dtype)
 
 
 def counts_of(s: SerialSettings, mech: Mechanism, per: dict[str, jax.Array],
@@ -529,8 +531,8 @@ def values(per: dict[str, jax.Array], name: str) -> jax.Array:
     return jnp.mean(v, 0)
 
 
-def _share(x: jax.Array, lab: jax.Array | None = None, G: int = 1
-           ) -> tuple[jax.Array, jax.Array]:  # fmt: skip
+def share(x: jax.Array, lab: jax.Array | None = None, G: int = 1
+          ) -> tuple[jax.Array, jax.Array]:  # fmt: skip
     """(mean, SE) of 0/1 values (M, N) along N: the Agresti–Coull SE (sd/√N is 0 when
     every target (or none) counts, which claims too much; √(p̃(1 − p̃)/(N + 4)) with
     p̃ = (x + 2)/(N + 4) stays positive there and equals the usual SE to O(1/N)); with
@@ -559,7 +561,7 @@ def ratio(y: jax.Array, x: jax.Array, n_min: int = N_MIN, lab: jax.Array | None 
           G: int = 1) -> tuple[jax.Array, jax.Array]:  # fmt: skip
     """The ratio estimator Σy/Σx of 0/1 values y ≤ x along the last axis (the share of
     the counted items that pass) with its delta-method SE √(Σ(y − r x)² / (N (N − 1))) / x̄,
-    never below the Agresti–Coull SE of Σy of Σx (:func:`_share`: a share of 0 or 1 is
+    never below the Agresti–Coull SE of Σy of Σx (:func:`share`: a share of 0 or 1 is
     not exact); NaN and NaN where Σx < ``n_min`` (a ratio over a handful of items claims
     what the sample cannot show). With groups ``lab`` (N,) of G: the batch-means SE of
     the ratio (:func:`batch_se`) in place of the delta method's."""
@@ -688,9 +690,9 @@ def estimates(per: dict[str, jax.Array], key: jax.Array | None = None,
         v = values(per, k)
         out[k] = (jnp.mean(v, -1), mean_se(v, lab, G))
     if A == 1:
-        out["reach"] = _share(per["success"][0], lab, G)
+        out["reach"] = share(per["success"][0], lab, G)
     else:
-        out["reach"] = (out["reach"][0], jnp.maximum(jnp.nan_to_num(out["reach"][1], nan=0.0), _share(
+        out["reach"] = (out["reach"][0], jnp.maximum(jnp.nan_to_num(out["reach"][1], nan=0.0), share(
             jnp.moveaxis(per["success"], 0, 1).reshape(M, A * N))[1]))  # fmt: skip
     out["gci_q05"] = quantile(jnp.moveaxis(per["inv_k"], 0, 1).reshape(M, A * N), Q, lab_a, G)
     if "clearance" in per:
@@ -700,8 +702,8 @@ def estimates(per: dict[str, jax.Array], key: jax.Array | None = None,
         from designopt.kinematics.collision import arms_clearance
 
         for k in range(A):
-            out[f"reach_{k}"] = _share(per["success"][k], lab, G)
-        out["reach_all"] = _share(jnp.prod(per["success"], 0), lab, G)
+            out[f"reach_{k}"] = share(per["success"][k], lab, G)
+        out["reach_all"] = share(jnp.prod(per["success"], 0), lab, G)
         if key is None or "segments" not in per:
             return out  # arms_free needs the tuples' key and the kept capsules
         ok, seg = _tuples(per, key, lab)
@@ -712,14 +714,14 @@ def estimates(per: dict[str, jax.Array], key: jax.Array | None = None,
                 d = arms_clearance(seg[a], r, seg[b], r)
                 gap = d if gap is None else jnp.minimum(gap, d)
         free = (gap >= margin).astype(ok.dtype)  # type: ignore[operator]
-        out["arms_ok"] = _share(ok * free, lab, G)
+        out["arms_ok"] = share(ok * free, lab, G)
         out["arms_free"] = ratio(ok * free, ok, N_MIN, lab, G)
         if "axis" in per:
             ang = instrument_angles(per, key, lab)
             out["instrument_angle"] = ratio_mean(ang, ok, N_MIN, lab, G)
             if band is not None:
                 lo, hi = band[0].astype(ang.dtype), band[1].astype(ang.dtype)
-                out["instrument_ok"] = _share(ok * free * ((ang >= lo) & (ang <= hi)), lab, G)
+                out["instrument_ok"] = share(ok * free * ((ang >= lo) & (ang <= hi)), lab, G)
     return out
 
 
