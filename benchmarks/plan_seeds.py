@@ -16,6 +16,11 @@ covers every pooled design.
     python benchmarks/plan_seeds.py --seed 0 --seed 1 --seed 2 --check 8
     python benchmarks/plan_seeds.py --config my_case.yaml --json out.json
     python benchmarks/plan_seeds.py --keep runs/ --also other/run_1.h5   # a stricter pool
+    python benchmarks/plan_seeds.py --panda --keep panda/   # two 7-joint Pandas instead
+
+``--panda`` writes the planning case with each UR5 replaced by a Franka Panda (7 joints,
+Franka's kinematics with a 0.3 m straight instrument: benchmarks/se_honesty.py's URDF)
+into the ``--keep`` folder (else a temporary one) and checks that.
 """
 
 from __future__ import annotations
@@ -54,6 +59,28 @@ def answer(path: Path) -> tuple[list[str], np.ndarray, list[str], dict]:
     return names, X, ["front"] * len(X), senses
 
 
+def panda_case(folder: Path) -> Path:
+    """The shipped planning case with two Pandas (module docstring), written into
+    ``folder``: its URDF and config (the mesh files by absolute path)."""
+    import yaml
+    from se_honesty import panda_urdf
+
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "panda.urdf").write_text(panda_urdf())
+    raw = yaml.safe_load((ROOT / "configs/port_placement.yaml").read_text())
+    st = raw["study"]
+    st["chain"] = {"urdf": str(folder / "panda.urdf"), "base": "panda_link0",
+                   "tip": "instrument_tip"}  # fmt: skip
+    st["collision"]["radius"] = [0.06] * 6 + [0.004]  # the last: link 7 to the tip, the shaft
+    for ob in st["collision"]["obstacles"]:
+        if "file" in ob:
+            ob["file"] = str(ROOT / "configs" / ob["file"])
+    raw["output"] = str(folder / "panda_placement.h5")
+    path = folder / "panda_placement.yaml"
+    path.write_text(yaml.safe_dump(raw, sort_keys=False))
+    return path
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--config", default=str(ROOT / "configs/port_placement.yaml"))
@@ -65,8 +92,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--also", action="append", default=[],
                     help="another run's archive (repeat): its answer joins the pool as a "
                          "design to cover (a stricter check), but need not cover itself")
+    ap.add_argument("--panda", action="store_true",
+                    help="check the planning case with two Franka Pandas (module docstring)")
     a = ap.parse_args(argv)
     seeds = a.seed or [0, 1, 2]
+    if a.panda:
+        a.config = str(panda_case(Path(a.keep or tempfile.mkdtemp())))
+    for path in a.also:
+        if not Path(path).is_file():
+            print(f"plan_seeds: --also {path}: no such archive", file=sys.stderr)
+            return 2
     import designopt
 
     cfg0 = designopt.load_config(a.config)

@@ -277,13 +277,13 @@ def design_notes(job: Any, X: np.ndarray, vals: Mapping[str, np.ndarray],
     ``quoted.warnings`` once, naming the designs it concerns) and, for a task, each
     design's IK coverage figure read from the front's ``targets`` group ``tg`` (the
     study's hook on the re-scoring's targets; its IK solves every design in one batch,
-    ``quoted.coverages``): ``ik_better`` (n,), ``ik_better_n`` and ``coverage_lines``,
+    ``quoted.read_coverages``): ``ik_better`` (n,), ``ik_better_n`` and ``coverage_lines``,
     the lines of the design whose share is the largest (the worst; its warning, if any,
     is among the warnings)."""
     from designopt.app import quoted
 
     n = len(X)
-    covers = quoted.coverages(job, None, X, {}, tg) if tg is not None else [{} for _ in X]
+    covers = quoted.read_coverages(tg, n)
     per = [quoted.warnings(job, {k: np.asarray(v)[i] for k, v in vals.items()}, X[i],
                            covers[i]) for i in range(n)]  # fmt: skip
     out: dict[str, Any] = {}

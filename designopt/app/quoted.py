@@ -68,20 +68,25 @@ def coverage(job: Any, settings: Any, x: np.ndarray, keys: Mapping[str, Any]) ->
     return coverages(job, settings, np.asarray(x, np.float64)[None], keys)[0]
 
 
-def coverages(job: Any, settings: Any, X: np.ndarray, keys: Mapping[str, Any],
-              tg: Mapping[str, Any] | None = None) -> list[dict[str, Any]]:
+def coverages(job: Any, settings: Any, X: np.ndarray, keys: Mapping[str, Any]
+              ) -> list[dict[str, Any]]:  # fmt: skip
     """:func:`coverage` of designs X (P, D), all from one call of the study's ``targets``
-    hook (its IK solves every design in one batch), or read from ``tg``, that hook's
-    answer for X when the caller has it (a front's archived ``targets`` group)."""
+    hook (its IK solves every design in one batch)."""
     X = np.atleast_2d(np.asarray(X, np.float64))
-    if tg is None:
-        if job.study.targets is None:
-            return [{} for _ in X]
-        tg = job.study.targets(settings, X if len(X) > 1 else X[0], keys, job.dtype)
+    if job.study.targets is None:
+        return [{} for _ in X]
+    tg = job.study.targets(settings, X if len(X) > 1 else X[0], keys, job.dtype)
+    return read_coverages(tg, len(X))
+
+
+def read_coverages(tg: Mapping[str, Any] | None, n: int) -> list[dict[str, Any]]:
+    """The IK coverage figures of ``n`` designs as :func:`coverage` gives them, read from
+    the study's ``targets`` answer for them ``tg`` (a front's archived ``targets`` group:
+    no solve); {} for each where it holds none."""
     at = dict((tg or {}).get("attrs", {}))
     if "ik_better" not in at:
-        return [{} for _ in X]
-    if len(X) == 1 and "coverage_lines" not in at:  # one design's attrs
+        return [{} for _ in range(n)]
+    if n == 1 and "coverage_lines" not in at:  # one design's attrs
         out = {k: at[k] for k in ("ik_better", "ik_better_n")}
         for k in ("lines", "warnings"):
             v = at.get(k, [])
@@ -91,7 +96,7 @@ def coverages(job: Any, settings: Any, X: np.ndarray, keys: Mapping[str, Any],
     lines, warns = list(at["coverage_lines"]), list(at["coverage_warnings"])
     return [{"ik_better": float(share[i]), "ik_better_n": float(at["ik_better_n"]),
              "lines": [str(lines[i])], "warnings": [str(warns[i])] if warns[i] else []}
-            for i in range(len(X))]  # fmt: skip
+            for i in range(n)]  # fmt: skip
 
 
 def warnings(job: Any, values: Mapping[str, Any], x: Any = None,

@@ -65,7 +65,7 @@ The SE's own relative error is about 1/√(2(R − 1)): 27 % at 8."""
 
 def replications(s: SerialSettings) -> int:
     """R: ``study.task.replications`` (default :data:`REPLICATIONS`; no task: 1)."""
-    return REPLICATIONS if s.task is None else int(s.task.replications)
+    return 1 if s.task is None else int(s.task.replications)
 
 
 def groups(s: SerialSettings) -> tuple[int, int]:
