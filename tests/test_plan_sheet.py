@@ -26,6 +26,7 @@ PORTS = ROOT / "configs/port_placement.yaml"
 N = 32  # targets, as tests/test_planning_figures.py
 RUN = {"study.objective": {"arms_ok": -1.0, "gci": -1.0}, "study.indices.n_samples": N,
        "final.n_samples": N,
+       "study.task.camera": {"port": [0.1, 0.0, 0.3], "band": [0.04, 0.16]},  # an endoscope
        "optimizer": {"name": "ptpso", "n_particles": 2, "n_iters": 1, "n_runs": 1}}  # fmt: skip
 NUM = r"-?\d+\.\d"
 VEC = re.compile(rf"\(({NUM}), ({NUM}), ({NUM})\)")
@@ -107,7 +108,7 @@ def _gid(fig, prefix: str) -> dict[str, str]:
 def _check_numbers(fig, ports: np.ndarray) -> None:
     """The incision labels (and the table's incision column) print the ports in mm to
     0.1 mm; each dimension line prints |p_i − p_j|."""
-    lab = _gid(fig, "incision-")
+    lab = {k: v for k, v in _gid(fig, "incision-").items() if k != "incision-camera"}
     assert len(lab) == len(ports)
     for k, p in enumerate(ports):
         m = VEC.search(lab[f"incision-{k}"])
@@ -192,6 +193,34 @@ def test_the_sheet_and_the_html_report_carry_the_final_stages_verdict(run):
     assert '<section id="plan"' in html or 'id="plan"' in html
     assert "Port plan" in html and 'src="data:image/png;base64,iVBOR' in html
     assert "this layout in the final stage" in html
+
+
+def test_the_endoscope_is_on_the_sheet_in_the_figures_and_the_report(run):
+    """``task.camera``: the archive's final/camera (its incision point and tip, as
+    ``camera.pose`` places them), the sheet's C label and row, the robot figures' scope
+    and the HTML report's endoscope trace; ``view_ok`` among the indices."""
+    from designopt.app import reporting
+    from designopt.figures import robot
+
+    rec, paths, figs = run
+    cam = np.asarray(rec.groups["final"]["camera"], np.float64).reshape(6)
+    x = np.asarray(list(rec.x.values()), np.float64)
+    from designopt.studies.serial.placement import camera_at
+
+    np.testing.assert_allclose(cam, camera_at(rec.config.study, x[None])[0], atol=1e-12)
+    assert 0.0 <= rec.indices["view_ok"][0] <= 1.0 and rec.indices["view_ok"][1] > 0
+    fig = figs["plan"]
+    m = VEC.search(_gid(fig, "incision-camera")["incision-camera"])
+    np.testing.assert_allclose([float(v) for v in m.groups()], cam[:3] * 1000, atol=0.05 + 1e-9)
+    texts = [t.get_text() for t in drawn_texts(fig)]
+    assert "C: camera" in texts and any(t.startswith("camera C: its tip at") for t in texts)
+    np.testing.assert_array_equal(fig.designopt_plan.camera, cam)
+    assert any(p.name == "robot_final.png" or p.name.startswith("robot") for p in paths)
+    scopes = [ln for f in figs.values() for ax in f.axes for ln in ax.get_lines()
+              if ln.get_color() == robot.SCOPE]  # fmt: skip
+    assert scopes, "no figure draws the endoscope"
+    out = reporting.write_html(paths[0].parent.parent / "pp.h5", rec)
+    assert '"name": "endoscope"' in out.read_text() or '"name":"endoscope"' in out.read_text()
 
 
 def test_front_plan_is_the_knees_and_front_robots_reads(front):

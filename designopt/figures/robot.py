@@ -116,7 +116,8 @@ class Targets:
 class Scene:
     """What one panel shows: arms, the region (a ``designopt.kinematics.task`` region),
     the tool-axis cone, targets, ``marks`` [(point (3,), colour)] (e.g. the targets the
-    arms reach) and ``collisions`` [(point a, point b)]."""
+    arms reach), ``collisions`` [(point a, point b)], ``ports`` and ``scopes`` (each
+    endoscope's incision point and tip)."""
 
     arms: list[Arm]
     title: str = ""
@@ -127,6 +128,7 @@ class Scene:
     collisions: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
     obstacles: list[Any] = field(default_factory=list)  # collision obstacle models
     ports: list[np.ndarray] = field(default_factory=list)
+    scopes: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)  # (incision, tip)
 
 
 def thickness(arms: Sequence[Arm]) -> float:
@@ -245,6 +247,7 @@ ANATOMY = "#c51b7d"  # obstacles inside the patient (``inside: true``): apart fr
 ANATOMY_EDGE = "#4d0026"  # their outline
 WALL = "#f4a582"  # the body wall the ports lie on
 PORT = "#000000"
+SCOPE = "#238b45"  # an endoscope: its incision point and its shaft to the tip
 
 
 def is_wall(ob: Any) -> bool:
@@ -436,6 +439,7 @@ def scene_points(scene: Scene) -> np.ndarray:
     pts += [np.atleast_2d(p) for p, _ in scene.marks]
     pts += [np.atleast_2d(np.asarray(p, np.float64)) for p in scene.ports]
     pts += [np.stack(ab) for ab in scene.collisions]
+    pts += [np.stack(ab) for ab in scene.scopes]
     return np.vstack(pts) if pts else np.zeros((1, 3))
 
 
@@ -593,6 +597,9 @@ def legend_handles(scene: Scene) -> list:
                             label=label))  # fmt: skip
     if scene.ports:
         hs.append(Line2D([], [], color=PORT, marker="o", mfc="white", ls="none", label="port"))
+    if scene.scopes:
+        hs.append(Line2D([], [], color=SCOPE, marker="D", mfc="white", lw=2,
+                         label="endoscope: its port and its shaft to the tip"))  # fmt: skip
     return hs
 
 
@@ -639,6 +646,10 @@ def draw_3d(ax: Any, scene: Scene, unit: str, legend: bool = True,
     for pt in scene.ports:
         ax.scatter(*np.asarray(pt, np.float64)[:, None], marker="o", s=60, c="white",
                    edgecolors=PORT, lw=1.5, depthshade=False, zorder=6)  # fmt: skip
+    for a, b in scene.scopes:
+        ax.plot(*np.stack([a, b]).T, color=SCOPE, lw=2.2, zorder=5.5)
+        ax.scatter(*np.asarray(a, np.float64)[:, None], marker="D", s=50, c="white",
+                   edgecolors=SCOPE, lw=1.5, depthshade=False, zorder=6)  # fmt: skip
     t, mappable = scene.targets, None
     if t is not None:
         ok = np.asarray(t.ok, bool)
@@ -796,6 +807,10 @@ def draw_obstacles_2d(ax: Any, scene: Scene, E: np.ndarray) -> None:
         uv = np.asarray(pt, np.float64) @ E
         ax.plot(uv[0], uv[1], marker="o", ms=8, mfc="white", mec=PORT, mew=1.5, ls="none",
                 zorder=6)  # fmt: skip
+    for a, b in scene.scopes:
+        uv = np.stack([a, b]) @ E
+        ax.plot(*uv.T, color=SCOPE, lw=2.2, zorder=5.5)
+        ax.plot(*uv[0], marker="D", ms=7, mfc="white", mec=SCOPE, mew=1.5, ls="none", zorder=6)
 
 
 def clip_segment(a: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray

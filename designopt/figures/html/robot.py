@@ -27,6 +27,7 @@ from designopt.figures.robot import (
     ANATOMY_EDGE,
     COLLIDING,
     FRAME_COLOURS,
+    SCOPE,
     Arm,
     Scene,
     anatomy_lines,
@@ -88,7 +89,7 @@ class FrontView:
     labels, one robot (list of arms, each at its base in the world) per design at one
     pose per design (a representative tuple of targets, or the home pose), each design's
     hover text, reference arms (the original robot of a URDF chain), and what stays:
-    the task region, obstacles and ports; ``x_se``, ``y_se`` (n,) the objectives'
+    the task region, obstacles, ports and endoscopes; ``x_se``, ``y_se`` (n,) the objectives'
     standard errors (None: no bars; drawn ± 2 SE like the front's own plot)."""
 
     title: str
@@ -104,6 +105,7 @@ class FrontView:
     note: str = ""
     obstacles: list[Any] = field(default_factory=list)
     ports: list[np.ndarray] = field(default_factory=list)
+    scopes: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
     x_se: np.ndarray | None = None
     y_se: np.ndarray | None = None
 
@@ -252,6 +254,11 @@ def _static(scene: Scene, unit: str, box: tuple[np.ndarray, np.ndarray]) -> list
                     **_xyz(np.asarray(scene.ports, np.float64)), "name": "port",
                     "marker": {"size": 6, "color": "white",
                                "line": {"color": "black", "width": 3}}})  # fmt: skip
+    if scene.scopes:
+        out.append({"type": "scatter3d", "mode": "lines+markers",
+                    **_xyz(_segments([np.stack(ab) for ab in scene.scopes])), "name": "endoscope",
+                    "marker": {"size": 4, "color": SCOPE, "symbol": "diamond"},
+                    "line": {"color": SCOPE, "width": 6}})  # fmt: skip
     if scene.cone is not None:
         out.append({"type": "scatter3d", "mode": "lines", **_xyz(_segments(cone_rays(scene.cone))),
                     "name": f"tool z axes within {scene.cone.half_angle:g}°", "hoverinfo": "skip",
@@ -428,7 +435,7 @@ def front_plots(fv: FrontView, ids: _Ids) -> list[Plot]:
 def front_scene(fv: FrontView) -> Scene:
     """What stays beside a front's robots: the reference arms, region, obstacles, ports."""
     return Scene(arms=fv.shown_reference(), region=fv.region, obstacles=list(fv.obstacles),
-                 ports=list(fv.ports))  # fmt: skip
+                 ports=list(fv.ports), scopes=list(fv.scopes))  # fmt: skip
 
 
 def clipped(view: View | None = None, front: FrontView | None = None) -> str:

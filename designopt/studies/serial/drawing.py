@@ -73,8 +73,9 @@ def full(mech: Mechanism, x: Any) -> np.ndarray:
 
 
 def obstacles_and_ports(s: SerialSettings, design: Any = None) -> dict[str, Any]:
-    """A scene's ``obstacles`` (``study.collision``'s, then ``task.body_wall``) and
-    ``ports`` (each arm's, or ``task.port``) as :class:`Scene` keywords. ``design``: the variables (a mapping, or a
+    """A scene's ``obstacles`` (``study.collision``'s, then ``task.body_wall``),
+    ``ports`` (each arm's, or ``task.port``) and ``scopes`` (``task.camera``'s incision
+    point and tip) as :class:`Scene` keywords. ``design``: the variables (a mapping, or a
     sequence in ``s.variables`` order; None: the middle of the box) that place a port
     named by design variables (on ``task.body_wall`` when there is one)."""
     from designopt.studies.serial.reach import ports_of
@@ -82,13 +83,21 @@ def obstacles_and_ports(s: SerialSettings, design: Any = None) -> dict[str, Any]
     obs = list(s.collision.obstacles) if s.collision is not None else []
     if s.task is not None and s.task.body_wall is not None:
         obs.append(s.task.body_wall)  # drawn as the skin (``figures.robot.is_wall``)
-    if s.task is None or s.ports()[0] is None:
-        return {"obstacles": obs, "ports": []}
     if design is not None and not hasattr(design, "keys"):
         design = dict(zip(s.variables, np.asarray(design, np.float64).tolist(), strict=True))
+    scopes = []
+    if s.task is not None and s.task.camera is not None:  # the endoscope: incision, tip
+        from designopt.studies.serial.placement import camera_at
+
+        mid = {k: (float(lo) + float(hi)) / 2 for k, (lo, hi) in s.variables.items()}
+        d = mid if design is None else design
+        c = camera_at(s, np.asarray([[d[k] for k in s.variables]], np.float64))[0]
+        scopes = [(c[:3], c[3:])]
+    if s.task is None or s.ports()[0] is None:
+        return {"obstacles": obs, "ports": [], "scopes": scopes}
     ports = [ports_of(s, k, [design])[0] for k in range(len(s.ports()))]
     ports = [np.asarray(p) for p in dict.fromkeys(tuple(p.tolist()) for p in ports)]
-    return {"obstacles": obs, "ports": ports}
+    return {"obstacles": obs, "ports": ports, "scopes": scopes}
 
 
 ARM_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#17becf",

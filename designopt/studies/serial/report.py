@@ -164,13 +164,18 @@ def front_view(rec: Any):
 
 
 def _front_scene(s: SerialSettings, X: Any) -> dict[str, Any]:
-    """The obstacles and ports a front's view draws: ports that the design moves differ
-    from design to design, so every front design's ports are drawn then."""
+    """The obstacles, ports and endoscopes a front's view draws: ports that the design
+    moves differ from design to design, so every front design's are drawn then."""
     around = obstacles_and_ports(s)
-    if not s.designed_ports():
+    cam = s.task.camera if s.task is not None else None
+    moved = cam is not None and any(isinstance(v, str) for v in cam.port)
+    if not (s.designed_ports() or moved):
         return around
-    ports = [p for x in np.asarray(X, np.float64) for p in obstacles_and_ports(s, x)["ports"]]
-    return around | {"ports": [np.asarray(p) for p in dict.fromkeys(tuple(p) for p in ports)]}
+    each = [obstacles_and_ports(s, x) for x in np.asarray(X, np.float64)]
+    ports = [p for a in each for p in a["ports"]]
+    scopes = {(tuple(a), tuple(b)): (a, b) for e in each for a, b in e["scopes"]}
+    return around | {"ports": [np.asarray(p) for p in dict.fromkeys(tuple(p) for p in ports)],
+                     "scopes": list(scopes.values())}  # fmt: skip
 
 
 def report(rec: Any) -> dict[str, Any] | None:
