@@ -133,8 +133,9 @@ def _extra_lines(s: SerialSettings, fin: Any) -> list[str]:
     ports = None if "ports" not in fin else np.asarray(fin["ports"], np.float64).reshape(-1, 3)
     bases = None if "bases" not in fin else np.asarray(fin["bases"], np.float64).reshape(-1, 6)
     A = len(ports) if ports is not None else len(bases) if bases is not None else 0
-    what = " and ".join(w for w, v in (("ports", ports), ("bases", bases),
-                                       ("the camera", fin.get("camera"))) if v is not None)  # fmt: skip
+    words = [w for w, v in (("ports", ports), ("bases", bases), ("the camera", fin.get("camera")))
+             if v is not None]  # fmt: skip
+    what = " and ".join([", ".join(words[:-1]), words[-1]] if len(words) > 1 else words)
     head = f"  {what} in the world frame ({u}; angles in deg)" + (
         f"; a port is the incision point, the design's point projected onto the {wall} "
         "body wall" if ports is not None and wall is not None else "")  # fmt: skip
