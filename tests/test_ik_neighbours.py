@@ -110,14 +110,20 @@ def _targets():
     return p
 
 
+TWO = np.stack([PUMA, PUMA * [1, 1.2, 1, 1, 1, 0.9, 1]])
+"""Two designs, the PUMA and a variant: the whole-task solve of both tests below is one
+compiled program."""
+
+
 def test_chunks_of_a_run_give_the_values_of_one_piece():
-    X = jnp.asarray(np.stack([PUMA, PUMA * [1, 1.2, 1, 1, 1, 0.9, 1]]))
+    X = jnp.asarray(TWO)
     p = _targets()
     whole = _solver(OPTS)(X, jnp.asarray(p), 0)
     C = G
     n_chunks = -(-N // C)
     pp = np.concatenate([p, np.repeat(p[-1:], n_chunks * C - N, 0)])
-    parts = [_solver(OPTS)(X, jnp.asarray(pp[c * C:(c + 1) * C]), c * C) for c in range(n_chunks)]
+    parts = [_solver(OPTS)(X, jnp.asarray(pp[c * C:(c + 1) * C]), c * C)
+             for c in range(n_chunks)]  # fmt: skip
     q = np.concatenate([np.asarray(r.q) for r in parts], 1)[:, :N]
     ok = np.concatenate([np.asarray(r.success) for r in parts], 1)[:, :N]
     np.testing.assert_array_equal(ok, np.asarray(whole.success))
@@ -137,8 +143,9 @@ def test_the_pass_keeps_only_better_solutions():
     """With the same key, the neighbour pass changes a target's solution only to one of
     higher 1/k (the default score): every target the plain solve reaches is reached,
     none at a lower 1/k, and the pass found better ones at some targets; the kept
-    solutions are solutions (FK on the target)."""
-    X = jnp.asarray(PUMA[None])
+    solutions are solutions (FK on the target). (Both designs of the chunks' test: its
+    whole-task program with the pass.)"""
+    X = jnp.asarray(TWO)
     p = _targets()
     plain = _solver(OPTS._replace(neighbours=0))(X, jnp.asarray(p), 0)
     nb = _solver(OPTS)(X, jnp.asarray(p), 0)
@@ -147,8 +154,9 @@ def test_the_pass_keeps_only_better_solutions():
     v0, v1 = np.asarray(plain.inv_k), np.asarray(nb.inv_k)
     assert np.all(v1[ok0] >= v0[ok0] - 1e-12)
     assert np.sum(v1[ok0] > v0[ok0] + 1e-6) >= 1
-    _, pf = SIX_R.fk(jnp.asarray(PUMA), nb.q[0])
-    assert np.max(np.linalg.norm(np.asarray(pf) - p, axis=-1)[ok1[0]]) < 1e-8
+    for m, x in enumerate(TWO):
+        _, pf = SIX_R.fk(jnp.asarray(x), nb.q[m])
+        assert np.max(np.linalg.norm(np.asarray(pf) - p, axis=-1)[ok1[m]]) < 1e-8, m
     # the profile counts both passes' seeds: the second pass tried at most k more, at
     # the targets with a reached neighbour
     extra = np.asarray(nb.tries) - np.asarray(plain.tries)

@@ -33,8 +33,8 @@ def _cfg(name: str, n: int, chunk: int | None = None) -> dict:
     s["indices"]["n_samples"] = n
     if chunk is not None:
         s["indices"]["chunk"] = chunk
-    # 50 targets: no neighbour pass (its chunks hold whole runs of 16), and no climb (the
-    # staging, not the IK, is checked)
+    # no neighbour pass (its chunks hold whole runs of 16), and no climb (the staging, not
+    # the IK, is checked)
     s["task"]["ik"] = s["task"].get("ik", {}) | {"neighbours": 0, "climb": 0}
     if isinstance(s["chain"].get("urdf"), str):
         s["chain"]["urdf"] = str(path.parent / s["chain"]["urdf"])
@@ -46,28 +46,33 @@ def _problem(cfg: dict):
     return c, objective.problem(c.study, streams(c.seed), jnp.float64)
 
 
+N = 24
+"""Targets of the comparison: the size of tests/test_ports_designed.py's and
+tests/test_scene_inputs.py's PUMA scenes, so that a session compiles the PUMA's one-chunk
+program (2 designs, 24 targets) and its block program (chunks of 16) once for all three."""
+
 CASES = [  # (config, designs): a port and a wall, two arms with collisions
-    ("urdf_puma560_port.yaml", [[0.43, 0.43, 0.4], [0.5, 0.35, 0.3], [0.38, 0.45, 0.35]]),
-    ("two_arms_front.yaml", [[0.6, 0.45, 0.45], [0.5, 0.3, 0.55], [0.55, 0.4, 0.5]]),
+    ("urdf_puma560_port.yaml", [[0.43, 0.43, 0.4], [0.5, 0.35, 0.3]]),
+    ("two_arms_front.yaml", [[0.6, 0.45, 0.45], [0.5, 0.3, 0.55]]),
 ]
 
 
 @pytest.mark.parametrize("name, X", CASES)
 def test_the_staged_scores_equal_the_one_program_path(name, X):
-    """f, every index, SE and count through the block program (3 designs: one block,
-    padded; 50 targets in chunks of 16: four chunks, the last padded) equal ``fn``'s in
-    one traced program (targets in one chunk of 50): the same IK solutions (joints,
+    """f, every index, SE and count through the block program (2 designs: one block,
+    padded; 24 targets in chunks of 16: two chunks, the last padded) equal ``fn``'s in
+    one traced program (targets in one chunk of 24): the same IK solutions (joints,
     success) bit for bit, every value to 1e-12 relative."""
     X = np.asarray(X)
-    _, staged = _problem(_cfg(name, 50, chunk=16))
-    _, whole = _problem(_cfg(name, 50))
-    assert taskindex.chunk(validate(_cfg(name, 50, 16), "t").study) == 16
-    assert taskindex.chunk(validate(_cfg(name, 50), "t").study) == 50
-    c = validate(_cfg(name, 50, 16), "t")
+    _, staged = _problem(_cfg(name, N, chunk=16))
+    _, whole = _problem(_cfg(name, N))
+    assert taskindex.chunk(validate(_cfg(name, N, 16), "t").study) == 16
+    assert taskindex.chunk(validate(_cfg(name, N), "t").study) == N
+    c = validate(_cfg(name, N, 16), "t")
     Xb = np.concatenate([X, np.repeat(X[-1:], blocks.DESIGNS - len(X), 0)])
     per = blocks.assembled(c.study, [{k: np.asarray(v) for k, v in ch.items()}
                                      for ch in staged.staged.values(staged.params, Xb)],
-                           blocks.DESIGNS, 50, np)  # fmt: skip
+                           blocks.DESIGNS, N, np)  # fmt: skip
     mech = blocks.program(c.study, jnp.float64)[0]
     ref_per = jax.jit(lambda p, X: taskindex.per_target(
         mech, c.study, whole.params, taskindex.design_full(p, X, jnp.float64), jnp.float64)
@@ -96,10 +101,11 @@ def test_the_staged_scores_equal_the_one_program_path(name, X):
 def test_one_block_program_serves_every_phase(tmp_path):
     """A front run of two arms (the search on 32 targets, the front's re-scoring on 96,
     then a figure's solution of a front design) compiles the IK once: one block program
-    (32 targets a chunk, as ``indices.chunk`` says), one shape."""
+    (16 targets a chunk, as ``indices.chunk`` says: the block program of the two arms'
+    case above), one shape."""
     from designopt import api
 
-    cfg = _cfg("two_arms_front.yaml", 32, chunk=32)
+    cfg = _cfg("two_arms_front.yaml", 32, chunk=16)
     cfg["optimizer"] |= {"n_particles": 8, "n_iters": 2}
     cfg["optimizer"].pop("fidelity")  # (a cheaper search IK is another program by design)
     cfg["front"] = {"n_samples": 96}
@@ -120,11 +126,12 @@ def test_one_block_program_serves_every_phase(tmp_path):
 def test_a_warm_run_loads_the_exported_block_program(tmp_path, monkeypatch):
     """With a compilation cache folder the block program is kept as exported StableHLO
     (``core.exported``): a second process (here: the in-memory table cleared) loads it
-    instead of tracing the IK again, and gives the same values bit for bit."""
+    instead of tracing the IK again, and gives the same values bit for bit. (The PUMA's
+    block program of the comparison above: XLA's compile is the cache's hit.)"""
     from designopt.core import exported
 
     monkeypatch.setattr(exported, "folder", lambda: tmp_path)  # the cache folder
-    c, pr = _problem(_cfg("urdf_puma560_port.yaml", 20))
+    c, pr = _problem(_cfg("urdf_puma560_port.yaml", N, chunk=16))
     X = np.asarray([[0.43, 0.43, 0.4]] * blocks.DESIGNS)
     exported._CALLS.clear()
     first = pr.staged.values(pr.params, X)
