@@ -138,3 +138,64 @@ def test_the_camera_port_counts_in_port_gap_and_its_warning():
     lines = plancheck.warnings(s, {"x": X[0]})
     assert any(ln.startswith(f"task.port_gap: the incision points of arm 0 and the camera are "
                              f"{d:.3g} m apart") for ln in lines), lines  # fmt: skip
+
+
+def _segment_distance(p1, q1, p2, q2):
+    """Exact distance between segments p1–q1 and p2–q2 (..., 3), NumPy (the closest
+    points' parameters clamped to [0, 1], Ericson's construction)."""
+    d1, d2, r = q1 - p1, q2 - p2, p1 - p2
+    a, e = np.sum(d1 * d1, -1), np.sum(d2 * d2, -1)
+    b, c, f = np.sum(d1 * d2, -1), np.sum(d1 * r, -1), np.sum(d2 * r, -1)
+    den = a * e - b * b
+    s = np.where(den > 1e-300, np.clip((b * f - c * e) / np.where(den > 1e-300, den, 1), 0, 1), 0)
+    t = (b * s + f) / np.where(e > 1e-300, e, 1)
+    s = np.where(t < 0, np.clip(-c / np.where(a > 1e-300, a, 1), 0, 1),
+                 np.where(t > 1, np.clip((b - c) / np.where(a > 1e-300, a, 1), 0, 1), s))
+    t = np.clip(t, 0, 1)
+    return np.linalg.norm(p1 + d1 * s[..., None] - (p2 + d2 * t[..., None]), axis=-1)
+
+
+def test_the_scope_shaft_keeps_every_kept_solution_clear():
+    """``camera.shaft``: the scope from its tip 0.4 m back along its axis, between two
+    instrument ports 4 cm apart. With it, every reached target's kept solution (each arm's
+    capsules, the instrument included) keeps ``collision.margin`` from the scope (exact
+    segment distances in NumPy), and its clearance is at most that distance, equal to it
+    where the scope is the nearest thing; without it, at the same IK seeds, some kept
+    solutions meet the scope."""
+    from designopt.studies import streams
+    from designopt.studies.serial import blocks, bodies
+
+    def settings(shaft):
+        raw = _raw((0.04, 0.16), 70.0)
+        raw["study"]["indices"]["n_samples"] = 32  # tests/test_plan_sheet.py's targets
+        raw["study"]["collision"] = copy.deepcopy(PORTS["study"]["collision"])
+        raw["study"]["task"]["region"] = copy.deepcopy(PORTS["study"]["task"]["region"])
+        cam = raw["study"]["task"]["camera"]
+        cam.update(port=[0, 0.0, 0.3], aim=[0, 0, 0.03], insertion=[0, 0.2])
+        if shaft:
+            cam["shaft"] = {"length": 0.4, "radius": 0.005}
+        return validate(raw, "c.yaml", checks=False).study
+
+    X = np.array([[0.55, 0.0, 0.02, 0.0, 0.0]])  # the ports at x = ±0.02 m, y = 0
+    jax.config.update("jax_enable_x64", True)
+    out = {}
+    for shaft in (True, False):
+        s = settings(shaft)
+        sol = blocks.solutions(s, X, streams(0), jnp.float64)
+        with jax.enable_x64(True):
+            mech = build(s)
+            p = camera.camera_params(settings(True), jnp.float64) | {
+                "scene_wall": taskindex.scene_params(s, jnp.float64, mech)["scene_wall"]}
+            a, b, rs = (np.asarray(v) for v in camera.shaft(
+                p, jnp.asarray(np.concatenate([X, np.zeros((1, 0))], 1)), "ellipsoid"))  # fmt: skip
+        seg = sol["segments"][:, 0]  # (A, N, L, 2, 3), the kept solutions in the world
+        r = np.asarray(bodies.geometry(s, mech).radii)
+        d = _segment_distance(seg[..., 0, :], seg[..., 1, :], a[0], b[0]) - r - rs
+        ok = sol["success"][:, 0]  # (A, N)
+        out[shaft] = (ok, d.min(-1), sol["clearance"][:, 0], s.collision.margin)
+    ok, d, c, margin = out[True]
+    assert ok.sum() >= 8 and np.all(d[ok] >= margin - 1e-9)
+    assert np.all(c[ok] <= d[ok] + 1e-9)
+    assert np.any(np.abs(c[ok] - d[ok]) <= 1e-9)  # the scope is the nearest somewhere
+    ok0, d0, _, _ = out[False]
+    assert np.any(d0[ok0] < margin), "the scope would block no kept solution: no test"

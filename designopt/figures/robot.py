@@ -117,7 +117,8 @@ class Scene:
     """What one panel shows: arms, the region (a ``designopt.kinematics.task`` region),
     the tool-axis cone, targets, ``marks`` [(point (3,), colour)] (e.g. the targets the
     arms reach), ``collisions`` [(point a, point b)], ``ports`` and ``scopes`` (each
-    endoscope's incision point and tip)."""
+    endoscope's outer end, its incision point or its shaft's far end, and its tip; its
+    incision point is among the ``ports``)."""
 
     arms: list[Arm]
     title: str = ""
@@ -128,7 +129,7 @@ class Scene:
     collisions: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
     obstacles: list[Any] = field(default_factory=list)  # collision obstacle models
     ports: list[np.ndarray] = field(default_factory=list)
-    scopes: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)  # (incision, tip)
+    scopes: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)  # (outer end, tip)
 
 
 def thickness(arms: Sequence[Arm]) -> float:
@@ -598,8 +599,7 @@ def legend_handles(scene: Scene) -> list:
     if scene.ports:
         hs.append(Line2D([], [], color=PORT, marker="o", mfc="white", ls="none", label="port"))
     if scene.scopes:
-        hs.append(Line2D([], [], color=SCOPE, marker="D", mfc="white", lw=2,
-                         label="endoscope: its port and its shaft to the tip"))  # fmt: skip
+        hs.append(Line2D([], [], color=SCOPE, lw=2, label="endoscope (its port among the ports)"))
     return hs
 
 
@@ -648,8 +648,6 @@ def draw_3d(ax: Any, scene: Scene, unit: str, legend: bool = True,
                    edgecolors=PORT, lw=1.5, depthshade=False, zorder=6)  # fmt: skip
     for a, b in scene.scopes:
         ax.plot(*np.stack([a, b]).T, color=SCOPE, lw=2.2, zorder=5.5)
-        ax.scatter(*np.asarray(a, np.float64)[:, None], marker="D", s=50, c="white",
-                   edgecolors=SCOPE, lw=1.5, depthshade=False, zorder=6)  # fmt: skip
     t, mappable = scene.targets, None
     if t is not None:
         ok = np.asarray(t.ok, bool)
@@ -808,9 +806,7 @@ def draw_obstacles_2d(ax: Any, scene: Scene, E: np.ndarray) -> None:
         ax.plot(uv[0], uv[1], marker="o", ms=8, mfc="white", mec=PORT, mew=1.5, ls="none",
                 zorder=6)  # fmt: skip
     for a, b in scene.scopes:
-        uv = np.stack([a, b]) @ E
-        ax.plot(*uv.T, color=SCOPE, lw=2.2, zorder=5.5)
-        ax.plot(*uv[0], marker="D", ms=7, mfc="white", mec=SCOPE, mew=1.5, ls="none", zorder=6)
+        ax.plot(*(np.stack([a, b]) @ E).T, color=SCOPE, lw=2.2, zorder=5.5)
 
 
 def clip_segment(a: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray

@@ -255,9 +255,8 @@ def _static(scene: Scene, unit: str, box: tuple[np.ndarray, np.ndarray]) -> list
                     "marker": {"size": 6, "color": "white",
                                "line": {"color": "black", "width": 3}}})  # fmt: skip
     if scene.scopes:
-        out.append({"type": "scatter3d", "mode": "lines+markers",
+        out.append({"type": "scatter3d", "mode": "lines",
                     **_xyz(_segments([np.stack(ab) for ab in scene.scopes])), "name": "endoscope",
-                    "marker": {"size": 4, "color": SCOPE, "symbol": "diamond"},
                     "line": {"color": SCOPE, "width": 6}})  # fmt: skip
     if scene.cone is not None:
         out.append({"type": "scatter3d", "mode": "lines", **_xyz(_segments(cone_rays(scene.cone))),

@@ -13,6 +13,11 @@ clipped to ``insertion``: d = clip(|aim − port| − (near + far)/2, d0, d1). A
 - the line of sight, the segment from the tip to t, keeps a positive distance from every
   ``inside`` obstacle (the anatomy occludes; the instruments do not).
 
+With ``shaft`` the scope is also a capsule from its tip ``length`` back along its axis
+(through the port and out of the patient) that every arm's links and instrument keep
+``collision.margin`` from: the IK refuses a solution that meets it, as it refuses one
+that meets an obstacle (``taskindex.chunk_values``).
+
 ``view_ok`` is the share of the task's targets seen (Agresti–Coull SE, never below the
 replications' batch-means SE: ``taskindex``'s shares). It needs no IK: one (M, N) array
 operation per design block.
@@ -56,7 +61,9 @@ def camera_params(s: SerialSettings, dtype: Any) -> dict[str, Any]:
         "sign": jnp.asarray(sign, dtype), "aim": jnp.asarray(aim(s), dtype),
         "cos_half": jnp.asarray(math.cos(math.radians(cam.fov) / 2), dtype),
         "band": jnp.asarray(np.asarray(cam.band, np.float64), dtype),
-        "insertion": jnp.asarray(np.asarray(ins, np.float64), dtype)}}  # fmt: skip
+        "insertion": jnp.asarray(np.asarray(ins, np.float64), dtype)}
+        | ({} if cam.shaft is None else {"shaft": jnp.asarray(
+            np.asarray([cam.shaft.length, cam.shaft.radius], np.float64), dtype)})}  # fmt: skip
 
 
 def pose(params: dict[str, Any], full: jax.Array, wall: str | None
@@ -78,6 +85,15 @@ def pose(params: dict[str, Any], full: jax.Array, wall: str | None
     band, ins = sc["band"].astype(dt), sc["insertion"].astype(dt)
     d = jnp.clip(n - (band[0] + band[1]) / 2, ins[0], ins[1])
     return p, p + d * z, z
+
+
+def shaft(params: dict[str, Any], full: jax.Array, wall: str | None
+          ) -> tuple[jax.Array, jax.Array, jax.Array]:  # fmt: skip
+    """The scope's rigid shaft as a capsule for designs ``full`` (M, P): (tip (M, 3), the
+    far end ``length`` back along the axis (M, 3), radius ()) (``camera.shaft``)."""
+    _, tip, z = pose(params, full, wall)
+    sh = params["scene_camera"]["shaft"].astype(full.dtype)
+    return tip, tip - sh[0] * z, sh[1]
 
 
 def seen(params: dict[str, Any], full: jax.Array, wall: str | None, pt: jax.Array

@@ -74,8 +74,8 @@ def full(mech: Mechanism, x: Any) -> np.ndarray:
 
 def obstacles_and_ports(s: SerialSettings, design: Any = None) -> dict[str, Any]:
     """A scene's ``obstacles`` (``study.collision``'s, then ``task.body_wall``),
-    ``ports`` (each arm's, or ``task.port``) and ``scopes`` (``task.camera``'s incision
-    point and tip) as :class:`Scene` keywords. ``design``: the variables (a mapping, or a
+    ``ports`` (each arm's, or ``task.port``, and the camera's) and ``scopes`` (``task.camera``'s incision
+    point, or its shaft's far end, and its tip) as :class:`Scene` keywords. ``design``: the variables (a mapping, or a
     sequence in ``s.variables`` order; None: the middle of the box) that place a port
     named by design variables (on ``task.body_wall`` when there is one)."""
     from designopt.studies.serial.reach import ports_of
@@ -92,12 +92,19 @@ def obstacles_and_ports(s: SerialSettings, design: Any = None) -> dict[str, Any]
         mid = {k: (float(lo) + float(hi)) / 2 for k, (lo, hi) in s.variables.items()}
         d = mid if design is None else design
         c = camera_at(s, np.asarray([[d[k] for k in s.variables]], np.float64))[0]
-        scopes = [(c[:3], c[3:])]
+        sh = s.task.camera.shaft
+        ax = c[3:] - c[:3]
+        n = float(np.linalg.norm(ax))
+        if sh is not None and n > 0:  # the rigid shaft, out of the patient
+            scopes = [(c[3:] - sh.length * ax / n, c[3:])]
+        else:
+            scopes = [(c[:3], c[3:])]
+    cam = [np.asarray(c[:3])] if scopes else []  # the camera's incision: a port too
     if s.task is None or s.ports()[0] is None:
-        return {"obstacles": obs, "ports": [], "scopes": scopes}
+        return {"obstacles": obs, "ports": cam, "scopes": scopes}
     ports = [ports_of(s, k, [design])[0] for k in range(len(s.ports()))]
     ports = [np.asarray(p) for p in dict.fromkeys(tuple(p.tolist()) for p in ports)]
-    return {"obstacles": obs, "ports": ports, "scopes": scopes}
+    return {"obstacles": obs, "ports": ports + cam, "scopes": scopes}
 
 
 ARM_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#17becf",

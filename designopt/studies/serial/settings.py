@@ -502,6 +502,21 @@ Entry = float | str
 """A number, or the name of a design variable or fixed value."""
 
 
+class CameraShaft(Section):
+    """``study.task.camera.shaft``: the scope as a rigid rod from its tip back through its
+    port, a capsule every arm's links and instrument keep ``collision.margin`` from."""
+
+    length: float = Field(
+        gt=0,
+        allow_inf_nan=False,
+        description="The scope's rigid length from its tip back (length unit): the part "
+        "outside the port is where the instrument arms meet it.",
+    )
+    radius: float = Field(
+        ge=0, allow_inf_nan=False, description="The scope's radius (length unit)."
+    )
+
+
 class Camera(Section):
     """``study.task.camera``: an endoscope through its own port, aimed at the task region
     (docs/planning.md, "The endoscope"). Its tip lies on the line from the incision
@@ -534,6 +549,11 @@ class Camera(Section):
         None,
         description="[d0, d1]: the tip's depth past the port (length unit; d0 = d1 holds it at "
         "one depth); unset: [0, ∞).",
+    )
+    shaft: CameraShaft | None = Field(
+        None,
+        description="`{length, radius}`: the scope's rigid shaft from its tip back; the arms' "
+        "collision checks keep clear of it (needs `study.collision`). Unset: not checked.",
     )
 
     _port_numbers = field_validator("port", mode="before")(
@@ -865,6 +885,10 @@ class SerialSettings(StudySettings):
             if self.task is None:
                 raise ValueError("indices.measure: 'task' needs a study.task section (the "
                                  "region to reach; docs/task.md)")  # fmt: skip
+            cam = self.task.camera
+            if cam is not None and cam.shaft is not None and self.collision is None:
+                raise ValueError("task.camera.shaft: the arms keep clear of the scope in their "
+                                 "collision checks; give study.collision (the arms' capsules)")  # fmt: skip
             if ind.sampler != "uniform":
                 raise ValueError(f"indices.sampler: measure 'task' draws its targets "
                                  f"uniformly in the task region; '{ind.sampler}' is for the "

@@ -348,17 +348,31 @@ def chunk_values(mech: Mechanism, s: SerialSettings, params: dict[str, Any], ful
     sc = jnp.asarray([1.0 if r < 3 else ind.length_scale for r in rows], dtype)
     half = (hi - lo) / 2
 
+    scope = None  # the endoscope's shaft (camera.shaft): a capsule per design
+    if geo is not None and "scene_camera" in sc_p and "shaft" in sc_p["scene_camera"]:
+        from designopt.kinematics.collision import capsule_capsule
+        from designopt.studies.serial import camera
+
+        scope = camera.shaft(sc_p, full.astype(dtype), wall)
+
     def clearance(m, pt, q):  # the clearance of items: rows m of X (B,), targets pt (B, 3)
         seg = geo.items(mech.model, X[m], q)  # type: ignore[union-attr]  # (B, L, 2, 3)
         a = m // M
         if arms:  # arm a's capsules in the world frame
             seg = jnp.einsum("bij,blej->blei", Rb[a, m % M], seg) + tb[a, m % M][:, None, None]
         if port is None:
-            return bodies.obstacle_and_self(geo, obst, seg, None, None, None, gp), seg  # type: ignore[arg-type]
-        pa = port[a, m % M]  # (B, 3)
-        z = pt - pa
-        z = z / jnp.maximum(jnp.linalg.norm(z, axis=-1, keepdims=True), 1e-300)
-        return bodies.obstacle_and_self(geo, obst, seg, pa, z, inner, gp), seg  # type: ignore[arg-type]
+            c = bodies.obstacle_and_self(geo, obst, seg, None, None, None, gp)  # type: ignore[arg-type]
+        else:
+            pa = port[a, m % M]  # (B, 3)
+            z = pt - pa
+            z = z / jnp.maximum(jnp.linalg.norm(z, axis=-1, keepdims=True), 1e-300)
+            c = bodies.obstacle_and_self(geo, obst, seg, pa, z, inner, gp)  # type: ignore[arg-type]
+        if scope is not None:  # every capsule, the instrument inside the patient too
+            s0, s1, rs = scope
+            d = capsule_capsule(seg[..., 0, :], seg[..., 1, :], gp["radii"].astype(dtype),
+                                s0[m % M][:, None], s1[m % M][:, None], rs)  # type: ignore[index]  # fmt: skip
+            c = jnp.minimum(c, jnp.min(d, -1))
+        return c, seg
 
     # with a port, the tool axes point from the port to the targets: (A|1, M|1, C, 3, 3)
     # (a port no design variable moves is every design's: one set of frames)
@@ -749,6 +763,8 @@ def structure_key(s: SerialSettings) -> str:
                           else str(task["region"].get("shape")))  # fmt: skip
         task["port"] = _entry_names(task.get("port"))
         task["insertion"] = task.get("insertion") is not None
+        cam = task.get("camera")  # its numbers are inputs; only a shaft adds to the program
+        task["camera"] = None if cam is None else {"shaft": cam.get("shaft") is not None}
         w = task.get("body_wall")
         if w is not None:  # its kind (a mesh: and its triangles' count) shapes the program
             mesh = w.get("shape") == "mesh"
