@@ -99,6 +99,9 @@ def test_the_camera_port_is_a_design_variable_and_bad_input_is_one_line(tmp_path
         ("band", [0.1, 0.02], ["needs 0 ≤ near < far"]), ("band", [".nan", 0.1], ["band"]),
         ("insertion", [-1, 0.1], ["needs 0 ≤ d0 ≤ d1"]),
         ("port", ["cx", 0, 0.3], ["'cx' is neither a design variable"]),
+        ("shaft", {"length": 0, "radius": 0.005}, ["camera.shaft.length", "got 0"]),
+        ("shaft", {"length": 0.4, "radius": -1}, ["camera.shaft.radius", "got -1"]),
+        ("shaft", {"length": 0.4}, ["camera.shaft.radius", "missing"]),
     ]:  # fmt: skip
         bad = _raw((0.02, 0.1), 70.0)
         bad["study"]["task"]["camera"][key] = value
@@ -199,3 +202,13 @@ def test_the_scope_shaft_keeps_every_kept_solution_clear():
     assert np.any(np.abs(c[ok] - d[ok]) <= 1e-9)  # the scope is the nearest somewhere
     ok0, d0, _, _ = out[False]
     assert np.any(d0[ok0] < margin), "the scope would block no kept solution: no test"
+
+
+def test_a_shaft_without_collisions_is_one_line(tmp_path, capsys):
+    bad = _raw((0.02, 0.1), 70.0)
+    bad["study"]["task"]["camera"]["shaft"] = {"length": 0.4, "radius": 0.005}
+    bad["study"].pop("collision")
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text(yaml.safe_dump(bad))
+    _refused(capsys, ["run", cfg, "--dry-run", "--quiet"], "key 'study.task.camera.shaft'",
+             "give study.collision")  # fmt: skip
