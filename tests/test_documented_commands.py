@@ -462,6 +462,8 @@ SKIP: dict[str, str] = {
     "replicated SE's formula and a seeds check: tests/test_se_replications.py)",
     "python benchmarks/plan_seeds.py": BENCH + ": three planning runs and eight common "
     "seeds' scoring, minutes (the race itself: tests/test_verdict.py)",
+    "python benchmarks/plan_seeds.py --panda": BENCH + ": the same with two 7-joint Pandas, "
+    "minutes",
     "python benchmarks/mo_nsga2.py": BENCH + "; needs pymoo (.[bench])",
     "python benchmarks/mo_nsga2.py [--runs 11] [--repeat 3] [--problems …] [--float32] "
     "[--survival pruning|crowding]": BENCH + "; needs pymoo (.[bench])",
