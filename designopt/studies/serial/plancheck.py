@@ -488,7 +488,12 @@ def _check_bases(s: SerialSettings) -> None:
                 R = bodies.rpy_matrix(R[:, 0], R[:, 1], R[:, 2], np)  # (K, 3, 3)
                 f = np.linspace(0.0, 1.0, CAPSULE_POINTS)
                 col = P[:, None] + f[None, :, None] * (R @ top)[:, None]  # (K, T, 3)
-                through = (sd(col.reshape(-1, 3)) < 0).reshape(col.shape[:2])
+                flat = col.reshape(-1, 3)
+                near = _in_bounds(shape, flat)  # the rest is outside: no distance needed
+                through = np.zeros(len(flat), bool)
+                if near.any():
+                    through[near] = sd(flat[near]) < 0
+                through = through.reshape(col.shape[:2])
                 if np.any(through):
                     j = int(np.argmax(through.any(1)))
                     c = col[j, int(np.argmax(through[j]))]
@@ -517,6 +522,29 @@ def _check_bases(s: SerialSettings) -> None:
                 f"{key}: {whose} stands inside {what} {every}: at {_fmt(P[j])} {u}; a "
                 f"robot's base stands outside the patient: {fix}"
             )
+
+
+def _in_bounds(shape: Any, P: np.ndarray) -> np.ndarray:
+    """(K,) bool: the points P (K, 3) within a box that holds the solid ``shape`` (a
+    mesh's vertices' box, an ellipsoid's, a ball's, a capsule's; a box's bounding ball);
+    every point of a half-space or another shape."""
+    kind = shape.shape
+    if kind == "mesh":
+        V = _mesh_world(shape)[0]
+        lo, hi = V.min(0), V.max(0)
+    elif kind in ("ellipsoid", "ball", "box"):
+        c = np.asarray(shape.center, np.float64)
+        r = (np.asarray(shape.radii, np.float64) if kind == "ellipsoid" else
+             float(shape.radius) if kind == "ball" else
+             0.5 * float(np.linalg.norm(shape.size)))  # fmt: skip
+        lo, hi = c - r, c + r
+    elif kind == "capsule":
+        ab = np.stack([np.asarray(shape.a, np.float64), np.asarray(shape.b, np.float64)])
+        lo, hi = ab.min(0) - float(shape.radius), ab.max(0) + float(shape.radius)
+    else:
+        return np.ones(len(P), bool)
+    eps = 1e-9 * (1.0 + float(np.max(np.abs(hi - lo))))
+    return np.all((P >= lo - eps) & (P <= hi + eps), -1)
 
 
 def _column_top(s: SerialSettings) -> np.ndarray | None:
