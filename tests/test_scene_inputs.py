@@ -2,7 +2,7 @@
 structure): the program traced for one scene, fed another scene's params (the port, the
 insertion range, the obstacles, the task region's targets, the arms' bases moved; in the
 planning case the body wall under designed ports, the meshes' poses, the anatomy, the
-instruments' band and radius), compiles nothing new and gives that scene's own indices,
+instruments' band and radius, the endoscope's port, view and shaft), compiles nothing new and gives that scene's own indices,
 bit for bit."""
 
 from __future__ import annotations
@@ -60,7 +60,7 @@ def _arms(edit: bool) -> dict:
 
 def _planning(edit: bool) -> dict:
     """The planning case: designed ports on an ellipsoid wall, a mesh outside, a capsule
-    and a mesh inside, the instruments' band and radius."""
+    and a mesh inside, the instruments' band and radius, an endoscope with a shaft."""
     path = Path("configs/port_placement.yaml").resolve()
     with open(path) as f:
         cfg = yaml.safe_load(f)
@@ -70,6 +70,12 @@ def _planning(edit: bool) -> dict:
     for o in s["collision"]["obstacles"]:
         if o["shape"] == "mesh":
             o["file"] = str(path.parent / o["file"])
+    s["task"]["camera"] = {"port": ["px", 0.1, 0.3], "band": [0.04, 0.16], "fov": 70,
+                           "shaft": {"length": 0.4, "radius": 0.005}}  # an endoscope  # fmt: skip
+    if edit:  # the endoscope's every number: its port, aim, band, view, depth and shaft
+        s["task"]["camera"] = {"port": ["px", 0.12, 0.28], "band": [0.03, 0.12], "fov": 80,
+                               "aim": [0.0, 0.01, 0.04], "insertion": [0.02, 0.15],
+                               "shaft": {"length": 0.35, "radius": 0.006}}  # fmt: skip
     if edit:  # move the wall, the abdomen's mesh, the vessel, the organ; the band, the tool
         s["task"]["body_wall"]["center"] = [0.0, 0.01, 0.065]
         s["task"]["instrument_angle"] = [40, 80]

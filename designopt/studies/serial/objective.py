@@ -73,7 +73,7 @@ def build_task_fn(mech: Mechanism, s: SerialSettings, dtype: Any) -> tuple[Any, 
     names, w = list(weights), list(weights.values())
 
     gap = s.has_port_gap()
-    shared = s.arms is None or any(a.port is None for a in s.arms)  # one task.port
+    shared = s.shared_port()
     view = s.task is not None and s.task.camera is not None
     wall = None if s.task is None or s.task.body_wall is None else s.task.body_wall.shape
 

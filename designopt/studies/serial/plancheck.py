@@ -620,7 +620,7 @@ def warnings(s: SerialSettings, final: Mapping[str, Any]) -> list[str]:
     u = length_unit(s)
     g = port_gap(s)
     p = incisions(s, final) if g is not None else None
-    if p is not None and (s.arms is None or any(a.port is None for a in s.arms)):
+    if p is not None and s.shared_port():
         p = p[:1]  # one task.port, which the arms share
     names = [] if p is None else [f"arm {k}" if s.arms is not None else "the port"
                                   for k in range(len(p))]  # fmt: skip

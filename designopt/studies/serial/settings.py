@@ -502,6 +502,15 @@ Entry = float | str
 """A number, or the name of a design variable or fixed value."""
 
 
+def _finite_entries(v: Any) -> Any:
+    """A port's entries with every number finite and of a sane size (names are checked
+    by the study)."""
+    bad = validation.first_bad([x for x in v if not isinstance(x, str)])
+    if bad is not None:
+        raise ValueError(bad[1])
+    return v
+
+
 class CameraShaft(Section):
     """``study.task.camera.shaft``: the scope as a rigid rod from its tip back through its
     port, a capsule every arm's links and instrument keep ``collision.margin`` from."""
@@ -560,13 +569,7 @@ class Camera(Section):
         classmethod(lambda cls, v: _number_or_name(v))
     )
 
-    @field_validator("port")
-    @classmethod
-    def _port(cls, v: Any) -> Any:
-        bad = validation.first_bad([x for x in v if not isinstance(x, str)])
-        if bad is not None:
-            raise ValueError(bad[1])
-        return v
+    _port = field_validator("port")(classmethod(lambda cls, v: _finite_entries(v)))
 
     @field_validator("band")
     @classmethod
@@ -658,11 +661,7 @@ class SerialTask(Task):
     @field_validator("port")
     @classmethod
     def _port(cls, v: Any) -> Any:  # (overrides Task._port: names are checked by the study)
-        if v is not None:
-            bad = validation.first_bad([x for x in v if not isinstance(x, str)])
-            if bad is not None:
-                raise ValueError(bad[1])
-        return v
+        return v if v is None else _finite_entries(v)
 
 
 class Units(Section):
@@ -1036,9 +1035,13 @@ class SerialSettings(StudySettings):
             return 0
         n = 0
         if self.ports()[0] is not None:
-            own = self.arms is not None and all(a.port is not None for a in self.arms)
-            n = len(self.arms) if own else 1  # type: ignore[arg-type]
+            n = 1 if self.shared_port() else len(self.arms)  # type: ignore[arg-type]
         return n + (self.task.camera is not None)
+
+    def shared_port(self) -> bool:
+        """Whether every arm goes through ``task.port`` (one incision; also with one arm)
+        rather than each through its own ``arms.<k>.port``."""
+        return self.arms is None or any(a.port is None for a in self.arms)
 
     def has_port_gap(self) -> bool:
         """Whether ``port_gap`` (the least distance between two incision points: the arms'
