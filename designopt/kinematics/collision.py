@@ -346,9 +346,7 @@ class Collision(Section):
 
     @model_validator(mode="after")
     def _radius_rule(self) -> Collision:
-        if self.links == "auto" and self.radius is None:
-            raise ValueError("radius: links: auto needs the capsules' radius (one number, "
-                             "or one per link)")  # fmt: skip
+        # (links: auto without a radius: the study refuses it unless each arm gives its own)
         if self.links == "urdf" and self.radius is not None:
             raise ValueError("radius: under links: urdf the URDF's <collision> shapes give "
                              "the radii; remove radius (margin adds a safety distance)")  # fmt: skip

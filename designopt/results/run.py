@@ -38,7 +38,8 @@ def targets_csv_text(g: Mapping[str, Any]) -> str:
     target, each column headed with its unit: arm (from 0, as ``reach_<k>``), target
     (from 0, its row in the archive's ``target_p``), x, y, z, reached (0/1), the joints
     (degrees for a revolute joint; the archive keeps radians), inv_k, clearance, the last three empty
-    where the target is not reached, then the arm's own values on every row (the study's
+    where the target is not reached (with arms of several robots, a ``robot`` column after
+    ``arm``, the joints q1 … qn of the longest chain, empty past an arm's own), then the arm's own values on every row (the study's
     ``arm_values`` with their ``arm_columns`` headings: the serial study's port on the
     body wall and base pose); full float precision (``repr``). A front's group (every
     array with a leading design axis) gives every design's rows, a first column
@@ -56,10 +57,12 @@ def targets_csv_text(g: Mapping[str, Any]) -> str:
     P, A, N = ok.shape
     names = names or [f"q{i + 1}" for i in range(q.shape[-1])]
     q_units = q_units or ["rad"] * q.shape[-1]
+    robots = [str(r) for r in at.get("arm_robots", [])]  # arms of several robots
     head = ["design"] if front else []
-    head += ["arm", "target", f"x [{u}]", f"y [{u}]", f"z [{u}]", "reached"]
+    head += ["arm"] + (["robot"] if robots else []) + ["target", f"x [{u}]", f"y [{u}]",
+                                                       f"z [{u}]", "reached"]  # fmt: skip
     head += [f"{n} [{'deg' if qu == 'rad' else qu}]" for n, qu in zip(names, q_units, strict=True)]
-    q = np.where(np.asarray(q_units) == "rad", np.rad2deg(q), q)
+    q = np.where(np.asarray(q_units) == "rad", np.rad2deg(q), q)  # ("mixed": as archived)
     extra = [(k, f"{k} [{u}]" if k == "clearance" else k) for k in ("inv_k", "clearance") if k in g]
     head += [h for _, h in extra]
     ev = {k: np.asarray(g[k], np.float64) if front else np.asarray(g[k], np.float64)[None]
@@ -78,8 +81,9 @@ def targets_csv_text(g: Mapping[str, Any]) -> str:
             own = [] if av is None else [repr(float(c)) for c in av[d, a]]
             for i in range(N):
                 hit = bool(ok[d, a, i])  # an unreached target has no solution: empty cells
-                w.writerow([*([d] if front else []), a, i, *(repr(float(c)) for c in p[i]),
-                            int(hit), *(repr(float(c)) if hit else "" for c in q[d, a, i]),
+                w.writerow([*([d] if front else []), a, *([robots[a]] if robots else []), i,
+                            *(repr(float(c)) for c in p[i]), int(hit),
+                            *(repr(float(c)) if hit and np.isfinite(c) else "" for c in q[d, a, i]),
                             *(repr(float(ev[k][d, a, i])) if hit else "" for k, _ in extra),
                             *own])  # fmt: skip
     return buf.getvalue()

@@ -84,6 +84,10 @@ def _targets(s: SerialSettings, x: Any, keys: Any, dtype: Any) -> dict[str, Any]
     types = [j.type for j in s.chain.joints]
     out["attrs"] = {"joints": list(joint_names(s)), "types": types, "length_unit": u,
                     "q_units": ["rad" if t == "R" else u for t in types]}  # fmt: skip
+    from designopt.studies.serial import setup
+
+    if setup.mixed(s):  # arms of several robots: q (…, n_max) padded with NaN
+        out["attrs"] |= setup.joint_attrs(s)
     # how often a second, independent set of IK seeds finds a better solution: every
     # design's in one batched solve (blocks.coverage)
     cov = blocks.coverage(s, X, keys, sol, dtype)
@@ -198,8 +202,10 @@ def _cost(s) -> Cost:
 
     With ``arms`` every arm solves every target: the per-target and per-design bytes are
     A times one arm's (plus the arms' kept capsules, 48 B per joint and target)."""
+    from designopt.studies.serial import setup
+
     ind, n_norm = s.indices, s.objective.get("n_norm")
-    n_q, rows = len(s.chain.joints), len(ind.rows())
+    n_q, rows = setup.n_joints(s), len(ind.rows())  # (the longest chain of a mixed set-up)
     if ind.measure == "task":
         from designopt.kinematics import ik
         from designopt.studies.serial import taskindex

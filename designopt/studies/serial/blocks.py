@@ -72,7 +72,7 @@ def program(s: SerialSettings, dtype: Any) -> tuple[Mechanism, Callable]:
 
         def run(p, X, pt, Rt, t0):
             full = taskindex.design_full(p, X, dtype)
-            return taskindex.chunk_values(mech, s, p, full, pt, Rt, t0, dtype)
+            return taskindex.setup_values(mech, s, p, full, pt, Rt, t0, dtype)
 
         _PROGRAMS[ck] = (mech, jax.jit(run))
     return _PROGRAMS[ck]
@@ -119,7 +119,8 @@ def host_params(s: SerialSettings, keys: Any, dtype: Any) -> tuple[Mechanism, di
          "q_lower": jnp.asarray(np.asarray(mech.lower, dt)),
          "q_upper": jnp.asarray(np.asarray(mech.upper, dt)),
          "sample_key": keys["samples"]} | taskindex.targets(s, keys["samples"], dtype)  # fmt: skip
-    return mech, p | bodies.base_params(s, mech, dtype) | taskindex.scene_params(s, dtype, mech)
+    return mech, (p | bodies.base_params(s, mech, dtype) | taskindex.scene_params(s, dtype, mech)
+                  | taskindex.group_params(s, dtype))  # fmt: skip
 
 
 def solution(s: SerialSettings, x: Any, keys: Any, dtype: Any = jnp.float64,

@@ -245,7 +245,7 @@ def problem(s: SerialSettings, keys: Mapping[str, jax.Array], dtype: Any) -> Pro
         from designopt.studies.serial import bodies
 
         params |= (taskindex.targets(s, keys["samples"], dtype) | bodies.base_params(s, mech, dtype)
-                   | taskindex.scene_params(s, dtype, mech))  # fmt: skip
+                   | taskindex.scene_params(s, dtype, mech) | taskindex.group_params(s, dtype))  # fmt: skip
     # the constraints' arrays join params first: the probe's params are the run's
     cons, archived = constraints_fn(s, names, params, dtype)
     norm_bounds = None

@@ -704,9 +704,26 @@ class ArmBase(Section):
 
 
 class Arm(Section):
-    """One of several identical arms (copies of ``chain``): its base and its port (else
-    ``task.port``, if any)."""
+    """One of several arms: its base, its port (else ``task.port``, if any), its tool's
+    insertion range and, for a set-up that mixes robots, its own robot: ``chain`` (else
+    ``study.chain``) with its capsules' ``radius`` and ``tool_radius`` (else
+    ``collision``'s). Arms of one robot share one compiled program
+    (``designopt.studies.serial.setup``)."""
 
+    chain: AnyChain | None = Field(
+        None,
+        description="This arm's own robot: `{urdf: FILE, base, tip, set}` or a DH table (else "
+        "`study.chain`); its names are the study's variables and fixed values.",
+    )
+    radius: float | list[float] | None = Field(
+        None,
+        description="This arm's capsule radius, one number or one per link (else "
+        "`collision.radius`); with its own `chain`, for its links.",
+    )
+    tool_radius: float | None = Field(
+        None,
+        description="This arm's instrument radius past its port (else `collision.tool_radius`).",
+    )
     base: ArmBase = Field(ArmBase(), description="Where this arm's base frame sits.")
     port: tuple[Entry, Entry, Entry] | None = Field(
         None,
@@ -721,6 +738,17 @@ class Arm(Section):
     _port_numbers = field_validator("port", mode="before")(
         classmethod(lambda cls, v: _number_or_name(v))
     )
+
+    @field_validator("radius", "tool_radius")
+    @classmethod
+    def _radii(cls, v: Any) -> Any:
+        for i, x in enumerate(v if isinstance(v, list) else [] if v is None else [v]):
+            if not (math.isfinite(x) and x > 0):
+                at = f"entry {i}: " if isinstance(v, list) else ""
+                raise ValueError(f"{at}needs a radius > 0 (length unit), got {x}")
+        if isinstance(v, list) and not v:
+            raise ValueError("needs at least one radius (or one number for every link)")
+        return v
 
     @field_validator("insertion")
     @classmethod
@@ -756,10 +784,15 @@ class SerialSettings(StudySettings):
         None,
         min_length=2,
         max_length=8,
-        description="2-8 copies of the chain, each with its own base and port (needs `collision`).",
+        description="2-8 arms, each with its own base and port (needs `collision`): copies of "
+        "`chain`, or each its own robot (`arms.<k>.chain`, `radius`, `tool_radius`).",
     )
-    chain: AnyChain = Field(
-        description="The chain: `{convention, joints: [...]}` (DH) or `{urdf: FILE, ...}`.",
+    chain: AnyChain = Field(  # type: ignore[assignment]
+        None,
+        description="The chain: `{convention, joints: [...]}` (DH) or `{urdf: FILE, ...}`; "
+        "required unless every arm gives its own `arms.<k>.chain` (then arm 0's is the "
+        "study's).",
+        validate_default=False,
     )
     indices: SerialIndices = Field(
         SerialIndices(),
@@ -827,7 +860,13 @@ class SerialSettings(StudySettings):
         return chain  # names no entry uses: ``_unused`` (a port may use them too)
 
     @model_validator(mode="after")
-    def _consistent(self) -> SerialSettings:
+    def _consistent(self, info: ValidationInfo) -> SerialSettings:
+        if self.chain is None:  # every arm its own robot, or a missing chain
+            if not self.arms or any(a.chain is None for a in self.arms):
+                raise ValueError("chain: missing; give study.chain (the robot), or every arm "
+                                 "its own arms.<k>.chain")  # fmt: skip
+            _arm_names(self.arms, set(self.variables) | set(self.fixed), info)  # (_names's)
+            self.chain = self.arms[0].chain
         n = len(self.chain.joints)
         rows = self.indices.rows()
         ind = self.indices
@@ -947,7 +986,13 @@ class SerialSettings(StudySettings):
                 raise ValueError(f"collision.obstacles.{i}.inside: an obstacle inside the "
                                  "patient meets the instrument past its port; give task.port"
                                  + (" or every arm's port" if self.arms else ""))  # fmt: skip
-        if c is not None and isinstance(c.radius, list):
+        if c is not None and c.links == "auto" and c.radius is None and \
+                (self.arms is None or any(a.radius is None for a in self.arms)):  # fmt: skip
+            raise ValueError("collision.radius: links: auto needs the capsules' radius (one "
+                             "number, or one per link)"
+                             + (", or every arm its own arms.<k>.radius" if self.arms else ""))  # fmt: skip
+        if c is not None and isinstance(c.radius, list) and \
+                (self.arms is None or any(a.chain is None for a in self.arms)):  # fmt: skip
             n = len(self.chain.joints)
             if len(c.radius) != n:
                 raise ValueError(f"collision.radius: one radius per link ({n} links, one per "
@@ -955,6 +1000,37 @@ class SerialSettings(StudySettings):
         if c is not None and c.links == "urdf" and not isinstance(self.chain, UrdfChain):
             raise ValueError("collision.links: 'urdf' takes a URDF chain's <collision> "
                              "shapes; a DH chain uses links: auto with a radius")  # fmt: skip
+        for k, a in enumerate(self.arms or []):
+            self._check_arm_robot(k, a)
+
+    def _check_arm_robot(self, k: int, a: Arm) -> None:
+        """An arm's own robot (``arms.<k>.chain``, ``radius``, ``tool_radius``): in the
+        study's length unit, its radii one per link, under ``links: urdf`` a URDF."""
+        c, ch = self.collision, a.chain
+        where = f"arms.{k}"
+        if ch is None:
+            if isinstance(a.radius, list) and len(a.radius) != len(self.chain.joints):
+                raise ValueError(f"{where}.radius: one radius per link ({len(self.chain.joints)} "
+                                 f"links of study.chain), got {len(a.radius)}")  # fmt: skip
+            return
+        if isinstance(ch, UrdfChain) and (length_unit(self) != "m"
+                                          or self.units.length not in (None, "m")):  # fmt: skip
+            raise ValueError(f"{where}.chain: a URDF's lengths are metres and every arm shares "
+                             f"one length unit; the study's is {self.units.length or length_unit(self)} "
+                             "(declare units: {length: m} if its DH numbers are metres)")  # fmt: skip
+        if c is not None and c.links == "urdf" and not isinstance(ch, UrdfChain):
+            raise ValueError(f"{where}.chain: collision.links 'urdf' takes a URDF chain's "
+                             "<collision> shapes; a DH chain uses links: auto with a radius")  # fmt: skip
+        n = len(ch.joints)
+        r = a.radius if a.radius is not None else None if c is None else c.radius
+        if c is not None and c.links == "urdf" and a.radius is not None:
+            raise ValueError(f"{where}.radius: under links: urdf the URDF's <collision> shapes "
+                             "give the radii; remove it")  # fmt: skip
+        if isinstance(r, list) and len(r) != n:
+            src = f"{where}.radius" if a.radius is not None else "collision.radius"
+            hint = "" if a.radius is not None else f" (from {src}); give {where}.radius"
+            raise ValueError(f"{where}.radius: one radius per link of this arm's chain ({n} "
+                             f"links, one per joint), got {len(r)}{hint}")  # fmt: skip
 
     def _unused(self) -> None:
         """The task's port names are variables or fixed values (lengths); a variable or
@@ -962,6 +1038,15 @@ class SerialSettings(StudySettings):
         an error: a typo would otherwise go unnoticed."""
         known = set(self.variables) | set(self.fixed)
         used = dict(_chain_kinds(self.chain))
+        for k, a in enumerate(self.arms or []):
+            for v, kind in ({} if a.chain is None else _chain_kinds(a.chain)).items():
+                what = "set" if isinstance(a.chain, UrdfChain) else "DH entry"
+                if v not in known:
+                    raise ValueError(f"arms.{k}.chain: {what} name '{v}' is neither a design "
+                                     f"variable nor a fixed value (variables: "
+                                     f"{sorted(self.variables)}, fixed: {sorted(self.fixed)})")  # fmt: skip
+                if used.setdefault(v, kind) != kind:
+                    raise ValueError(f"arms.{k}.chain: '{v}' is used as an angle and as a length")
         for a in self.arms or []:
             for kind, row in (("length", a.base.xyz), ("angle", a.base.rpy),
                               ("length", a.port or ())):  # fmt: skip
@@ -1075,7 +1160,8 @@ class SerialSettings(StudySettings):
     def _arm_angles(self) -> set[str]:
         return {
             v.removeprefix("-") for a in self.arms or [] for v in a.base.rpy if isinstance(v, str)
-        }
+        } | {v for a in self.arms or [] if a.chain is not None
+             for v, kind in _chain_kinds(a.chain).items() if kind == "angle"}  # fmt: skip
 
     def insertions(self) -> list[tuple[float, float]]:
         """The insertion range [d0, d1] of each arm (one entry without ``arms``): its own,

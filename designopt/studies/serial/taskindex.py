@@ -120,10 +120,7 @@ def estimates_of(s: SerialSettings, mech: Mechanism, per: dict[str, jax.Array],
                  params: dict[str, Any]) -> dict[str, tuple[jax.Array, jax.Array]]:  # fmt: skip
     """:func:`estimates` with the study's replication groups (:func:`groups`), arms, radii
     and margin (``bodies.geometry``)."""
-    from designopt.studies.serial import bodies
-
-    g = bodies.geometry(s, mech)
-    if g is None:
+    if s.collision is None:
         return estimates(per, grp=groups(s))
     key = jax.random.fold_in(params["sample_key"], 2)  # the arms' target tuples
     sc_p = params if "scene_insertion" in params else scene_params(s, per["success"].dtype, mech)
@@ -158,20 +155,47 @@ def scene_params(s: SerialSettings, dtype: Any, mech: Mechanism | None = None) -
     if band is not None and s.arms is not None:  # [lo, hi] in degrees
         out["scene_band"] = jnp.asarray(np.asarray(band, np.float64), dtype)
     if s.collision is not None:
+        from designopt.studies.serial import setup
         from designopt.studies.serial.mechanism import build
 
-        out |= bodies.geometry_params(bodies.geometry(s, mech or build(s)), dtype)
+        if setup.mixed(s):  # the margin; each arm's radii: setup.group_params
+            g0 = setup.groups(s)[0]
+            out |= bodies.geometry_params(bodies.geometry(g0.settings, g0.mech), dtype)
+        else:
+            out |= bodies.geometry_params(bodies.geometry(s, mech or build(s)), dtype)
     from designopt.studies.serial.camera import camera_params
 
     return out | bodies.port_params(s, dtype) | camera_params(s, dtype)
 
 
+def group_params(s: SerialSettings, dtype: Any) -> dict[str, Any]:
+    """A mixed set-up's extra ``params``: ``setup`` (one dict per group of its
+    ``setup.ARM_PARAMS``, the group's view's) and ``scene_geometry``'s radii as (A, L)
+    (``setup.radii``). Empty for a set-up of one robot."""
+    from designopt.studies.serial import bodies, setup
+
+    if not setup.mixed(s):
+        return {}
+    per = []
+    for g in setup.groups(s):
+        v, mech = g.settings, g.mech
+        dt = np.dtype(jnp.dtype(dtype))
+        p = {"q_lower": jnp.asarray(np.asarray(mech.lower, dt)),
+             "q_upper": jnp.asarray(np.asarray(mech.upper, dt))}  # fmt: skip
+        p |= bodies.base_params(v, mech, dtype) | scene_params(v, dtype, mech)
+        per.append({k: p[k] for k in setup.ARM_PARAMS if k in p})
+    out: dict[str, Any] = {"setup": tuple(per)}
+    if s.collision is not None:
+        gp = dict(per[0]["scene_geometry"])
+        gp["radii"] = setup.radii(s, dtype)
+        out["scene_geometry"] = gp
+    return out
+
+
 def counts_of(s: SerialSettings, mech: Mechanism, per: dict[str, jax.Array],
               params: dict[str, Any]) -> dict[str, tuple[jax.Array, int]]:  # fmt: skip
     """:func:`counts` with the arms' target tuples of :func:`estimates_of`."""
-    from designopt.studies.serial import bodies
-
-    if bodies.geometry(s, mech) is None:
+    if s.collision is None:
         return counts(per)
     return counts(per, jax.random.fold_in(params["sample_key"], 2), groups(s))
 
@@ -271,7 +295,7 @@ def per_target(mech: Mechanism, s: SerialSettings, params: dict[str, Any], full:
     program of its own: the same values.)"""
     N, M = params["target_p"].shape[0], full.shape[0]
     pc, Rc, t0 = chunked_targets(params, chunk(s), dtype)
-    out = jax.lax.map(lambda a: chunk_values(mech, s, params, full, a[0], a[1], a[2], dtype, opts),
+    out = jax.lax.map(lambda a: setup_values(mech, s, params, full, a[0], a[1], a[2], dtype, opts),
                       (pc, Rc, t0))  # each (n_chunks, A·M, C, ...)  # fmt: skip
     return assemble(out, len(s.arms) if s.arms is not None else 1, M, N)
 
@@ -459,6 +483,23 @@ def chunk_values(mech: Mechanism, s: SerialSettings, params: dict[str, Any], ful
         zt = jnp.einsum("amij,amcj->amci", Rb, Rt_[..., 2].reshape(A, M, C, 3))
         out["axis"] = zt.reshape(A * M, C, 3)
     return out
+
+
+def setup_values(mech: Any, s: SerialSettings, params: dict[str, Any], full: jax.Array,
+                 pt: jax.Array, Rt: jax.Array | None, t0: jax.Array, dtype: Any,
+                 opts: Any = None, profile: bool = False) -> dict[str, jax.Array]:  # fmt: skip
+    """:func:`chunk_values` of the whole set-up (``setup``): the study's own for one robot
+    (``mech`` its chain), else each group's on its view, its chain and its
+    ``params["setup"]`` entries, put together in arm order by ``setup.merged``."""
+    from designopt.studies.serial import setup
+
+    if not setup.mixed(s):
+        return chunk_values(mech, s, params, full, pt, Rt, t0, dtype, opts, profile)
+    outs = []
+    for g, gp in zip(setup.groups(s), params["setup"], strict=True):
+        outs.append(chunk_values(g.mech, g.settings, params | gp, full, pt, Rt, t0, dtype, opts,
+                                 profile))  # fmt: skip
+    return setup.merged(s, outs, full.shape[0])
 
 
 SHAFT_SLACK = 1e-6
@@ -721,11 +762,12 @@ def estimates(per: dict[str, jax.Array], key: jax.Array | None = None,
         if key is None or "segments" not in per:
             return out  # arms_free needs the tuples' key and the kept capsules
         ok, seg = _tuples(per, key, lab)
-        r = jnp.asarray(radii, seg[0].dtype)
+        r = jnp.asarray(radii, seg[0].dtype)  # (L,), or each arm's (A, L) (a mixed set-up)
         gap = None
         for a in range(A):
             for b in range(a + 1, A):
-                d = arms_clearance(seg[a], r, seg[b], r)
+                ra, rb = (r[a], r[b]) if r.ndim == 2 else (r, r)
+                d = arms_clearance(seg[a], ra, seg[b], rb)
                 gap = d if gap is None else jnp.minimum(gap, d)
         free = (gap >= margin).astype(ok.dtype)  # type: ignore[operator]
         out["arms_ok"] = share(ok * free, lab, G)
