@@ -1027,7 +1027,27 @@ def error_text(e: ValidationError, raw: Any = None, model: Any = None) -> str:
             if isinstance(_node(raw, base), dict) and first in _node(raw, base):
                 loc, msg = [*base, *head.split(".", 1)], rest
                 break
+    if err["type"] == "extra_forbidden" and len(loc) > 1 and loc[0] == "study" \
+            and msg == _MESSAGES["extra_forbidden"]:  # fmt: skip
+        msg += _known_here(tuple(err["loc"]), model)
     return f"key '{'.'.join(loc) or '(top level)'}': {msg}"
+
+
+def _known_here(loc: tuple, model: Any) -> str:
+    """"; known here: a, b, …" for an unknown key at the pydantic location ``loc``: the
+    keys of the section it sits in (every member's, for a union of sections), or ""
+    where the section cannot be told."""
+    tp = _type_at(model, loc[:-1]) if model is not None else None
+    members = _union(tp) or [tp]
+    names: list[str] = []
+    for m in members:
+        m = _strip(m)
+        if not _is_model(m):
+            return ""
+        for n, f in m.model_fields.items():
+            if (f.alias or n) not in names:
+                names.append(f.alias or n)
+    return f"; known here: {', '.join(names)}" if names else ""
 
 
 _KEY = re.compile(r"^[A-Za-z_][\w\-]*(\.[\w\-]+)*$")

@@ -597,11 +597,13 @@ def obstacle_and_self(g: Geometry, obst: Any, seg: jax.Array, port: jax.Array | 
     return jnp.minimum(d, gp["cap"].astype(seg.dtype))  # +inf where nothing is checked
 
 
-def check(s: SerialSettings, mech: Mechanism) -> None:
+def check(s: SerialSettings, mech: Mechanism, ids: tuple[int, ...] | None = None) -> None:
     """ValueError naming ``collision.obstacles.<i>`` when a link of the middle design
     overlaps that obstacle in every one of 256 random configurations (e.g. a base link
     standing in the table's half-space): every target would be unreached. The port's
-    exemption is not applied here, so a link through the port is not counted."""
+    exemption is not applied here, so a link through the port is not counted. ``ids``:
+    the arms' numbers in the study when ``s`` is a view of some of them
+    (``setup.groups``)."""
     g = geometry(s, mech)
     c = s.collision
     if g is None or c is None or not c.obstacles:
@@ -628,7 +630,7 @@ def check(s: SerialSettings, mech: Mechanism) -> None:
                 if j == last and s.ports()[min(k, len(s.ports()) - 1)] is not None:
                     continue  # the link through the port may touch the body wall
                 if np.all(gaps[:, j] < g.margin):
-                    arm = f" of arm {k}" if s.arms is not None else ""
+                    arm = f" of arm {k if ids is None else ids[k]}" if s.arms is not None else ""
                     raise ValueError(
                         f"collision.obstacles.{i}: {g.names[j]}{arm} overlaps this "
                         f"{ob.shape} in every configuration of the middle design (e.g. a "

@@ -82,13 +82,31 @@ def cmd_chain(args: argparse.Namespace, ctx: Any) -> int:
     import jax
 
     jax.config.update("jax_enable_x64", True)
+    cfg, _ = loaded
+    where = args.config
+    s0 = _serial(cfg, where)
+    design = design_values(s0, ctx.design(args.design), where)
+    from designopt.studies.serial import setup
+
+    if not setup.mixed(s0):
+        return _chain_of(s0, design, args, cfg.seed)
+    if args.q is not None:
+        raise ConfigError(f"--q {args.q}: the arms are different robots ("
+                          + ", ".join(setup.robot_name(s0, k) for k in range(setup.n_arms(s0)))
+                          + "), so one joint vector fits none of them all; leave --q out")  # fmt: skip
+    status = 0
+    for g in setup.groups(s0):  # each robot of the set-up, once
+        arms = ", ".join(str(k) for k in g.arms)
+        print(f"arm{'s' if len(g.arms) > 1 else ''} {arms}: {setup.robot_name(s0, g.arms[0])}")
+        status = max(status, _chain_of(g.settings, design, args, cfg.seed))
+    return status
+
+
+def _chain_of(s: Any, design: dict[str, float], args: argparse.Namespace, seed: int) -> int:
+    """:func:`cmd_chain` for one robot (``s``: the study, or an arm's view of it)."""
     from designopt.studies.serial.mechanism import build
     from designopt.studies.serial.settings import UrdfChain, length_unit
 
-    cfg, _ = loaded
-    where = args.config
-    s = _serial(cfg, where)
-    design = design_values(s, ctx.design(args.design), where)
     q = _parse_q(args.q, tuple(j.type for j in s.chain.joints))
     mech = build(s)
     n = mech.n
@@ -141,7 +159,7 @@ def cmd_chain(args: argparse.Namespace, ctx: Any) -> int:
         lines += _pose_lines(f"FK at --q {args.q} (deg, {u})", Rq, pq, u)
     status = 0
     if urdf_chain:
-        err = check_import(s, design, mech, full, cfg.seed)
+        err = check_import(s, design, mech, full, seed)
         ok = err < 1e-9
         lines.append(f"check against yourdfpy's FK at {N_CHECK} random joint values in the "
                      f"limits: max |ΔT| = {err:.2e} ({'OK' if ok else 'MISMATCH'})")  # fmt: skip
@@ -305,15 +323,27 @@ def _view_title(s: Any, design: dict[str, float], q: np.ndarray, at_home: bool,
     urdf_chain = isinstance(s.chain, UrdfChain)
     what = (f"{Path(s.chain.urdf).name} ({s.chain.imported.base} -> {s.chain.imported.tip})" if urdf_chain
             else f"DH chain ({s.chain.convention}, {len(s.chain.joints)} joints)")  # fmt: skip
-    pose = drawing.joint_values(s, q) + (" (home pose: each joint at 0 where its limits allow, "
-                                         "else mid-range)" if at_home else "")  # fmt: skip
-    lines = [f"{what}: design {dtext}", solved or f"at {pose}"]
+    from designopt.studies.serial import setup
+
+    mixed = setup.mixed(s)
+    if mixed:  # arms of several robots: each its own, at its own home pose
+        A = setup.n_arms(s)
+        what = ", ".join(f"arm {k}: {setup.robot_name(s, k)}" for k in range(A))
+        qs = np.atleast_2d(q)
+        pose = "; ".join(f"arm {k} at " + drawing.joint_values(v, qs[k][: len(v.chain.joints)])
+                         for k, v in ((k, setup.arm_view(s, k)) for k in range(A)))  # fmt: skip
+        pose += " (home poses: each joint at 0 where its limits allow, else mid-range)"
+    else:
+        pose = "at " + drawing.joint_values(s, q) + (
+            " (home pose: each joint at 0 where its limits allow, else mid-range)"
+            if at_home else "")  # fmt: skip
+    lines = [f"{what}: design {dtext}", solved or pose]
     if s.arms is not None:
         lines.append(f"{len(s.arms)} arms, each at its base in the world (study.arms)"
-                     + ("" if solved else ", every arm at this pose"))  # fmt: skip
-    if urdf_chain:
+                     + ("" if solved or mixed else ", every arm at this pose"))  # fmt: skip
+    if urdf_chain and not mixed:
         lines.append("set numbers: " + drawing.changes_text(s, design).replace("\n", "; "))
-    note = drawing.meshes_note(s, design, q)
+    note = None if mixed else drawing.meshes_note(s, design, q)
     if note:
         lines.append(note)
     return lines
@@ -407,11 +437,18 @@ def cmd_view(args: argparse.Namespace, ctx: Any) -> int:
     s = _serial(cfg, where, "view")
     design = design_values(s, ctx.design(args.design), where)
     mech = build(s)
+    from designopt.studies.serial import setup
+
+    if args.q is not None and setup.mixed(s):
+        raise ConfigError(f"--q {args.q}: the arms are different robots ("
+                          + ", ".join(setup.robot_name(s, k) for k in range(setup.n_arms(s)))
+                          + "), so one joint vector fits none of them all; leave --q out "
+                          "to see each arm at the task")  # fmt: skip
     q = _parse_q(args.q, tuple(j.type for j in s.chain.joints))
     if q is not None:
         _in_limits(q, s, mech, args.q)
     at_home = q is None
-    q = drawing.home(mech) if q is None else q
+    q = drawing.home_q(s, mech) if q is None else q
     png, html = _outputs(args, cfg)
     for p in (png, html):
         if p is not None:
@@ -471,14 +508,16 @@ def view_of(s: Any, mech: Any, x: np.ndarray, q: np.ndarray, title: str, origina
     ref = drawing.original_arms(s, mech, x, q, budget=_budget(2 * A)) if original else []
     mine = _marked(drawing.study_arms(s, mech, x, q, label="this design", color="#ff7f0e",
                                       budget=_budget(A + len(ref))), solved)  # fmt: skip
-    Q = np.broadcast_to(np.asarray(q, np.float64), (len(mine), mech.n))
+    q = np.asarray(q, np.float64)
+    Q = np.broadcast_to(q, (len(mine), q.shape[-1]))
     scene = robot.Scene(arms=ref, **around)
     if solved is not None and solved["Q"] is not None:
         scene.collisions = solved["pairs"]
         scene.marks = [(p, "#d62728") for p in solved["marks"]]
     return page.View(title=title + "; drag to rotate", unit=length_unit(s), scene=scene,
                      poses=[page.Pose("this pose", mine,
-                                      [drawing.hover(s, a.label, qa) for a, qa in zip(mine, Q, strict=True)])],
+                                      [drawing.hover(s, a.label, qa, None, k if A > 1 else None)
+                                       for k, (a, qa) in enumerate(zip(mine, Q, strict=True))])],
                      note=("faint: the original robot (the URDF's numbers); " if ref else "")
                      + "hover the joints for their values")  # fmt: skip
 

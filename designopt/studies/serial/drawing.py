@@ -30,6 +30,7 @@ import numpy as np
 
 from designopt.figures.robot import Arm, Cone, Scene, Targets
 from designopt.numerics import montecarlo as mc
+from designopt.studies.serial import setup
 from designopt.studies.serial.mechanism import (  # noqa: F401 (re-exported)
     Mechanism,
     home,
@@ -139,7 +140,6 @@ def _tuples(s: SerialSettings, mech: Mechanism, sol: Mapping[str, np.ndarray],
     k's tuple j is target π_k(j)): (π_k per arm, the tuples where every arm reaches its
     own target (N,) bool, the least gap between two arms per tuple, each arm's capsules
     per tuple (N, L, 2, 3) in the world, the collision geometry)."""
-    import jax.numpy as jnp
 
     from designopt.kinematics.collision import arms_clearance
     from designopt.studies.serial import bodies
@@ -154,14 +154,22 @@ def _tuples(s: SerialSettings, mech: Mechanism, sol: Mapping[str, np.ndarray],
     perm = [np.asarray(p) for p in taskindex.perms(key, N, lab, A)]
     both = np.all(np.stack([ok[k][perm[k]] for k in range(A)]), 0)
     seg = [np.asarray(sol["segments"])[k][perm[k]] for k in range(A)]  # (N, L, 2, 3) world
-    g = bodies.geometry(s, mech)
+    g = bodies.geometry(setup.groups(s)[0].settings, setup.groups(s)[0].mech)
     gap = np.full(N, np.inf)
     if both.any() and g is not None:
-        r = jnp.asarray(g.radii)
+        r = _arm_radii(s)
         for a in range(A):
             for b in range(a + 1, A):
-                gap = np.minimum(gap, np.asarray(arms_clearance(seg[a], r, seg[b], r)))
+                gap = np.minimum(gap, np.asarray(arms_clearance(seg[a], r[a], seg[b], r[b])))
     return perm, both, gap, seg, g
+
+
+def _arm_radii(s: SerialSettings) -> Any:
+    """Each arm's capsule radii (A, L) as a JAX array (``setup.radii``: an arm of fewer
+    capsules repeats its last, as its archived capsules do)."""
+    import jax.numpy as jnp
+
+    return setup.radii(s, jnp.float64 if jax.config.jax_enable_x64 else jnp.float32)
 
 
 def _ordered(both: np.ndarray, gap: np.ndarray) -> np.ndarray:
@@ -242,7 +250,6 @@ def arm_tuples(s: SerialSettings, mech: Mechanism, x: Any, sol: Mapping[str, np.
     dropped. Each: (label, the arms at their solutions with their bases and colours,
     colliding pairs (their closest points), the arms' joints). With ``counted``, the
     median's label says how many tuples collide (:meth:`TupleStats.count`)."""
-    import jax.numpy as jnp
 
     from designopt.kinematics.collision import arms_clearance
 
@@ -253,7 +260,7 @@ def arm_tuples(s: SerialSettings, mech: Mechanism, x: Any, sol: Mapping[str, np.
     st = _stats(both, gap, g)
     picks = dict.fromkeys([st.median, st.tightest, st.loosest])
     names = {st.loosest: "loosest", st.tightest: "tightest", st.median: "median"}
-    r = jnp.asarray(g.radii)  # type: ignore[union-attr]
+    r = _arm_radii(s)
     u = length_unit(s)
     out = []
     for j in picks:
@@ -262,7 +269,7 @@ def arm_tuples(s: SerialSettings, mech: Mechanism, x: Any, sol: Mapping[str, np.
         pairs, coll = [], set()
         for a in range(A):
             for b in range(a + 1, A):
-                d = float(np.asarray(arms_clearance(seg[a][j], r, seg[b][j], r)))
+                d = float(np.asarray(arms_clearance(seg[a][j], r[a], seg[b][j], r[b])))
                 if d < g.margin:  # type: ignore[union-attr]
                     pa, pb, _ = _closest(seg[a][j], seg[b][j])
                     pairs.append((pa, pb))
@@ -285,8 +292,8 @@ def representative(s: SerialSettings, mech: Mechanism, sol: Mapping[str, np.ndar
     arm reaches (as ``arms_free`` draws them, :func:`arm_tuples`), the one of median gap
     between the arms. The home pose (no target) where nothing is reached or there is no
     task (``sol`` None)."""
-    A = 1 if s.arms is None else len(s.arms)
-    q0 = np.broadcast_to(home(mech), (A, mech.n))
+    q0 = setup.homes(s)
+    A = len(q0)
     if sol is None:
         return "the home pose", q0, []
     p = np.asarray(sol["target_p"], np.float64)
@@ -348,16 +355,22 @@ def study_arms(s: SerialSettings, mech: Mechanism, x: Any, Q: np.ndarray, *, lab
     its base in the world (:func:`base_poses`): arm k at joints Q[k] (Q (A, n); (n,):
     every arm at the same joints). One arm (``label``, ``color``) without ``study.arms``;
     else ``<label>: arm k`` (``arm k``) in :data:`ARM_COLOURS`. ``model``, ``design``:
-    as :func:`arms` (None: the original robot of a URDF chain)."""
+    as :func:`arms` ("original" and None: the original robot of each arm's URDF chain). A
+    set-up of several robots draws each arm with its own (``setup.arm_view``), its
+    joints the first of Q[k] (the rest NaN)."""
     T = base_poses(s, mech, x)
     Q = np.asarray(Q, np.float64)
-    Q = np.broadcast_to(Q, (len(T), mech.n)) if Q.ndim == 1 else Q
+    Q = np.broadcast_to(Q, (len(T), Q.shape[-1])) if Q.ndim == 1 else Q
+    ms = setup.mechanisms(s)
     out = []
     for k, Tk in enumerate(T):
-        lab = label if Tk is None else (f"{label}: arm {k}" if label else f"arm {k}")
+        who = f"arm {k}" + (f" ({setup.robot_name(s, k)})" if setup.mixed(s) else "")
+        lab = label if Tk is None else (f"{label}: {who}" if label else who)
         col = color if Tk is None else ARM_COLOURS[k % len(ARM_COLOURS)]
-        a = arms(s, mech, [x], Q[k][None], labels=[lab], colors=[col], budget=budget,
-                 model=model, design=design)[0][0]  # fmt: skip
+        sk, mk = (s, mech) if not setup.mixed(s) else (setup.arm_view(s, k), ms[k])
+        mod = model if model != "original" else original_model(sk, mk)
+        a = arms(sk, mk, [x], Q[k][None, : mk.n], labels=[lab], colors=[col], budget=budget,
+                 model=mod, design=design)[0][0]  # fmt: skip
         out.append(a if Tk is None else _with_base(a, Tk))
     return out
 
@@ -455,7 +468,7 @@ def original_arms(s: SerialSettings, mech: Mechanism, x: Any, q: np.ndarray,
     """The URDF's own robot at joints q, every arm at its base for design ``x`` (the
     bases are design numbers, not the file's)."""
     return study_arms(s, mech, x, q, label=label, color=color, budget=budget,
-                      model=original_model(s, mech), design=None)  # fmt: skip
+                      model="original", design=None)  # fmt: skip
 
 
 def changes(s: SerialSettings, design: Mapping[str, float]) -> list[tuple[str, float, float, str]]:
@@ -585,10 +598,21 @@ def arms_scene(s: SerialSettings, mech: Mechanism, x: Any, sol: Mapping[str, np.
                  **obstacles_and_ports(s, x))  # fmt: skip
 
 
-def hover(s: SerialSettings, label: str, q: np.ndarray, inv_k: float | None = None) -> str:
-    """The report's hover text of an arm: its label, 1/k, joint values."""
+def home_q(s: SerialSettings, mech: Mechanism) -> np.ndarray:
+    """The home pose to draw: the chain's (n,), or with arms of several robots every
+    arm's own (A, n_max) (``setup.homes``)."""
+    return setup.homes(s) if setup.mixed(s) else home(mech)
+
+
+def hover(s: SerialSettings, label: str, q: np.ndarray, inv_k: float | None = None,
+          arm: int | None = None) -> str:
+    """The report's hover text of an arm (``arm``: its index, whose robot names the
+    joints): its label, 1/k, joint values."""
     from designopt.figures.html import esc
 
+    if arm is not None and setup.mixed(s):
+        s = setup.arm_view(s, arm)
+        q = np.asarray(q)[: len(s.chain.joints)]
     rows = ", ".join(ROWS[r] for r in s.indices.rows())
     k = "" if inv_k is None else f"<br>1/k ({s.indices.norm}-norm; rows {rows}) = {inv_k:.4g}"
     return (f"<b>{esc(label)}</b>{k}<br>" + esc(joint_values(s, q, "<br>")).replace("&lt;br&gt;", "<br>")

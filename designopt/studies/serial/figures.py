@@ -188,7 +188,7 @@ def _workspace(p: np.ndarray, c: np.ndarray, s: SerialSettings, folder: Path,
     region = s.task.region if s.task is not None else None
     if rec is not None:
         mech = build(s)
-        q = drawing.home(mech)
+        q = drawing.home_q(s, mech)
         x = np.asarray(list(rec.x.values()), np.float64)
         arm = drawing.study_arms(s, mech, x, q, label="final design at its home pose")
         p, c = _in_world(p, c, [a.base for a in arm])
@@ -326,7 +326,7 @@ def _one_robot(rec: RunRecord, sol: dict[str, np.ndarray] | None) -> robot.Scene
                                   label="final design", color="#ff7f0e")  # fmt: skip
         return robot.Scene(arms=arms, marks=[(t, "#d62728") for t in tg],
                            title=f"the final design at {label}", **around)  # fmt: skip
-    q = drawing.home(mech)
+    q = drawing.home_q(s, mech)
     arms = drawing.study_arms(s, mech, x, q, label="final design", color="#ff7f0e")
     return robot.Scene(arms=arms, title="the final design at the home pose (each joint at 0 "
                        "where its limits allow, else mid-range)", **around)  # fmt: skip
@@ -361,8 +361,9 @@ def draw_robot(rec: RunRecord, folder: Path,
         fig = robot.figure([scene], length_unit(s), "\n".join([head] + ([note] if note else [])),
                            size=7.0)  # fmt: skip
         return save(fig, folder, "robot")
-    orig = drawing.original_arms(s, mech, x, q)  # every arm at its base in the world
-    final = drawing.study_arms(s, mech, x, q, label="final design", color="#ff7f0e")
+    qa = drawing.home_q(s, mech)  # (every arm's own, with arms of several robots)
+    orig = drawing.original_arms(s, mech, x, qa)  # every arm at its base in the world
+    final = drawing.study_arms(s, mech, x, qa, label="final design", color="#ff7f0e")
     note = drawing.meshes_note(s, design, q)
     around = drawing.obstacles_and_ports(s, design)  # the patient and the port, where configured
     scenes = [robot.Scene(arms=orig, region=region, title="original: the URDF's own numbers",

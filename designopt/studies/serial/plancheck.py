@@ -465,8 +465,10 @@ def _check_bases(s: SerialSettings) -> None:
     u = length_unit(s)
     rows = [(f"arms.{k}.base", a.base.xyz, a.base.rpy) for k, a in enumerate(s.arms)] \
         if s.arms else [(None, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))]  # fmt: skip
-    top = _column_top(s)
-    for arm_key, xyz, rpy in rows:
+    from designopt.studies.serial import setup
+
+    tops = [_column_top(setup.arm_view(s, k)) for k in range(len(rows))]  # each its robot's
+    for (arm_key, xyz, rpy), top in zip(rows, tops, strict=True):
         var = [v.removeprefix("-") if isinstance(v, str) and v.removeprefix("-") in s.variables
                else None for v in xyz]  # fmt: skip
         named = sorted({n for n in var if n is not None})

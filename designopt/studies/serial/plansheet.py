@@ -54,7 +54,8 @@ class Plan:
     incisions 0 and 1 to the region's centre (None: one port, or no region),
     ``angle`` the index ``instrument_angle`` (value, SE) in deg (None where not
     archived), ``band`` ``task.instrument_angle``, ``rows`` more (label, text) lines,
-    ``camera`` the endoscope's incision point and tip (6,) or None."""
+    ``camera`` the endoscope's incision point and tip (6,) or None, ``robots`` each arm's
+    robot where the arms are different robots (``setup.robot_name``)."""
 
     unit: str
     shown: str
@@ -69,6 +70,7 @@ class Plan:
     band: tuple[float, float] | None = None
     rows: list[str] = field(default_factory=list)
     camera: np.ndarray | None = None  # (6,): the endoscope's incision point and its tip
+    robots: tuple[str, ...] = ()  # each arm's robot, where the arms are different robots
 
 
 def display_unit(unit: str) -> tuple[str, float]:
@@ -127,6 +129,10 @@ def plan_of(s: SerialSettings, g: Mapping[str, Any],
                 None if band is None else (float(band[0]), float(band[1])))  # fmt: skip
     if "camera" in g:
         plan.camera = np.asarray(g["camera"], np.float64).reshape(6)
+    from designopt.studies.serial import setup
+
+    if setup.mixed(s):
+        plan.robots = tuple(setup.robot_name(s, k) for k in range(setup.n_arms(s)))
     plan.rows = _rows(s, plan, ind, objectives)
     return plan
 
@@ -508,7 +514,7 @@ def _table(fig: Any, plan: Plan, W: float, H: float, top: float, height: float) 
         head += [f"base x, y, z [{u}]", "base roll, pitch, yaw [deg]"]
     cells = []
     for k, p in enumerate(plan.ports):
-        row = [f"P{k}: arm {k}", _fmt(p, f)]
+        row = [f"P{k}: arm {k}" + (f" ({plan.robots[k]})" if plan.robots else ""), _fmt(p, f)]
         if plan.port_points is not None:
             row += [_fmt(plan.port_points[k], f),
                     f"{np.linalg.norm(p - plan.port_points[k]) * f:.1f}"]  # fmt: skip

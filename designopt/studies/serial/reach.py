@@ -48,18 +48,22 @@ def check(s: SerialSettings) -> None:
     plancheck.check(s)  # a unit slip is named before _check_ports finds a port off the wall
     _check_ports(s)
     if s.collision is not None:
-        from designopt.studies.serial import bodies
+        from designopt.studies.serial import bodies, setup
 
-        bodies.check(s, build(s))
+        for g in setup.groups(s):  # each robot's arms (the study itself for one robot)
+            bodies.check(g.settings, g.mech, g.arms)
 
 
 def _check_reach(s: SerialSettings) -> None:
     """ValueError naming ``task.region`` when no design (some arm in no design) reaches
     any point of the task region (:func:`check`)."""
+    from designopt.studies.serial import setup
+
     u = length_unit(s)
     far = largest_reach(s)
     if s.arms is not None:
         for k in range(len(s.arms)):
+            far = largest_reach(setup.arm_view(s, k))  # its own robot's
             lo, hi = base_range(s, k)
             near = region_box_distance(s.task.region, lo, hi)
             if near > far * (1 + 1e-9) + 1e-12:
@@ -226,8 +230,10 @@ def _check_ports(s: SerialSettings) -> None:
         rpy = (0.0, 0.0, 0.0) if arm is None else arm.base.rpy
         if not all(isinstance(v, float | int) for v in (*xyz, *rpy)):
             continue  # a designed base: wherever the design puts it
-        if shapes is None:
-            shapes = _base_shapes(s)
+        if shapes is None or s.arms is not None:
+            from designopt.studies.serial import setup
+
+            shapes = _base_shapes(setup.arm_view(s, k))  # its own robot's base link
         R = rpy_matrix(*(math.radians(float(v)) for v in rpy))
         t = np.asarray(xyz, np.float64)
         dist = [(np.array([_seg_point(p, R @ a + t, R @ b + t) for p in ports]), a, b, r)

@@ -16,6 +16,7 @@ from designopt.studies.serial.drawing import (
     arms,
     design_pose,
     home,
+    home_q,
     hover,
     meshes_note,
     obstacles_and_ports,
@@ -73,11 +74,14 @@ def run_view(rec: Any):
         sol_all = task_solution(rec)
         scene.targets = arms_scene(s, mech, x, sol_all, fkeys, budget=None).targets
         tup = arm_tuples(s, mech, x, sol_all, fkeys, budget=None)
-        poses = [Pose(lab, row, [hover(s, a.label, q, None) for a, q in zip(row, qs, strict=True)])
+        poses = [Pose(lab, row, [hover(s, a.label, q, None, k)
+                                 for k, (a, q) in enumerate(zip(row, qs, strict=True))])
                  for lab, row, _, qs in tup]  # fmt: skip
         if not poses:
+            q0 = home_q(s, mech)
             row = study_arms(s, mech, x, q0, budget=None)
-            poses = [Pose("home pose", row, [hover(s, a.label, q0) for a in row])]
+            poses = [Pose("home pose", row, [hover(s, a.label, q0 if q0.ndim == 1 else q0[k], None, k)
+                                             for k, a in enumerate(row)])]  # fmt: skip
         what = ("tuples of targets (one per arm): the median gap (first), the tightest (next "
                 "step) and the loosest; " + tuple_stats(s, mech, sol_all, fkeys).text())
     elif s.indices.measure == "task":
@@ -139,7 +143,8 @@ def front_view(rec: Any):
     poses = [design_pose(s, mech, X[i], rec.keys()) for i in range(n)]
     robots = [study_arms(s, mech, X[i], Q, label="design", color="#ff7f0e", budget=budget)
               for i, (_, Q, _) in enumerate(poses)]  # fmt: skip
-    ref = original_arms(s, mech, X[0], q0, budget=budget) if isinstance(s.chain, UrdfChain) else []
+    ref = original_arms(s, mech, X[0], home_q(s, mech), budget=budget) \
+        if isinstance(s.chain, UrdfChain) else []  # fmt: skip
     hov = []
     for i in range(n):
         d = dict(zip(s.variables, X[i], strict=True))
