@@ -201,6 +201,11 @@ SCENARIOS: list[tuple] = [
      "designopt show results/port_placement/port_placement.h5",
      "designopt show results/port_placement/port_placement.h5 --csv",
      "designopt report results/port_placement/port_placement.h5 --html"),
+    # arms of different robots (configs/mixed_setup.yaml, docs/planning.md)
+    ("designopt eval configs/mixed_setup.yaml --design b=0.55 by=0 px=0.03 py0=-0.1 py1=0.1",
+     "designopt run configs/mixed_setup.yaml",
+     "designopt show results/mixed_setup/mixed_setup.h5 --csv",
+     "designopt report results/mixed_setup/mixed_setup.h5 --html"),
     ("designopt run configs/two_arms_front.yaml",
      ("designopt report ARCHIVE --html", "report results/two_arms/two_arms_front.h5 --html")),
     # URDF (docs/urdf.md, configs/urdf_*.yaml)
@@ -345,6 +350,9 @@ SMALL: dict[str, dict] = {
     "port_placement": {"study": {"indices": {"n_samples": 32}}, "front": {"n_samples": 32},
                        "optimizer": {"n_particles": 4, "n_iters": 2, "n_runs": 1},
                        "final": {"stage": 32, "max_samples": 64}},
+    "mixed_setup": {"study": {"indices": {"n_samples": 32}}, "front": {"n_samples": 32},
+                    "optimizer": {"n_particles": 4, "n_iters": 2, "n_runs": 1},
+                    "final": {"stage": 32, "max_samples": 64}},
     "urdf_arm": {"study": {"indices": {"n_samples": 512}}, "optimizer": OPT,
                  "scan": {"vary": {"l_wrist": {"num": 2}, "l_jaw": {"num": 2}}}} | _final(512),
     "urdf_mesh_arm": {"study": {"indices": {"n_samples": 512}}, "optimizer": OPT} | _final(512),

@@ -1,0 +1,185 @@
+"""Arms of different robots in one set-up (issue #67, item 1): a Franka Panda and a UR5,
+each with its own instrument, through two ports in the mesh abdomen beside an endoscope
+(configs/mixed_setup.yaml, at 32 targets).
+
+Checked against independent references: the shipped Panda's joints against the URDF that
+example-robot-data installs; every kept solution's forward kinematics in pinocchio, arm
+by arm (its tip on its target, its instrument through its own incision point); each arm
+of the mixed set-up against the same arm in a set-up of two copies of its robot (the
+per-target values bit for bit, so reach_k is each arm's alone); the archive's per-arm
+joint names and the CSV's rows."""
+
+from __future__ import annotations
+
+import copy
+import csv
+import io
+import json
+import sysconfig
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import jax
+import numpy as np
+import pytest
+
+from designopt.app import config as C
+from designopt.core.errors import ConfigError
+from designopt.core.keys import streams
+
+ROOT = Path(__file__).resolve().parents[1]
+CFG = ROOT / "configs" / "mixed_setup.yaml"
+DESIGN = np.array([[0.55, 0.0, 0.03, -0.1, 0.1]])  # b, by, px, py0, py1
+N = 32
+ROBOTS = Path(sysconfig.get_paths()["purelib"]) / "cmeel.prefix/share/example-robot-data/robots"
+
+
+def _raw() -> dict:
+    raw, _ = C.parse(CFG)
+    raw["study"]["indices"]["n_samples"] = N
+    return raw
+
+
+def _settings(raw: dict):
+    return C.validate(raw, str(CFG), folder=CFG.parent).study
+
+
+@pytest.fixture(scope="module")
+def x64():
+    before = jax.config.jax_enable_x64
+    jax.config.update("jax_enable_x64", True)
+    yield
+    jax.config.update("jax_enable_x64", before)
+
+
+@pytest.fixture(scope="module")
+def mixed(x64):
+    """(settings, the targets group ``Study.targets`` archives for DESIGN)."""
+    from designopt.studies.serial import STUDY
+
+    s = _settings(_raw())
+    return s, STUDY.targets(s, DESIGN[0], streams(0), jax.numpy.float64)
+
+
+def test_the_shipped_panda_is_example_robot_datas():
+    from designopt.kinematics import urdf
+
+    path = ROBOTS / "panda_description/urdf/panda.urdf"
+    if not path.is_file():
+        pytest.skip("example-robot-data is not installed (the peers extra installs it)")
+    ours = urdf.parse((ROOT / "configs/robots/panda/panda_instrument.urdf").read_text(), "ours")
+    root = ET.parse(path).getroot()
+    theirs = {j.get("name"): j for j in root.iter("joint")}
+    names = [f"panda_joint{i}" for i in range(1, 9)]
+    for n in names:
+        j, t = ours.joints[n], theirs[n]
+        o = t.find("origin")
+        assert np.allclose(j.xyz, [float(v) for v in o.get("xyz").split()], atol=0, rtol=0)
+        assert np.allclose(j.rpy, [float(v) for v in o.get("rpy").split()], atol=0, rtol=0)
+        assert j.type == t.get("type")
+        if t.get("type") == "revolute":
+            lim = t.find("limit")
+            assert j.limits == (float(lim.get("lower")), float(lim.get("upper")))
+            assert np.array_equal(j.axis, [float(v) for v in t.find("axis").get("xyz").split()])
+
+
+def test_each_arm_is_its_own_robot_in_pinocchio(mixed):
+    """Every reached target of each arm: pinocchio's FK of the archived joints (the arm's
+    own, the NaN padding cut) at the arm's base puts the instrument tip on the target and
+    its axis through the arm's incision point."""
+    pin = pytest.importorskip("pinocchio")
+    from designopt.studies.serial import placement, setup
+
+    s, tg = mixed
+    pl = placement.placement(s, DESIGN)
+    ports, bases = np.asarray(pl["ports"])[0], np.asarray(pl["bases"])[0]  # (A, 3), (A, 6)
+    files = ["robots/panda/panda_instrument.urdf", "robots/ur5/ur5_instrument.urdf"]
+    q, ok, p = np.asarray(tg["q"]), np.asarray(tg["success"], bool), np.asarray(tg["target_p"])
+    assert q.shape == (2, N, 7) and ok[0].sum() >= N // 2 and ok[1].sum() >= N // 2
+    for k, f in enumerate(files):
+        model = pin.buildModelFromUrdf(str(ROOT / "configs" / f))
+        data = model.createData()
+        fid = model.getFrameId("instrument_tip")
+        n = model.nq
+        assert n == setup.mechanisms(s)[k].n and np.isnan(q[k, :, n:]).all()
+        R0 = pin.rpy.rpyToMatrix(*np.radians(bases[k, 3:]))
+        for i in np.flatnonzero(ok[k]):
+            pin.framesForwardKinematics(model, data, q[k, i, :n])
+            T = data.oMf[fid]
+            tip = R0 @ T.translation + bases[k, :3]
+            axis = R0 @ T.rotation[:, 2]
+            assert np.linalg.norm(tip - p[i]) < 1e-6
+            off = ports[k] - tip  # the incision point lies on the instrument's line
+            assert np.linalg.norm(off - (off @ axis) * axis) < 1e-5
+            assert off @ axis < 0  # behind the tip, on the flange's side
+
+
+def test_each_arm_equals_its_robot_in_a_set_up_of_copies(mixed):
+    """The Panda of the mixed set-up and arm 0 of two Pandas (likewise the UR5 and arm 1
+    of two UR5s) at the same bases and ports: the same solutions, bit for bit."""
+    from designopt.studies.serial import blocks
+
+    s, tg = mixed
+    raw = _raw()
+    arms = raw["study"]["arms"]
+    for k in (0, 1):
+        twin = copy.deepcopy(raw)
+        for j in (0, 1):
+            twin["study"]["arms"][j] |= {key: arms[k][key] for key in ("chain", "radius")}
+        sol = blocks.solutions(_settings(twin), DESIGN, streams(0))
+        n = np.asarray(sol["q"]).shape[-1]
+        assert np.array_equal(np.asarray(sol["success"])[k, 0], np.asarray(tg["success"])[k] > 0)
+        assert np.array_equal(np.asarray(sol["q"])[k, 0], np.asarray(tg["q"])[k, :, :n])
+        assert np.array_equal(np.asarray(sol["inv_k"])[k, 0], np.asarray(tg["inv_k"])[k])
+
+
+def test_the_archive_and_the_csv_name_each_arms_joints(mixed):
+    from designopt.results.run import targets_csv_text
+
+    s, tg = mixed
+    at = tg["attrs"]
+    assert at["arm_robots"] == ["panda_instrument.urdf", "ur5_instrument.urdf"]
+    names = json.loads(at["arm_joints"])
+    assert names[0] == [f"panda_joint{i}" for i in range(1, 8)]
+    assert names[1][0] == "shoulder_pan_joint" and len(names[1]) == 6
+    assert at["joints"] == [f"q{i}" for i in range(1, 8)] and at["q_units"] == ["rad"] * 7
+    rows = list(csv.reader(io.StringIO(targets_csv_text(tg))))
+    head = rows[0]
+    assert head[:3] == ["arm", "robot", "target"] and "q7 [deg]" in head
+    q7 = head.index("q7 [deg]")
+    ur5 = [r for r in rows[1:] if r[0] == "1" and r[6] == "1"]
+    panda = [r for r in rows[1:] if r[0] == "0" and r[6] == "1"]
+    assert ur5 and panda and all(r[1] == "ur5_instrument.urdf" and r[q7] == "" for r in ur5)
+    assert all(r[q7] != "" for r in panda)
+    i = int(panda[0][2])
+    assert float(panda[0][q7]) == pytest.approx(np.degrees(np.asarray(tg["q"])[0, i, 6]), abs=0)
+
+
+@pytest.mark.parametrize("edit,says", [
+    (lambda a: a[1].update(robot="ur5"), "known here: chain, radius, tool_radius, base"),
+    (lambda a: a[1].update(radius=[0.05] * 5), "arms.1.radius': one radius per link of this "
+     "arm's chain (6 links"),
+    (lambda a: a[0]["chain"].update(set={"panda_joint4.origin.x": "nope"}), "arms.0.chain': set "
+     "name 'nope' is neither a design variable nor a fixed value"),
+    (lambda a: a[1].pop("radius"), "collision.radius': links: auto needs the capsules' radius "
+     "(one number, or one per link), or every arm its own arms.<k>.radius"),
+    (lambda a: [x.pop("chain") for x in a], "chain: missing; give study.chain (the robot), or "
+     "every arm its own arms.<k>.chain"),
+    (lambda a: a[1].update(radius=-0.1), "needs a radius > 0"),
+])  # fmt: skip
+def test_a_mistake_in_an_arms_robot_is_one_line(edit, says):
+    raw = _raw()
+    edit(raw["study"]["arms"])
+    with pytest.raises(ConfigError, match=says.replace("(", r"\(").replace(")", r"\)")):
+        C.validate(raw, str(CFG), folder=CFG.parent, checks=False)
+
+
+def test_a_urdf_arm_needs_the_study_in_metres():
+    raw = _raw()
+    raw["study"]["chain"] = {"convention": "standard", "joints": [
+        {"type": "R", "a": 0.3, "limits": [-90, 90]}, {"type": "R", "a": 0.3, "limits": [-90, 90]}]}
+    raw["study"]["units"] = {"length": "mm"}
+    raw["study"]["arms"][1].pop("chain")
+    raw["study"]["arms"][1]["radius"] = 0.05
+    with pytest.raises(ConfigError, match="arms.0.chain': a URDF's lengths are metres"):
+        C.validate(raw, str(CFG), folder=CFG.parent, checks=False)
