@@ -707,7 +707,7 @@ class Arm(Section):
     """One of several arms: its base, its port (else ``task.port``, if any), its tool's
     insertion range and, for a set-up that mixes robots, its own robot: ``chain`` (else
     ``study.chain``) with its capsules' ``radius`` and ``tool_radius`` (else
-    ``collision``'s). Arms of one robot share one compiled program
+    ``collision``'s). Arms of one robot are solved in one batch
     (``designopt.studies.serial.setup``)."""
 
     chain: AnyChain | None = Field(

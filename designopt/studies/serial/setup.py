@@ -3,7 +3,8 @@ report and archive read (issue #67).
 
 Every arm is ``study.chain`` unless it carries its own robot (``arms.<k>.chain``, with its
 capsules' ``radius`` and its ``tool_radius``). Arms of one robot form a :class:`Group`,
-scored by one compiled block program: its settings are a single-robot *view* of the
+solved in one batch (one IK per robot in the block program, not one per arm): its
+settings are a single-robot *view* of the
 study (:func:`view`: the group's chain, collision radii and arms), so the kernel
 (``taskindex.chunk_values``) knows one chain at a time. A set-up of one robot is one group
 whose view is the study itself: every existing config runs the program it ran before.
