@@ -40,6 +40,12 @@ def _release_compiled_programs():
     maps each) and ran into the kernel's map limit (vm.max_map_count 65530), which
     crashed XLA mid-suite."""
     yield
+    release_compiled_programs()
+
+
+def release_compiled_programs() -> None:
+    """Drop every compiled program this process holds (they stay in the session's cache
+    folder, so a later test loads rather than compiles them)."""
     from designopt.app import job
     from designopt.core import exported
     from designopt.problems import evaluate
