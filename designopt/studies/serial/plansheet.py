@@ -134,6 +134,9 @@ def plan_of(s: SerialSettings, g: Mapping[str, Any],
     if setup.mixed(s):
         plan.robots = tuple(setup.robot_name(s, k) for k in range(setup.n_arms(s)))
     plan.rows = _rows(s, plan, ind, objectives)
+    if plan.robots:  # which arm is which robot (the table's rows are the arms)
+        plan.rows.insert(0, "robots: " + ", ".join(f"arm {k} (P{k}) {r}"
+                                                  for k, r in enumerate(plan.robots)))  # fmt: skip
     return plan
 
 
@@ -514,7 +517,7 @@ def _table(fig: Any, plan: Plan, W: float, H: float, top: float, height: float) 
         head += [f"base x, y, z [{u}]", "base roll, pitch, yaw [deg]"]
     cells = []
     for k, p in enumerate(plan.ports):
-        row = [f"P{k}: arm {k}" + (f" ({plan.robots[k]})" if plan.robots else ""), _fmt(p, f)]
+        row = [f"P{k}: arm {k}", _fmt(p, f)]
         if plan.port_points is not None:
             row += [_fmt(plan.port_points[k], f),
                     f"{np.linalg.norm(p - plan.port_points[k]) * f:.1f}"]  # fmt: skip
