@@ -1,13 +1,13 @@
 """Tests are the caller: they ask for float64 explicitly (``import designopt`` no longer
 changes JAX's global configuration)."""
 
-import gc
 import os
 import shutil
 import tempfile
 
 import jax
 import pytest
+from compiled import release_compiled_programs
 
 from designopt.cli.setup import use_cache
 
@@ -41,22 +41,6 @@ def _release_compiled_programs():
     crashed XLA mid-suite."""
     yield
     release_compiled_programs()
-
-
-def release_compiled_programs() -> None:
-    """Drop every compiled program this process holds (they stay in the session's cache
-    folder, so a later test loads rather than compiles them)."""
-    from designopt.app import job
-    from designopt.core import exported
-    from designopt.problems import evaluate
-    from designopt.studies.serial import blocks
-
-    job._PROBLEMS.clear()
-    evaluate._SCORERS.clear()
-    blocks._PROGRAMS.clear()
-    exported._CALLS.clear()
-    jax.clear_caches()
-    gc.collect()
 
 
 def pytest_sessionfinish(session: pytest.Session) -> None:

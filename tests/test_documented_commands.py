@@ -622,10 +622,9 @@ def _params() -> list:
 def test_documented_command_runs(scenario, tmp_path, monkeypatch, capsys):
     """Each documented command as written, from a folder laid out as the repository, with
     the shipped config at small sizes: exit 0 and every file it names written. Each
-    scenario's compiled programs are dropped after it (conftest's
-    ``release_compiled_programs``): the module runs some sixty commands, and holding all
+    scenario's compiled programs are dropped after it (tests/compiled.py): the module runs some sixty commands, and holding all
     their executables mapped at once crashed XLA (the kernel's map limit)."""
-    from conftest import release_compiled_programs
+    from compiled import release_compiled_programs
 
     text = " ".join(a for _, argv in _steps(scenario) for a in argv)
     folder = make_tree(tmp_path / "repo", text)
