@@ -467,7 +467,8 @@ def _check_bases(s: SerialSettings) -> None:
         if s.arms else [(None, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))]  # fmt: skip
     from designopt.studies.serial import setup
 
-    tops = [_column_top(setup.arm_view(s, k)) for k in range(len(rows))]  # each its robot's
+    tops = [_column_top(setup.arm_view(s, k)) for k in range(len(rows))] if setup.mixed(s) \
+        else [_column_top(s)] * len(rows)  # each arm its own robot's column
     for (arm_key, xyz, rpy), top in zip(rows, tops, strict=True):
         var = [v.removeprefix("-") if isinstance(v, str) and v.removeprefix("-") in s.variables
                else None for v in xyz]  # fmt: skip

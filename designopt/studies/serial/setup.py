@@ -26,7 +26,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from designopt.studies.serial.settings import Arm, SerialSettings
+from designopt.studies.serial.settings import SerialSettings
 
 ARM_PARAMS = ("q_lower", "q_upper", "arm_const", "arm_col", "arm_sign", "scene_insertion",
               "scene_port", "scene_geometry")  # fmt: skip
@@ -109,10 +109,6 @@ def arm_view(s: SerialSettings, k: int) -> SerialSettings:
         if k in g.arms:
             return g.settings if len(g.arms) == 1 else view(g.settings, (g.arms.index(k),))
     raise IndexError(k)
-
-
-def arm_of(s: SerialSettings, k: int) -> Arm | None:
-    return None if s.arms is None else s.arms[k]
 
 
 def n_arms(s: SerialSettings) -> int:
