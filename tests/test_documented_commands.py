@@ -202,7 +202,7 @@ SCENARIOS: list[tuple] = [
      "designopt show results/port_placement/port_placement.h5 --csv",
      "designopt report results/port_placement/port_placement.h5 --html"),
     # arms of different robots (configs/mixed_setup.yaml, docs/planning.md)
-    ("designopt eval configs/mixed_setup.yaml --design b=0.55 by=0 px=0.03 py0=-0.1 py1=0.1",
+    ("designopt eval configs/mixed_setup.yaml --design b=0.59 by=0.18 px=0.12 py0=-0.09 py1=-0.11 c=0.63",
      "designopt run configs/mixed_setup.yaml",
      "designopt show results/mixed_setup/mixed_setup.h5 --csv",
      "designopt report results/mixed_setup/mixed_setup.h5 --html"),

@@ -146,6 +146,7 @@ def _extra_lines(s: SerialSettings, fin: Any) -> list[str]:
     lines = [head + ":"]
     for k in range(A):
         arm = "  arm" if A == 1 and s.arms is None else f"  arm {k}"
+        arm += " (holds the camera)" if k == s.camera_arm() else ""
         parts = []
         if ports is not None:
             txt = f"port {_vec(ports[k])} {u}"

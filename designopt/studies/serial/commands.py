@@ -383,7 +383,8 @@ def _solved_pose(s: Any, mech: Any, x: np.ndarray, seed: int) -> dict[str, Any] 
     st = drawing.tuple_stats(s, mech, sol, keys)
     label, arms_, pairs, qs = tup[0]
     perm = drawing._tuples(s, mech, sol, keys)[0]
-    marks = [np.asarray(sol["target_p"])[perm[k][st.median]] for k in range(len(s.arms))]
+    marks = [np.asarray(sol["target_p"])[perm[k][st.median]]
+            for k in s.instrument_arms()]  # the camera arm's target is the scope's
     return {"text": f"solved for the task's {N} targets (IK, one target per arm): every arm "
                     f"at the {label}; {st.text()}", "Q": np.stack(qs), "pairs": pairs,
             "colliding": [a.colliding for a in arms_], "marks": marks}  # fmt: skip

@@ -311,8 +311,10 @@ def representative(s: SerialSettings, mech: Mechanism, sol: Mapping[str, np.ndar
     j = int(order[(len(order) - 1) // 2])
     idx = [int(perm[k][j]) for k in range(A)]
     Q = np.stack([np.asarray(sol["q"])[k][i] for k, i in enumerate(idx)])
-    return (f"the tuple of median gap between the arms (tuple {j}: targets {idx}, gap "
-            f"{length_text(gap[j], length_unit(s))})", Q, [p[i] for i in idx])  # fmt: skip
+    inst = s.instrument_arms()  # (the camera arm's target is the scope's: not starred)
+    return (f"the tuple of median gap between the arms (tuple {j}: targets "
+            f"{[idx[k] for k in inst]}, gap {length_text(gap[j], length_unit(s))})", Q,
+            [p[idx[k]] for k in inst])  # fmt: skip
 
 
 def design_pose(s: SerialSettings, mech: Mechanism, x: Any,
@@ -364,7 +366,8 @@ def study_arms(s: SerialSettings, mech: Mechanism, x: Any, Q: np.ndarray, *, lab
     ms = setup.mechanisms(s)
     out = []
     for k, Tk in enumerate(T):
-        who = f"arm {k}" + (f" ({setup.robot_name(s, k)})" if setup.mixed(s) else "")
+        who = f"arm {k}" + (", camera" if k == s.camera_arm() else "") + \
+            (f" ({setup.robot_name(s, k)})" if setup.mixed(s) else "")  # fmt: skip
         lab = label if Tk is None else (f"{label}: {who}" if label else who)
         col = color if Tk is None else ARM_COLOURS[k % len(ARM_COLOURS)]
         sk, mk = (s, mech) if not setup.mixed(s) else (setup.arm_view(s, k), ms[k])
@@ -636,5 +639,6 @@ def placement_text(s: SerialSettings, g: Mapping[str, Any]) -> str:
         part = [f"port {vec(ports[k])} {u}"] if ports is not None else []
         if bases is not None:
             part.append(f"base {vec(bases[k][:3])} {u}, rpy {vec(bases[k][3:])} deg")
-        out.append(f"arm {k}: " + ", ".join(part))
+        who = f"arm {k}" + (" (holds the camera)" if k == s.camera_arm() else "")
+        out.append(f"{who}: " + ", ".join(part))
     return "; ".join(out)

@@ -317,7 +317,8 @@ def _one_robot(rec: RunRecord, sol: dict[str, np.ndarray] | None) -> robot.Scene
             st = drawing.tuple_stats(s, mech, sol, final_keys(rec))
             label, arms, pairs, _ = tup[0]
             perm = drawing._tuples(s, mech, sol, final_keys(rec))[0]
-            tg = [np.asarray(sol["target_p"])[perm[k][st.median]] for k in range(len(s.arms))]
+            tg = [np.asarray(sol["target_p"])[perm[k][st.median]]
+            for k in s.instrument_arms()]  # the camera arm's target is the scope's
             return robot.Scene(arms=arms, collisions=pairs, marks=[(t, "#d62728") for t in tg],
                                title=f"the final design at the {label}\n{st.text()}", **around)  # fmt: skip
     if sol is not None:

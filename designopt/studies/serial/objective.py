@@ -75,6 +75,8 @@ def build_task_fn(mech: Mechanism, s: SerialSettings, dtype: Any) -> tuple[Any, 
     gap = s.has_port_gap()
     shared = s.shared_port()
     view = s.task is not None and s.task.camera is not None
+    holder = s.camera_arm()  # the arm that holds the scope, if one does
+    inst = taskindex.instruments(s)
     wall = None if s.task is None or s.task.body_wall is None else s.task.body_wall.shape
 
     def fn(params, X, key):
@@ -89,11 +91,13 @@ def build_task_fn(mech: Mechanism, s: SerialSettings, dtype: Any) -> tuple[Any, 
         est = taskindex.estimates_of(s, mech, per, params)
         full = design_full(params, X, dtype)
         if gap:  # exact: a function of the design alone (no samples, SE 0)
-            g = incisions.port_gap(params, full, wall, shared)
+            g = incisions.port_gap(params, full, wall, shared, holder)
             est["port_gap"] = (g, jnp.zeros_like(g))
         seen = None
         if view:  # the endoscope's view of the targets: no IK
             seen = camera.seen(params, full, wall, params["target_p"]).astype(dtype)
+            if holder is not None:  # seen while its arm holds the scope (its replication's)
+                seen = seen * per["success"][holder].astype(dtype)
             G, run = taskindex.groups(s)
             est["view_ok"] = taskindex.share(seen, taskindex.labels(seen.shape[-1], (G, run)), G)
         out = {}
@@ -110,7 +114,7 @@ def build_task_fn(mech: Mechanism, s: SerialSettings, dtype: Any) -> tuple[Any, 
         lin = [i for i, k in enumerate(names) if taskindex.mean_type(k)]
         f_se = jnp.zeros_like(f)
         if lin:
-            c = normalise.weighted_sum([taskindex.values(per, names[i]) for i in lin],
+            c = normalise.weighted_sum([taskindex.values(per, names[i], inst) for i in lin],
                                        b[jnp.asarray(lin)], [w[i] for i in lin])  # fmt: skip
             G, run = taskindex.groups(s)  # batch means over the replications (issue #65)
             f_se = taskindex.mean_se(c, taskindex.labels(c.shape[-1], (G, run)), G)

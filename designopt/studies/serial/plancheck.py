@@ -330,7 +330,7 @@ def _check_port_units(s: SerialSettings) -> None:
         c, _ = region_center_radius(s.task.region)  # type: ignore[union-attr]
         bound = np.abs(c) + size
     cam = s.task.camera  # type: ignore[union-attr]
-    rows = [(_port_key(s, k), p) for k, p in enumerate(s.ports())]
+    rows = [(_port_key(s, k), p) for k, p in enumerate(s.ports()) if k != s.camera_arm()]
     rows += [] if cam is None else [("task.camera.port", cam.port)]
     for key, entries in rows:
         if entries is None:
@@ -623,10 +623,13 @@ def warnings(s: SerialSettings, final: Mapping[str, Any]) -> list[str]:
     u = length_unit(s)
     g = port_gap(s)
     p = incisions(s, final) if g is not None else None
+    keep = list(s.instrument_arms()) if p is not None and s.arms is not None else None
+    if keep is not None:
+        p = p[np.asarray(keep)]  # type: ignore[index]  # the camera arm's port is the camera's
     if p is not None and s.shared_port():
-        p = p[:1]  # one task.port, which the arms share
+        p, keep = p[:1], (keep or [0])[:1]  # one task.port, which the arms share
     names = [] if p is None else [f"arm {k}" if s.arms is not None else "the port"
-                                  for k in range(len(p))]  # fmt: skip
+                                  for k in (keep or range(len(p)))]  # fmt: skip
     cam = None if g is None else camera_incision(s, final)
     if cam is not None:  # the endoscope's incision point
         p = cam[None] if p is None else np.concatenate([p, cam[None]])
@@ -636,7 +639,8 @@ def warnings(s: SerialSettings, final: Mapping[str, Any]) -> list[str]:
             d = float(np.linalg.norm(p[i] - p[j]))
             if d < g:  # type: ignore[operator]
                 arms = names[i].startswith("arm ") and names[j].startswith("arm ")
-                who = f"arms {i} and {j}" if arms else f"{names[i]} and {names[j]}"
+                who = f"arms {names[i][4:]} and {names[j][4:]}" if arms else \
+                    f"{names[i]} and {names[j]}"  # fmt: skip
                 out.append(f"task.port_gap: the incision points of {who} are {d:.3g} {u} "
                            f"apart, closer than {g:.3g} {u}: the trocars and the instruments "
                            "crowd each other (keep ports at least about 5 cm apart)")  # fmt: skip

@@ -115,6 +115,13 @@ def plan_of(s: SerialSettings, g: Mapping[str, Any],
     ports = np.asarray(g["ports"], np.float64).reshape(-1, 3)
     pp = np.asarray(g["port_points"], np.float64).reshape(-1, 3) if "port_points" in g else None
     bases = np.asarray(g["bases"], np.float64).reshape(-1, 6) if "bases" in g else None
+    holder = s.camera_arm()
+    held = None  # the camera arm's base: a text row (its incision point is the camera's, C)
+    if holder is not None and len(ports) == len(s.arms or ()):
+        keep = np.asarray(s.instrument_arms())
+        held = None if bases is None else bases[holder]
+        ports, bases = ports[keep], None if bases is None else bases[keep]
+        pp = None if pp is None else pp[keep]
     dist = [(i, j, float(np.linalg.norm(ports[i] - ports[j])))
             for i, j in itertools.combinations(range(len(ports)), 2)]  # fmt: skip
     c = region_centre(s.task.region if s.task is not None else None)
@@ -132,11 +139,18 @@ def plan_of(s: SerialSettings, g: Mapping[str, Any],
     from designopt.studies.serial import setup
 
     if setup.mixed(s):
-        plan.robots = tuple(setup.robot_name(s, k) for k in range(setup.n_arms(s)))
+        plan.robots = tuple(setup.robot_name(s, k) for k in range(setup.n_arms(s))
+                            if k != holder)  # fmt: skip
     plan.rows = _rows(s, plan, ind, objectives)
     if plan.robots:  # which arm is which robot (the table's rows are the arms)
-        plan.rows.insert(0, "robots: " + ", ".join(f"arm {k} (P{k}) {r}"
-                                                  for k, r in enumerate(plan.robots)))  # fmt: skip
+        plan.rows.insert(0, "robots: " + ", ".join(
+            f"arm {k} (P{j}) {r}" for j, (k, r) in enumerate(zip(s.instrument_arms(), plan.robots,
+                                                                  strict=False))))  # fmt: skip
+    if holder is not None:  # the arm that holds the scope through C
+        at = "" if held is None else (f", base {_fmt(held[:3], f)} {shown}, "
+                                      f"yaw {held[5]:.1f} deg")  # fmt: skip
+        plan.rows.insert(0 + bool(plan.robots), f"camera arm: arm {holder} "
+                         f"({setup.robot_name(s, holder)}) holds the scope through C{at}")  # fmt: skip
     return plan
 
 

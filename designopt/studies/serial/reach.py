@@ -217,7 +217,7 @@ def _check_ports(s: SerialSettings) -> None:
     shapes = None
     designs = port_designs(s)
     for k, entries in enumerate(s.ports()):
-        if entries is None:
+        if entries is None or k == s.camera_arm():  # the camera arm's is task.camera's
             continue
         arm = None if s.arms is None else s.arms[k]
         where = "task.port" if arm is None or arm.port is None else f"arms.{k}.port"

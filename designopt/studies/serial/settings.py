@@ -724,6 +724,13 @@ class Arm(Section):
         None,
         description="This arm's instrument radius past its port (else `collision.tool_radius`).",
     )
+    role: Literal["instrument", "camera"] = Field(
+        "instrument",
+        description="`instrument` (reaches the task's targets) or `camera`: the arm holds "
+        "the endoscope of `task.camera` (its tip at the scope's tip, its tool axis along the "
+        "scope's, through the camera port) for the whole task; `view_ok` counts only what "
+        "it holds, and its links count in the arms' collisions (docs/planning.md).",
+    )
     base: ArmBase = Field(ArmBase(), description="Where this arm's base frame sits.")
     port: tuple[Entry, Entry, Entry] | None = Field(
         None,
@@ -958,7 +965,23 @@ class SerialSettings(StudySettings):
                 raise ValueError("arms: the arms reach the task through their ports "
                                  "(arms.<k>.port or task.port) or by position; a "
                                  "task.tool_axis cone is for one arm")  # fmt: skip
-            given = [a.port is not None for a in self.arms]
+            cams = [k for k, a in enumerate(self.arms) if a.role == "camera"]
+            for k in cams:
+                if self.task.camera is None:  # type: ignore[union-attr]
+                    raise ValueError(f"arms.{k}.role: a camera arm holds the endoscope of "
+                                     "task.camera; give task.camera (its port, band, fov)")  # fmt: skip
+                for fld in ("port", "insertion"):
+                    if getattr(self.arms[k], fld) is not None:
+                        raise ValueError(f"arms.{k}.{fld}: a camera arm goes through "
+                                         f"task.camera's port (task.camera.port, "
+                                         f".insertion); remove arms.{k}.{fld}")  # fmt: skip
+            if len(cams) > 1:
+                raise ValueError(f"arms.{cams[1]}.role: one arm holds the endoscope (arm "
+                                 f"{cams[0]} already does)")  # fmt: skip
+            if len(cams) == len(self.arms):
+                raise ValueError(f"arms.{cams[0]}.role: a set-up needs an instrument arm "
+                                 "beside the camera arm")  # fmt: skip
+            given = [a.port is not None for a in self.arms if a.role != "camera"]
             if any(given) and not all(given):
                 raise ValueError("arms: give every arm its own port (arms.<k>.port) or none "
                                  "(then task.port, if given, is every arm's)")  # fmt: skip
@@ -968,6 +991,10 @@ class SerialSettings(StudySettings):
                 if a.insertion is not None and self.ports()[k] is None:
                     raise ValueError(f"arms.{k}.insertion: is the tool's depth past a port; "
                                      f"give arms.{k}.port or task.port")  # fmt: skip
+        if self.task is not None and self.task.instrument_angle is not None \
+                and self.arms is not None and len(self.instrument_arms()) < 2:  # fmt: skip
+            raise ValueError("task.instrument_angle: is the band of the angle between two "
+                             "instrument arms; the set-up has one (the other holds the camera)")  # fmt: skip
         if self.task is not None and self.task.instrument_angle is not None \
                 and self.arms is None:  # fmt: skip
             raise ValueError("task.instrument_angle: is the band of the angle between two "
@@ -1104,6 +1131,8 @@ class SerialSettings(StudySettings):
                 out += COLLISION_INDEX_NAMES
             if self.arms is not None:
                 out += tuple(f"reach_{k}" for k in range(len(self.arms))) + ARM_INDEX_NAMES
+                if len(self.instrument_arms()) < 2:  # one instrument beside the camera arm
+                    out = tuple(k for k in out if k != "instrument_angle")
                 if self.task.instrument_angle is not None:  # type: ignore[union-attr]
                     out += ("instrument_ok",)
                 if self.has_port_gap():
@@ -1120,13 +1149,24 @@ class SerialSettings(StudySettings):
             return 0
         n = 0
         if self.ports()[0] is not None:
-            n = 1 if self.shared_port() else len(self.arms)  # type: ignore[arg-type]
+            n = 1 if self.shared_port() else len(self.instrument_arms())
         return n + (self.task.camera is not None)
 
     def shared_port(self) -> bool:
-        """Whether every arm goes through ``task.port`` (one incision; also with one arm)
-        rather than each through its own ``arms.<k>.port``."""
-        return self.arms is None or any(a.port is None for a in self.arms)
+        """Whether every instrument arm goes through ``task.port`` (one incision; also with
+        one arm) rather than each through its own ``arms.<k>.port``."""
+        return self.arms is None or any(a.port is None for a in self.arms if a.role != "camera")
+
+    def camera_arm(self) -> int | None:
+        """The index of the arm that holds the endoscope (``arms.<k>.role: camera``)."""
+        return next((k for k, a in enumerate(self.arms or []) if a.role == "camera"), None)
+
+    def instrument_arms(self) -> tuple[int, ...]:
+        """The indices of the arms that reach the task's targets (every arm but the camera
+        arm; (0,) without ``arms``)."""
+        if self.arms is None:
+            return (0,)
+        return tuple(k for k, a in enumerate(self.arms) if a.role != "camera")
 
     def has_port_gap(self) -> bool:
         """Whether ``port_gap`` (the least distance between two incision points: the arms'
@@ -1169,7 +1209,9 @@ class SerialSettings(StudySettings):
         d = (0.0, math.inf) if self.task is None else self.task.depth_range()
         if self.arms is None:
             return [d]
-        return [a.insertion if a.insertion is not None else d for a in self.arms]
+        # the camera arm's tip is the scope's, whose depth camera.pose keeps in range
+        return [(0.0, math.inf) if a.role == "camera" else a.insertion
+                if a.insertion is not None else d for a in self.arms]  # fmt: skip
 
     def ports(self) -> list[tuple[Entry, Entry, Entry] | None]:
         """The port entries of each arm (one entry without ``arms``): its own, else
@@ -1177,7 +1219,9 @@ class SerialSettings(StudySettings):
         tp = None if self.task is None else self.task.port
         if self.arms is None:
             return [tp]
-        return [a.port if a.port is not None else tp for a in self.arms]
+        cam = None if self.task is None else self.task.camera
+        return [cam.port if a.role == "camera" and cam is not None
+                else a.port if a.port is not None else tp for a in self.arms]  # fmt: skip
 
 
 def _arm_names(arms: list[Arm] | None, known: set[str], info: ValidationInfo) -> dict[str, str]:

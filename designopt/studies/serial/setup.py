@@ -50,7 +50,7 @@ def robot_key(s: SerialSettings, k: int) -> str:
     a = s.arms[k]  # type: ignore[index]
     chain = s.chain if a.chain is None else a.chain
     return json.dumps([chain.model_dump(mode="json", exclude={"urdf_path"}), a.radius,
-                       a.tool_radius], sort_keys=True)  # fmt: skip
+                       a.tool_radius, a.role], sort_keys=True)  # fmt: skip
 
 
 def view(s: SerialSettings, arms: tuple[int, ...]) -> SerialSettings:
@@ -67,14 +67,20 @@ def view(s: SerialSettings, arms: tuple[int, ...]) -> SerialSettings:
         cu = {k: v for k, v in (("radius", a.radius), ("tool_radius", a.tool_radius))
               if v is not None}  # fmt: skip
         upd["collision"] = c.model_copy(update=cu)
+    if a.role == "camera":  # one pose per replication (taskindex.camera_values): no runs of
+        # neighbouring targets to seed from
+        task = s.task  # type: ignore[union-attr]
+        upd["task"] = task.model_copy(update={"ik": task.ik.model_copy(update={"neighbours": 0})})
     return s.model_copy(update=upd)
 
 
 def mixed(s: SerialSettings) -> bool:
     """Whether some arm carries a robot of its own (``arms.<k>.chain``, ``radius`` or
-    ``tool_radius``)."""
+    ``tool_radius``) or holds the camera (``role: camera``: its own group, whose target is
+    the scope's pose, ``taskindex.setup_values``)."""
     return s.arms is not None and any(
-        a.chain is not None or a.radius is not None or a.tool_radius is not None for a in s.arms)
+        a.chain is not None or a.radius is not None or a.tool_radius is not None
+        or a.role == "camera" for a in s.arms)  # fmt: skip
 
 
 def groups(s: SerialSettings) -> tuple[Group, ...]:
@@ -147,7 +153,8 @@ def joint_attrs(s: SerialSettings) -> dict[str, Any]:
     """The archive's joint attributes of a set-up of several robots: ``joints`` q1 … qn
     (n the most joints of any arm; an arm's q is NaN past its own), ``types`` and
     ``q_units`` per column where every arm that has the joint agrees (else "mixed"),
-    ``arm_robots`` (each arm's, :func:`robot_name`), and each arm's own joint names,
+    ``arm_robots`` (each arm's, :func:`robot_name`; " (camera)" after the arm that holds
+    the endoscope, whose targets' q is its replication's pose), and each arm's own joint names,
     types and units as JSON (``arm_joints``, ``arm_types``, ``arm_q_units``)."""
     from designopt.studies.serial.mechanism import joint_names
     from designopt.studies.serial.settings import length_unit
@@ -163,7 +170,8 @@ def joint_attrs(s: SerialSettings) -> dict[str, Any]:
     ctype = [c.pop() if len(c) == 1 else "mixed" for c in col]
     return {"joints": [f"q{j + 1}" for j in range(n)], "types": ctype,
             "q_units": ["rad" if t == "R" else u if t == "P" else "mixed" for t in ctype],
-            "arm_robots": [robot_name(s, k) for k in range(n_arms(s))],
+            "arm_robots": [robot_name(s, k) + (" (camera)" if k == s.camera_arm() else "")
+                           for k in range(n_arms(s))],  # fmt: skip
             "arm_joints": json.dumps(names), "arm_types": json.dumps(types),
             "arm_q_units": json.dumps([["rad" if t == "R" else u for t in ts] for ts in types])}
 

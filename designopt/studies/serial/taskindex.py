@@ -120,12 +120,20 @@ def estimates_of(s: SerialSettings, mech: Mechanism, per: dict[str, jax.Array],
                  params: dict[str, Any]) -> dict[str, tuple[jax.Array, jax.Array]]:  # fmt: skip
     """:func:`estimates` with the study's replication groups (:func:`groups`), arms, radii
     and margin (``bodies.geometry``)."""
+    inst = instruments(s)
     if s.collision is None:
-        return estimates(per, grp=groups(s))
+        return estimates(per, grp=groups(s), inst=inst)
     key = jax.random.fold_in(params["sample_key"], 2)  # the arms' target tuples
     sc_p = params if "scene_insertion" in params else scene_params(s, per["success"].dtype, mech)
     gp = sc_p["scene_geometry"]
-    return estimates(per, key, gp["radii"], gp["margin"], sc_p.get("scene_band"), groups(s))
+    return estimates(per, key, gp["radii"], gp["margin"], sc_p.get("scene_band"), groups(s),
+                     inst)  # fmt: skip
+
+
+def instruments(s: SerialSettings) -> tuple[int, ...] | None:
+    """The instrument arms' indices where an arm holds the camera (the task's means are
+    theirs), else None (every arm)."""
+    return None if s.camera_arm() is None else s.instrument_arms()
 
 
 def scene_params(s: SerialSettings, dtype: Any, mech: Mechanism | None = None) -> dict[str, Any]:
@@ -196,8 +204,8 @@ def counts_of(s: SerialSettings, mech: Mechanism, per: dict[str, jax.Array],
               params: dict[str, Any]) -> dict[str, tuple[jax.Array, int]]:  # fmt: skip
     """:func:`counts` with the arms' target tuples of :func:`estimates_of`."""
     if s.collision is None:
-        return counts(per)
-    return counts(per, jax.random.fold_in(params["sample_key"], 2), groups(s))
+        return counts(per, inst=instruments(s))
+    return counts(per, jax.random.fold_in(params["sample_key"], 2), groups(s), instruments(s))
 
 
 BEST_SLOTS = 8
@@ -335,9 +343,10 @@ def chunk_values(mech: Mechanism, s: SerialSettings, params: dict[str, Any], ful
     (``pt`` (C, 3), ``Rt`` (C, 3, 3) or None; ``t0``: the index of its first target in
     the task, which the IK's seeds hash): each (A·M, C, ...), arm-major. Reads the scene
     (:func:`scene_params`), the joint limits, the arms' bases and the IK's key from
-    ``params``, never the targets. ``profile``: also the IK's seeds tried per target
-    (``ik_tries``) and converged seeds refused for a collision (``ik_refused``)
-    (benchmarks/planning_profile.py)."""
+    ``params``, never the targets. ``pt`` (M, C, 3): each design's own C targets (the
+    camera arm's: :func:`setup_values`; ``Rt`` then None). ``profile``: also the IK's
+    seeds tried per target (``ik_tries``) and converged seeds refused for a collision
+    (``ik_refused``) (benchmarks/planning_profile.py)."""
     from designopt.kinematics.task import port_frames
     from designopt.studies.serial import bodies
 
@@ -345,7 +354,13 @@ def chunk_values(mech: Mechanism, s: SerialSettings, params: dict[str, Any], ful
     opts = options(s) if opts is None else opts
     rows = ind.rows()
     lo, hi = params["q_lower"].astype(dtype), params["q_upper"].astype(dtype)
-    M, C = full.shape[0], pt.shape[0]
+    M, C = full.shape[0], pt.shape[-2]
+    own = pt.ndim == 3  # each design its own targets (M, C, 3)
+    ptb = pt[None] if own else pt[None, None]  # (1, M|1, C, 3)
+
+    def at(m, t):  # the target of rows m (designs of the tiled X) and chunk entries t
+        return pt[m % M, t] if own else pt[t]
+
     geo = bodies.geometry(s, mech)
     arms = s.arms is not None
     A = len(s.arms) if arms else 1
@@ -372,8 +387,10 @@ def chunk_values(mech: Mechanism, s: SerialSettings, params: dict[str, Any], ful
     sc = jnp.asarray([1.0 if r < 3 else ind.length_scale for r in rows], dtype)
     half = (hi - lo) / 2
 
-    scope = None  # the endoscope's shaft (camera.shaft): a capsule per design
-    if geo is not None and "scene_camera" in sc_p and "shaft" in sc_p["scene_camera"]:
+    scope = None  # the endoscope's shaft (camera.shaft): a capsule per design (not the
+    # camera arm's: it holds the scope)
+    if geo is not None and "scene_camera" in sc_p and "shaft" in sc_p["scene_camera"] \
+            and s.camera_arm() is None:  # fmt: skip
         from designopt.kinematics.collision import capsule_capsule
         from designopt.studies.serial import camera
 
@@ -401,9 +418,9 @@ def chunk_values(mech: Mechanism, s: SerialSettings, params: dict[str, Any], ful
     # with a port, the tool axes point from the port to the targets: (A|1, M|1, C, 3, 3)
     # (a port no design variable moves is every design's: one set of frames)
     Rw = None if port is None else \
-        port_frames(pt[None, None], (port if moved else port[:, :1])[:, :, None, :])  # fmt: skip
+        port_frames(ptb, (port if moved or own else port[:, :1])[:, :, None, :])  # fmt: skip
     if arms:  # each arm's targets in its own base frame, (A·M, C, ...)
-        pl = jnp.einsum("amji,amcj->amci", Rb, pt[None, None] - tb[:, :, None, :])
+        pl = jnp.einsum("amji,amcj->amci", Rb, ptb - tb[:, :, None, :])
         p_ik = pl.reshape(A * M, C, 3)
         R_ik = None if Rw is None else jnp.einsum(
             "amji,amcjk->amcik", Rb, jnp.broadcast_to(Rw, (A, M, C, 3, 3))
@@ -426,12 +443,12 @@ def chunk_values(mech: Mechanism, s: SerialSettings, params: dict[str, Any], ful
     if geo is not None:
 
         def accept(m, t, q):
-            return clearance(m, pt[t], q)[0] >= gp["margin"].astype(dtype)  # type: ignore[index]
+            return clearance(m, at(m, t), q)[0] >= gp["margin"].astype(dtype)  # type: ignore[index]
 
         if s.task.ik.best == "clearance":  # type: ignore[union-attr]
 
             def score(m, t, q):  # as far from the anatomy (and the rest) as the arm can be
-                return clearance(m, pt[t], q)[0]
+                return clearance(m, at(m, t), q)[0]
 
     # a design equal to an earlier one of the block (a padded block's copies, particles
     # that met) is solved once: its representative's solutions are copied (ik.solve)
@@ -441,11 +458,11 @@ def chunk_values(mech: Mechanism, s: SerialSettings, params: dict[str, Any], ful
     hopeless = None
     if port is not None:  # a target out of an arm's insertion range is a failure whatever
         # the joints (below): one seed for it, not all of them
-        depth = jnp.linalg.norm(pt[None, None] - port[:, :, None, :], axis=-1)  # (A|1, M, C)
+        depth = jnp.linalg.norm(ptb - port[:, :, None, :], axis=-1)  # (A|1, M, C)
         inside = (depth >= d0) & (depth <= d1) & (depth > 0)
         hopeless = jnp.broadcast_to(~inside, (A, M, C)).reshape(A * M, C)
         if inner is not None:  # so is a target whose instrument meets the anatomy
-            blocked = _shaft_blocked(mech, geo, full, lo, hi, port, pt, depth, inner, gp, rep,
+            blocked = _shaft_blocked(mech, geo, full, lo, hi, port, ptb, depth, inner, gp, rep,
                                      ~hopeless, A, M, C)  # fmt: skip
             hopeless = hopeless | blocked
     R_, run = groups(s)  # each replication group its own database (issue #65)
@@ -469,11 +486,11 @@ def chunk_values(mech: Mechanism, s: SerialSettings, params: dict[str, Any], ful
         m_all = jnp.repeat(jnp.arange(X.shape[0]), C)
         t_all = jnp.tile(jnp.arange(C), X.shape[0])
         qf = res.q.reshape(-1, res.q.shape[-1])
-        _, seg = clearance(m_all, pt[t_all], qf)  # the capsules of all (their FK is cheap)
+        _, seg = clearance(m_all, at(m_all, t_all), qf)  # the capsules of all (cheap FK)
         # the clearance (the costly part) of the kept solutions that count: reached, of a
         # representative design (the rest copy theirs)
         need = (ok.reshape(rep.shape[0], C) & (rep == jnp.arange(rep.shape[0]))[:, None])
-        c = ik.on_rows(lambda r: clearance(m_all[r], pt[t_all[r]], qf[r])[0],
+        c = ik.on_rows(lambda r: clearance(m_all[r], at(m_all[r], t_all[r]), qf[r])[0],
                        need.reshape(-1), ik.CHECK_ROWS).reshape(-1, C)[rep]  # fmt: skip
         out["clearance"] = jnp.where(ok, c.reshape(ok.shape), z)
         if arms:
@@ -497,9 +514,38 @@ def setup_values(mech: Any, s: SerialSettings, params: dict[str, Any], full: jax
         return chunk_values(mech, s, params, full, pt, Rt, t0, dtype, opts, profile)
     outs = []
     for g, gp in zip(setup.groups(s), params["setup"], strict=True):
+        if g.settings.camera_arm() is not None:
+            outs.append(camera_values(g, s, params | gp, full, pt.shape[0], t0, dtype, opts,
+                                      profile))  # fmt: skip
+            continue
         outs.append(chunk_values(g.mech, g.settings, params | gp, full, pt, Rt, t0, dtype, opts,
                                  profile))  # fmt: skip
     return setup.merged(s, outs, full.shape[0])
+
+
+def camera_values(g: Any, s: SerialSettings, params: dict[str, Any], full: jax.Array, C: int,
+                  t0: jax.Array, dtype: Any, opts: Any = None, profile: bool = False
+                  ) -> dict[str, jax.Array]:  # fmt: skip
+    """The camera arm's values (``arms.<k>.role: camera``, group ``g``) at a chunk of C of
+    the task's targets, (M, C, ...) as :func:`chunk_values`' of an arm: its one target is
+    the scope's pose (``camera.pose``: the tip, the axis from the camera port), solved once
+    per replication group (R targets per design, target j of group j, with the IK's key
+    folded apart from the instrument arms'), and each task target takes its own group's
+    solution, so that the replications' spread covers the camera arm's IK draw too and
+    ``arms_ok``'s tuples (of one group) meet one camera pose."""
+    from designopt.studies.serial import camera
+
+    R, run = groups(s)
+    wall = None if s.task.body_wall is None else s.task.body_wall.shape  # type: ignore[union-attr]
+    tip = camera.pose(params, full.astype(dtype), wall)[1]  # (M, 3)
+    pc = jnp.broadcast_to(tip[:, None], (tip.shape[0], R, 3))
+    o = None if opts is None else opts._replace(neighbours=0)
+    p = params | {"sample_key": jax.random.fold_in(params["sample_key"], 7)}
+    out = chunk_values(g.mech, g.settings, p, full, pc, None, jnp.zeros((), jnp.int32), dtype, o,
+                       profile)  # (M, R, ...)  # fmt: skip
+    lab = jnp.zeros((C,), jnp.int32) if R <= 1 else ik.group_of(t0 + jnp.arange(C, dtype=jnp.int32),
+                                                               R, run)  # fmt: skip
+    return {k: v[:, lab] for k, v in out.items()}
 
 
 SHAFT_SLACK = 1e-6
@@ -509,7 +555,7 @@ IK's tolerance, so that no converged solution's shaft can clear what its line do
 
 
 def _shaft_blocked(mech: Mechanism, geo: Any, full: jax.Array, lo: jax.Array, hi: jax.Array,
-                   port: jax.Array, pt: jax.Array, depth: jax.Array, inner: Any,
+                   port: jax.Array, pt: jax.Array, depth: jax.Array, inner: Any,  # pt (1, M|1, C, 3)
                    gp: dict[str, Any], rep: jax.Array, asked: jax.Array, A: int, M: int,
                    C: int) -> jax.Array:  # fmt: skip
     """(A·M, C) bool: targets whose every solution the collision check refuses, because the
@@ -545,7 +591,7 @@ def _shaft_blocked(mech: Mechanism, geo: Any, full: jax.Array, lo: jax.Array, hi
     need = (asked.reshape(A, M, C) & on[None, :, None]
             & (depth < l0[None, :, None] - SHAFT_SLACK)
             & (rep.reshape(A, M) == jnp.arange(A * M).reshape(A, M))[..., None])  # fmt: skip
-    ends = jnp.stack(jnp.broadcast_arrays(port[:, :, None, :], pt[None, None]), -2)
+    ends = jnp.stack(jnp.broadcast_arrays(port[:, :, None, :], pt), -2)
     ends = jnp.broadcast_to(ends, (A, M, C, 2, 3)).reshape(-1, 1, 2, 3)
     tr = gp["tool_radius"].astype(dt)
     d = ik.on_rows(lambda r: col.clearance(ends[r], tr, inner, ()), need.reshape(-1),
@@ -579,11 +625,13 @@ def quantile(v: jax.Array, q: float = Q, lab: jax.Array | None = None, G: int = 
     return val, se * jnp.maximum(jnp.nan_to_num(deff, nan=1.0), 1.0)
 
 
-def values(per: dict[str, jax.Array], name: str) -> jax.Array:
+def values(per: dict[str, jax.Array], name: str, inst: tuple[int, ...] | None = None
+           ) -> jax.Array:  # fmt: skip
     """The per-target values (M, N) whose mean is the index ``name`` (a MEANS entry or
-    ``clearance``): with several arms, the mean over the arms at each target."""
+    ``clearance``): with several arms, the mean over the arms at each target (the
+    instrument arms ``inst`` where one holds the camera, :func:`instruments`)."""
     v = per["success"] if name == "reach" else per["inv_k" if name == "gci" else name]
-    return jnp.mean(v, 0)
+    return jnp.mean(v if inst is None else v[jnp.asarray(inst)], 0)
 
 
 def share(x: jax.Array, lab: jax.Array | None = None, G: int = 1
@@ -634,17 +682,19 @@ def ratio(y: jax.Array, x: jax.Array, n_min: int = N_MIN, lab: jax.Array | None 
 
 
 def counts(per: dict[str, jax.Array], key: jax.Array | None = None,
-           grp: tuple[int, int] | None = None) -> dict[str, tuple[jax.Array, int]]:  # fmt: skip
+           grp: tuple[int, int] | None = None, inst: tuple[int, ...] | None = None
+           ) -> dict[str, tuple[jax.Array, int]]:  # fmt: skip
     """(denominator count (M,), out of) of each ratio estimator :func:`estimates` gives:
-    ``collision_free``: converged targets of A·N; ``arms_free``: tuples every arm reaches
-    of N."""
+    ``collision_free``: the instrument arms' (``inst``, else every arm's) converged
+    targets of A·N; ``arms_free``: tuples every arm reaches of N."""
     A, M, N = per["success"].shape
     out = {}
+    ii = tuple(range(A)) if inst is None else tuple(inst)
     if "clearance" in per:
-        out["collision_free"] = (jnp.sum(per["converged"], (0, 2)), A * N)
+        out["collision_free"] = (jnp.sum(per["converged"][jnp.asarray(ii)], (0, 2)), len(ii) * N)
     if A > 1 and key is not None and "segments" in per:
         out["arms_free"] = (jnp.sum(_tuples(per, key, labels(N, grp))[0], -1), N)
-        if "axis" in per:
+        if "axis" in per and len(ii) >= 2:
             out["instrument_angle"] = out["arms_free"]
     return out
 
@@ -687,13 +737,14 @@ def perms(key: jax.Array, N: int, lab: jax.Array | None, A: int) -> list[jax.Arr
 
 
 def instrument_angles(per: dict[str, jax.Array], key: jax.Array,
-                      lab: jax.Array | None = None) -> jax.Array:  # fmt: skip
-    """The angle (degrees, (M, N)) between arm 0's and arm 1's tool axes (``per["axis"]``,
-    world frame) at each target tuple of :func:`_tuples` (the triangulation of the two
-    instruments; ``lab``: the targets' groups, :func:`perms`)."""
+                      lab: jax.Array | None = None, pair: tuple[int, int] = (0, 1)
+                      ) -> jax.Array:  # fmt: skip
+    """The angle (degrees, (M, N)) between the tool axes (``per["axis"]``, world frame) of
+    the first two instrument arms ``pair`` at each target tuple of :func:`_tuples` (the
+    triangulation of the two instruments; ``lab``: the targets' groups, :func:`perms`)."""
     A, M, N = per["success"].shape
-    perm = perms(key, N, lab, 2)[1]
-    a, b = per["axis"][0], per["axis"][1][:, perm]
+    perm = perms(key, N, lab, pair[1] + 1)[pair[1]]
+    a, b = per["axis"][pair[0]], per["axis"][pair[1]][:, perm]
     c = jnp.clip(jnp.sum(a * b, -1), -1.0, 1.0)
     return jnp.degrees(jnp.arccos(c))
 
@@ -713,8 +764,13 @@ def _tuples(per: dict[str, jax.Array], key: jax.Array, lab: jax.Array | None = N
 
 def estimates(per: dict[str, jax.Array], key: jax.Array | None = None,
               radii: tuple[float, ...] = (), margin: float = 0.0, band: Any = None,
-              grp: tuple[int, int] | None = None) -> dict[str, tuple[jax.Array, jax.Array]]:  # fmt: skip
+              grp: tuple[int, int] | None = None, inst: tuple[int, ...] | None = None
+              ) -> dict[str, tuple[jax.Array, jax.Array]]:  # fmt: skip
     """(value, SE) (M,) of every task index from the per-target values (A, M, N).
+    ``inst``: the instrument arms where one arm holds the camera (:func:`instruments`):
+    the means, ``reach``, ``gci_q05`` and ``collision_free`` are theirs, the camera arm
+    counts in ``reach_<k>`` (the share of targets whose replication's scope pose it holds),
+    ``reach_all`` and the arms' tuples (``arms_ok``, ``arms_free``).
     ``grp``: the targets' replication groups (:func:`groups`), whose spread the SEs are
     (batch means; the module's docstring); None: the i.i.d. SEs.
 
@@ -739,19 +795,25 @@ def estimates(per: dict[str, jax.Array], key: jax.Array | None = None,
     A, M, N = per["success"].shape
     lab = labels(N, grp)
     G = 1 if lab is None else grp[0]  # type: ignore[index]
-    lab_a = None if lab is None else jnp.tile(lab, A)  # the (A·N) values' groups, arm-major
+    ii = tuple(range(A)) if inst is None else tuple(inst)
+    Ai = len(ii)
+
+    def of(name):  # the instrument arms' values (Ai, M, N)
+        return per[name] if inst is None else per[name][jnp.asarray(ii)]
+
+    lab_a = None if lab is None else jnp.tile(lab, Ai)  # the (Ai·N) values' groups, arm-major
     out = {}
     for k in MEANS + (("clearance",) if "clearance" in per else ()):
-        v = values(per, k)
+        v = values(per, k, inst)
         out[k] = (jnp.mean(v, -1), mean_se(v, lab, G))
-    if A == 1:
-        out["reach"] = share(per["success"][0], lab, G)
+    if Ai == 1:
+        out["reach"] = share(of("success")[0], lab, G)
     else:
         out["reach"] = (out["reach"][0], jnp.maximum(jnp.nan_to_num(out["reach"][1], nan=0.0), share(
-            jnp.moveaxis(per["success"], 0, 1).reshape(M, A * N))[1]))  # fmt: skip
-    out["gci_q05"] = quantile(jnp.moveaxis(per["inv_k"], 0, 1).reshape(M, A * N), Q, lab_a, G)
+            jnp.moveaxis(of("success"), 0, 1).reshape(M, Ai * N))[1]))  # fmt: skip
+    out["gci_q05"] = quantile(jnp.moveaxis(of("inv_k"), 0, 1).reshape(M, Ai * N), Q, lab_a, G)
     if "clearance" in per:
-        out["collision_free"] = ratio(jnp.sum(per["success"], 0), jnp.sum(per["converged"], 0),
+        out["collision_free"] = ratio(jnp.sum(of("success"), 0), jnp.sum(of("converged"), 0),
                                       N_MIN, lab, G)  # fmt: skip
     if A > 1:
         from designopt.kinematics.collision import arms_clearance
@@ -772,8 +834,8 @@ def estimates(per: dict[str, jax.Array], key: jax.Array | None = None,
         free = (gap >= margin).astype(ok.dtype)  # type: ignore[operator]
         out["arms_ok"] = share(ok * free, lab, G)
         out["arms_free"] = ratio(ok * free, ok, N_MIN, lab, G)
-        if "axis" in per:
-            ang = instrument_angles(per, key, lab)
+        if "axis" in per and Ai >= 2:
+            ang = instrument_angles(per, key, lab, (ii[0], ii[1]))
             out["instrument_angle"] = ratio_mean(ang, ok, N_MIN, lab, G)
             if band is not None:
                 lo, hi = band[0].astype(ang.dtype), band[1].astype(ang.dtype)
