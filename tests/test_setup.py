@@ -204,6 +204,19 @@ def test_a_camera_arm_needs_the_camera():
         C.validate(raw, str(CFG), folder=CFG.parent, checks=False)
 
 
+def test_an_instrument_angle_needs_two_instrument_arms():
+    raw = _raw()
+    raw["study"]["arms"].pop(1)
+    raw["study"]["arms"][0]["base"]["xyz"] = [-0.55, "by", 0]  # (b was the other arm's too)
+    raw["study"]["arms"][0]["port"] = [-0.03, "py0", 0.30]
+    for k in ("b", "px", "py1"):
+        raw["study"]["variables"].pop(k)
+    with pytest.raises(ConfigError, match="task.instrument_angle': is the band of the angle "
+                                          "between two instrument arms; the set-up has one "
+                                          "beside the camera arm"):  # fmt: skip
+        C.validate(raw, str(CFG), folder=CFG.parent, checks=False)
+
+
 def test_a_urdf_arm_needs_the_study_in_metres():
     raw = _raw()
     raw["study"]["chain"] = {"convention": "standard", "joints": [

@@ -993,8 +993,9 @@ class SerialSettings(StudySettings):
                                      f"give arms.{k}.port or task.port")  # fmt: skip
         if self.task is not None and self.task.instrument_angle is not None \
                 and self.arms is not None and len(self.instrument_arms()) < 2:  # fmt: skip
+            held = " beside the camera arm" if self.camera_arm() is not None else ""
             raise ValueError("task.instrument_angle: is the band of the angle between two "
-                             "instrument arms; the set-up has one (the other holds the camera)")  # fmt: skip
+                             f"instrument arms; the set-up has one{held}")  # fmt: skip
         if self.task is not None and self.task.instrument_angle is not None \
                 and self.arms is None:  # fmt: skip
             raise ValueError("task.instrument_angle: is the band of the angle between two "
