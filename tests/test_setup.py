@@ -269,3 +269,26 @@ def test_the_camera_arm_holds_one_pose_per_replication_and_counts_in_the_tuples(
     held = dict(per)
     held["success"] = per["success"].at[2].set(0.0)
     assert arms_ok(held, r)[0] == 0
+
+
+def test_the_plan_table_names_each_port_by_its_arm_when_the_camera_arm_sits_between():
+    """The plan sheet's table numbers the incision points P0, P1, … over the instrument
+    arms, but each row names its own arm: with the camera arm listed as arm 1, P1 is arm
+    2's; the camera arm has no P row (it goes through C) and its base is a text row."""
+    from designopt.studies.serial import plansheet
+
+    raw = _raw()
+    arms = raw["study"]["arms"]
+    arms.insert(1, arms.pop(2))  # instrument, camera, instrument
+    cfg = C.validate(raw, str(CFG), folder=CFG.parent, checks=False)
+    s = cfg.study
+    assert s.camera_arm() == 1 and s.instrument_arms() == (0, 2)
+    ports = np.array([[-0.1, 0.0, 0.3], [0.0, 0.16, 0.3], [0.1, 0.05, 0.3]])
+    bases = np.array([[-0.6, 0, 0, 0, 0, 0], [0, 0.6, 0, 0, 0, -90], [0.6, 0, 0, 0, 0, 180.0]])
+    plan = plansheet.plan_of(s, {"ports": ports, "bases": bases,
+                                 "camera": np.r_[ports[1], 0.0, 0.1, 0.05]})  # fmt: skip
+    head, cells = plansheet.table_cells(plan)
+    assert [c[0] for c in cells] == ["P0: arm 0", "P1: arm 2", "C: camera"]
+    assert cells[1][1] == "(100.0, 50.0, 300.0)" and cells[1][2] == "(600.0, 0.0, 0.0)"
+    assert any(r.startswith("camera arm: arm 1 ") and "(0.0, 600.0, 0.0)" in r for r in plan.rows)
+    assert plan.distances == [(0, 1, pytest.approx(np.linalg.norm(ports[0] - ports[2])))]

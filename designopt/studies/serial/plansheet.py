@@ -55,7 +55,8 @@ class Plan:
     ``angle`` the index ``instrument_angle`` (value, SE) in deg (None where not
     archived), ``band`` ``task.instrument_angle``, ``rows`` more (label, text) lines,
     ``camera`` the endoscope's incision point and tip (6,) or None, ``robots`` each arm's
-    robot where the arms are different robots (``setup.robot_name``)."""
+    robot where the arms are different robots (``setup.robot_name``), ``arms`` the arm
+    index of each row of ``ports`` (a camera arm, which goes through C, has no row)."""
 
     unit: str
     shown: str
@@ -71,6 +72,7 @@ class Plan:
     rows: list[str] = field(default_factory=list)
     camera: np.ndarray | None = None  # (6,): the endoscope's incision point and its tip
     robots: tuple[str, ...] = ()  # each arm's robot, where the arms are different robots
+    arms: tuple[int, ...] = ()  # the arm of each row of ``ports`` (empty: row k is arm k)
 
 
 def display_unit(unit: str) -> tuple[str, float]:
@@ -134,6 +136,8 @@ def plan_of(s: SerialSettings, g: Mapping[str, Any],
     band = s.task.instrument_angle if s.task is not None else None
     plan = Plan(unit, shown, f, ports, pp, bases, dist, c, la, ang,
                 None if band is None else (float(band[0]), float(band[1])))  # fmt: skip
+    if holder is not None and len(ports) == len(s.instrument_arms()):
+        plan.arms = tuple(s.instrument_arms())
     if "camera" in g:
         plan.camera = np.asarray(g["camera"], np.float64).reshape(6)
     from designopt.studies.serial import setup
@@ -521,8 +525,10 @@ def _bases(ax: Any, plan: Plan, E: np.ndarray, p2: np.ndarray, lo: np.ndarray, h
                         fontsize=FONT, color=col, weight="bold", zorder=7)  # fmt: skip
 
 
-def _table(fig: Any, plan: Plan, W: float, H: float, top: float, height: float) -> None:
-    """Each arm's incision point, its move onto the wall and its base, as a table."""
+def table_cells(plan: Plan) -> tuple[list[str], list[list[str]]]:
+    """(header, rows) of the plan's table: each instrument arm's incision point (P0, P1,
+    … named by its arm's index), its move onto the wall and its base; the camera's
+    incision point C last."""
     u, f = plan.shown, plan.factor
     head = ["", f"incision point x, y, z [{u}]"]
     if plan.port_points is not None:
@@ -531,7 +537,7 @@ def _table(fig: Any, plan: Plan, W: float, H: float, top: float, height: float) 
         head += [f"base x, y, z [{u}]", "base roll, pitch, yaw [deg]"]
     cells = []
     for k, p in enumerate(plan.ports):
-        row = [f"P{k}: arm {k}", _fmt(p, f)]
+        row = [f"P{k}: arm {plan.arms[k] if plan.arms else k}", _fmt(p, f)]
         if plan.port_points is not None:
             row += [_fmt(plan.port_points[k], f),
                     f"{np.linalg.norm(p - plan.port_points[k]) * f:.1f}"]  # fmt: skip
@@ -540,6 +546,12 @@ def _table(fig: Any, plan: Plan, W: float, H: float, top: float, height: float) 
         cells.append(row)
     if plan.camera is not None:  # the camera's row: its incision point (its tip: the rows)
         cells.append(["C: camera", _fmt(plan.camera[:3], f)] + ["–"] * (len(head) - 2))
+    return head, cells
+
+
+def _table(fig: Any, plan: Plan, W: float, H: float, top: float, height: float) -> None:
+    """Each arm's incision point, its move onto the wall and its base, as a table."""
+    head, cells = table_cells(plan)
     ax = fig.add_axes((0.75 / W, (top - height) / H, (W - 1.5) / W, height / H))
     ax.set_axis_off()
     tab = ax.table(cellText=cells, colLabels=head, loc="upper center", cellLoc="center",
