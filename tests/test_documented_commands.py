@@ -490,6 +490,9 @@ SKIP: dict[str, str] = {
     "python benchmarks/planning_profile.py": BENCH + " (the planning case's block program timed "
                                              "warm, with the IK's counts)",
     "python benchmarks/scaling.py --reps 5": BENCH + " (device layouts in child processes)",
+    "python benchmarks/threads.py": BENCH + ": planning runs on one thread and on every core, "
+    "minutes (the same numbers bit for bit: tests/test_concurrency.py)",
+    "python benchmarks/threads.py --repeat 2": BENCH + ": as above, two repeats",
     "python docs/make_figures.py": "regenerates docs/img (every shipped config: minutes); the "
                                    "configs run here at small sizes",
     "python docs/make_figures.py --only rcm": "writes docs/img; rcm runs here",

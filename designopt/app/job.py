@@ -5,6 +5,7 @@ later step reads them from the job instead of looking them up again."""
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,6 +36,7 @@ def dtype_of(cfg: Any) -> np.dtype:
 
 
 _PROBLEMS: dict[tuple, Problem] = {}
+_BUILDING = threading.RLock()
 
 
 def build_problem(cfg: Any, keys: Mapping[str, jax.Array], where: str = "config",
@@ -42,7 +44,13 @@ def build_problem(cfg: Any, keys: Mapping[str, jax.Array], where: str = "config"
     """The study's Problem for this config (``dtype``: the job's, else the config's); a
     ValueError becomes a ConfigError. The last few are kept: a second run of the same study
     settings, keys and dtype in one process reuses the Problem, so its compiled programs
-    too (a resume, a test, a notebook)."""
+    too (a resume, a test, a notebook). One thread builds at a time (the final stage's
+    stages are scored side by side: ``designopt.core.concurrency``)."""
+    with _BUILDING:
+        return _build_problem(cfg, keys, where, dtype)
+
+
+def _build_problem(cfg: Any, keys: Mapping[str, jax.Array], where: str, dtype: Any) -> Problem:
     from designopt.problems import normalise
 
     dtype = dtype_of(cfg) if dtype is None else dtype

@@ -34,7 +34,7 @@ from designopt.app.preflight import Estimate
 from designopt.app.records import bind
 from designopt.app.reporting import draw_figures, write_html
 from designopt.app.scoring import check_finite, placement, problem_group, run_groups, with_placement
-from designopt.core import devices
+from designopt.core import concurrency, devices
 from designopt.core.errors import ConfigError, WriteError
 from designopt.core.keys import streams
 from designopt.core.timing import Stopwatch
@@ -247,8 +247,9 @@ def run(cfg: Any, text: str | None = None, where: str = "config", out: Path | No
                 problem = how.problem(job)
             with Stopwatch() as opt, progress(o.n_iters, f"{o.name} on {cfg.study.name}") as bar:
                 try:
-                    res = optimise(job, problem, progress=bar, checkpoint=saver, resume=ck,
-                                   ref_point=how.ref_point(job))  # fmt: skip
+                    with concurrency.in_background(_warm(job)):
+                        res = optimise(job, problem, progress=bar, checkpoint=saver, resume=ck,
+                                       ref_point=how.ref_point(job))  # fmt: skip
                 except KeyboardInterrupt as e:
                     if saver is None:
                         raise
@@ -275,6 +276,26 @@ def run(cfg: Any, text: str | None = None, where: str = "config", out: Path | No
         if ses is not None:
             _write_run(out, rec, ses, saver)
     return Report(out, how.lines(rec), rec)
+
+
+def _warm(job: Job) -> Callable[[], None] | None:
+    """What compiles, beside the search, the programs its scoring after it runs: where the
+    search scores with other settings (``optimizer.fidelity``) and the study scores in
+    blocks (``Problem.staged``), one block of the study's own problem (the box's centre in
+    every row) on its targets; the values are dropped. None where the search's programs
+    are the scoring's."""
+    if job.search_cfg is None:
+        return None
+
+    def warm() -> None:
+        p = job.problem
+        if p.staged is None:
+            return
+        x = 0.5 * (np.asarray(p.lower, np.float64) + np.asarray(p.upper, np.float64))
+        X = np.repeat(x[None], p.staged.designs, 0).astype(job.dtype)
+        p.staged.values(p.params, X)
+
+    return warm
 
 
 def _write_run(out: Path, rec: Record, ses: writer.Session, saver: ckpt.Checkpointer) -> None:

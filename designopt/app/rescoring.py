@@ -27,6 +27,7 @@ designs spread over more than FLAT of their box are the flat directions.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import math
 from collections.abc import Mapping, Sequence
@@ -36,6 +37,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from designopt.core import concurrency
 from designopt.core.errors import ConfigError
 from designopt.problems.base import Problem
 from designopt.problems.evaluate import score
@@ -148,13 +150,17 @@ def blocked(prob: Problem, X: np.ndarray) -> dict[str, np.ndarray]:
     design: one compiled program for any n, and row i's values those of design i alone."""
     X = np.atleast_2d(np.asarray(X, np.float64))
     B = prob.staged.designs if prob.staged is not None else BLOCK
-    parts = []
-    for i in range(0, len(X), B):
+
+    def one(i: int) -> dict[str, np.ndarray]:
         Xi = X[i : i + B]
         k = len(Xi)
         if k < B:
             Xi = np.concatenate([Xi, np.repeat(Xi[-1:], B - k, 0)])
-        parts.append({key: np.asarray(v)[:k] for key, v in score(prob, Xi, batch=B).items()})
+        return {key: np.asarray(v)[:k] for key, v in score(prob, Xi, batch=B).items()}
+
+    # the blocks side by side on the CPU's cores (designopt.core.concurrency)
+    parts = concurrency.map_calls([functools.partial(one, i) for i in range(0, len(X), B)],
+                                  key=("blocked", prob.staged or prob.fn, X.shape[1]))  # fmt: skip
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
 

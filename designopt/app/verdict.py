@@ -36,6 +36,7 @@ scene itself is taken to share it, not checked).
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable
 from typing import Any
@@ -45,6 +46,7 @@ import numpy as np
 
 from designopt.app import quoted
 from designopt.app import rescoring as rs
+from designopt.core import concurrency
 from designopt.core.errors import ConfigError
 from designopt.numerics import pareto, racing
 
@@ -278,7 +280,9 @@ def race_candidates(job: Any, X: np.ndarray, like: Any = None,
         return np.stack(cols, -1), succ, tri
 
     def sample_fn(active: np.ndarray, st: racing.Stage) -> racing.Draw:
-        got = [unit(s, active) for s in range(st.start, st.stop)]
+        # a stage's units side by side on the CPU's cores (designopt.core.concurrency)
+        got = concurrency.map_calls([functools.partial(unit, s, active)
+                                     for s in range(st.start, st.stop)])  # fmt: skip
         V = np.stack([g[0] for g in got], 1)  # (C_active, units, m)
         if not share_cons:
             return racing.Draw(V)

@@ -17,6 +17,7 @@ import contextlib
 import hashlib
 import os
 import tempfile
+import threading
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -24,6 +25,7 @@ from typing import Any
 import jax
 
 _CALLS: dict[str, Callable] = {}
+_LOCK = threading.RLock()
 _SOURCE: list[str] = []
 
 
@@ -113,6 +115,11 @@ def compiled(key: str, fn: Callable, args: tuple) -> Callable:
     cache folder when one is there, else exported now and kept there; ``fn`` itself
     without a cache folder or where exporting fails."""
     sig = signature(key, args)
+    with _LOCK:  # one export per program, whichever thread asks first
+        return _compiled(sig, fn, args)
+
+
+def _compiled(sig: str, fn: Callable, args: tuple) -> Callable:
     if sig in _CALLS:
         return _CALLS[sig]
     d = folder()

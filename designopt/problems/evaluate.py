@@ -4,6 +4,7 @@ a run's objective calls (``evaluate_batch``: the very program the run compiled).
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from typing import Any
 
@@ -11,7 +12,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from designopt.core import devices
+from designopt.core import concurrency, devices
 from designopt.problems.base import Problem, evaluate_batch
 
 
@@ -92,13 +93,20 @@ def staged_scores(problem: Problem, X: Any, params: Any = None, dtype: Any = Non
     n, B = X.shape[0], st.designs
     red = _reducer(st.reduce, problem.constraints)
     key = jax.random.key(0)
-    outs = []
-    for i in range(0, n, B):  # dispatched asynchronously: the blocks queue up
+
+    def block(Xi: np.ndarray) -> Any:
+        Xj = jnp.asarray(Xi)
+        return red(params, Xj, key, st.values(params, Xj))
+
+    rows = []
+    for i in range(0, n, B):
         Xi = X[i : i + B]
         if len(Xi) < B:
             Xi = np.concatenate([Xi, np.repeat(Xi[-1:], B - len(Xi), 0)])
-        Xj = jnp.asarray(Xi)
-        outs.append(red(params, Xj, key, st.values(params, Xj)))
+        rows.append(Xi)
+    # the blocks side by side on the CPU's cores (each call of the IK's program runs on one)
+    outs = concurrency.map_calls([functools.partial(block, Xi) for Xi in rows],
+                                 key=("staged", st.values, red, X.shape[1:], X.dtype.str))  # fmt: skip
     f = np.concatenate([np.asarray(o[0]) for o in outs])[:n]
     aux = {k: np.concatenate([np.asarray(o[1][k]) for o in outs])[:n] for k in outs[0][1]}
     v = np.concatenate([np.asarray(o[2]) for o in outs])[:n]

@@ -22,7 +22,9 @@ its batch. The price: a block holds :data:`DESIGNS` designs, so one design's sol
 
 from __future__ import annotations
 
+import functools
 import json
+import threading
 from collections.abc import Callable
 from typing import Any
 
@@ -30,7 +32,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from designopt.core import exported
+from designopt.core import concurrency, exported
 from designopt.studies.serial import taskindex
 from designopt.studies.serial.mechanism import Mechanism, build
 from designopt.studies.serial.settings import SerialSettings, length_unit
@@ -48,6 +50,7 @@ the rest is the reduction's): left out, so a run's and its front's params reach 
 program. (The front's re-scoring keeps the run's chunk: ``Cost.designs``.)"""
 
 _PROGRAMS: dict[tuple[str, str], tuple[Mechanism, Callable]] = {}
+_LOCK = threading.Lock()
 
 
 def block_key(s: SerialSettings) -> str:
@@ -65,17 +68,18 @@ def program(s: SerialSettings, dtype: Any) -> tuple[Mechanism, Callable]:
     designs X (:data:`DESIGNS`, V) (the variables, config units) at one chunk of targets,
     each (A·DESIGNS, C, ...) (``taskindex.chunk_values``). One per structure and dtype."""
     ck = (block_key(s), jnp.dtype(dtype).name)
-    if ck not in _PROGRAMS:
-        mech = build(s)
-        while len(_PROGRAMS) >= 8:
-            _PROGRAMS.pop(next(iter(_PROGRAMS)))
+    with _LOCK:  # one jitted function per structure, whichever thread asks first
+        if ck not in _PROGRAMS:
+            mech = build(s)
+            while len(_PROGRAMS) >= 8:
+                _PROGRAMS.pop(next(iter(_PROGRAMS)))
 
-        def run(p, X, pt, Rt, t0):
-            full = taskindex.design_full(p, X, dtype)
-            return taskindex.setup_values(mech, s, p, full, pt, Rt, t0, dtype)
+            def run(p, X, pt, Rt, t0):
+                full = taskindex.design_full(p, X, dtype)
+                return taskindex.setup_values(mech, s, p, full, pt, Rt, t0, dtype)
 
-        _PROGRAMS[ck] = (mech, jax.jit(run))
-    return _PROGRAMS[ck]
+            _PROGRAMS[ck] = (mech, jax.jit(run))
+        return _PROGRAMS[ck]
 
 
 def values(s: SerialSettings, dtype: Any) -> Callable[[dict[str, Any], Any], list[dict]]:
@@ -92,7 +96,9 @@ def values(s: SerialSettings, dtype: Any) -> Callable[[dict[str, Any], Any], lis
         X = jnp.asarray(X)
         args = [(p, X, pc[i], None if Rc is None else Rc[i], t0[i]) for i in range(len(t0))]
         call = exported.compiled(key, run, args[0])  # a warm run loads, not traces, it
-        return [call(*a) for a in args]
+        # the chunks side by side on the CPU's cores (designopt.core.concurrency)
+        return concurrency.map_calls([functools.partial(call, *a) for a in args],
+                                     key=(key, exported.signature(key, args[0])))  # fmt: skip
 
     return fn
 
@@ -173,10 +179,13 @@ def solutions(s: SerialSettings, X: Any, keys: Any, dtype: Any = jnp.float64,
     B, P, N = DESIGNS, len(X), p["target_p"].shape[0]
     pad = np.concatenate([X, np.repeat(X[-1:], -P % B, 0)]).astype(dt)
     run = values(s, dtype)
-    parts = []
-    for b in range(0, len(pad), B):  # one block program call per 16 designs
+
+    def one(b: int) -> dict[str, np.ndarray]:  # one block program call per 16 designs
         chunks = [{k: np.asarray(v) for k, v in c.items()} for c in run(p, pad[b : b + B])]
-        parts.append(assembled(s, chunks, B, N, np))
+        return assembled(s, chunks, B, N, np)
+
+    parts = concurrency.map_calls([functools.partial(one, b) for b in range(0, len(pad), B)],
+                                  key=("solutions", block_key(s), str(dt), N))  # fmt: skip
     out = {k: np.concatenate([q[k] for q in parts], 1)[:, :P] for k in parts[0]}
     out["success"] = out["success"] > 0.5
     return out | {k: np.asarray(p[k]) for k in ("target_p", "target_R") if k in p}

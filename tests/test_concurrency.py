@@ -1,0 +1,123 @@
+"""Independent calls of compiled programs side by side (designopt.core.concurrency): the
+same results as one after the other, bit for bit, in the calls' order; errors raised;
+no nesting; ``DESIGNOPT_THREADS=1`` turns it off; a background job is waited for."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from designopt.core import concurrency
+
+
+def test_map_calls_keeps_the_order_and_runs_the_calls_at_once(monkeypatch):
+    monkeypatch.setenv(concurrency.ENV, "2")
+    names: list[str] = []
+    barrier = threading.Barrier(2, timeout=10)  # both calls must be running at once
+
+    def call(i: int):
+        names.append(threading.current_thread().name)
+        barrier.wait()
+        return jnp.arange(3) + i
+
+    out = concurrency.map_calls([lambda i=i: call(i) for i in range(2)])
+    assert [np.asarray(o).tolist() for o in out] == [[0, 1, 2], [1, 2, 3]]
+    assert all(n.startswith("designopt-call") for n in names)
+
+
+def test_the_first_call_of_a_new_key_runs_alone(monkeypatch):
+    monkeypatch.setenv(concurrency.ENV, "2")
+    running, most = [0], [0]
+    lock = threading.Lock()
+
+    def call(i: int) -> int:
+        with lock:
+            running[0] += 1
+            most[0] = max(most[0], running[0])
+        time.sleep(0.05 if i == 0 else 0.2)
+        with lock:
+            running[0] -= 1
+        return i
+
+    key = ("test", object())
+    assert concurrency.map_calls([lambda i=i: call(i) for i in range(3)], key=key) == [0, 1, 2]
+    assert most[0] == 2  # the first alone, then the two others together
+    most[0] = 0
+    assert concurrency.map_calls([lambda i=i: call(i) for i in range(2)], key=key) == [0, 1]
+    assert most[0] == 2  # a key seen before: all at once
+
+
+def test_an_error_is_raised_and_one_thread_is_one_after_the_other(monkeypatch):
+    monkeypatch.setenv(concurrency.ENV, "2")
+
+    def bad():
+        raise ValueError("the second call")
+
+    with pytest.raises(ValueError, match="the second call"):
+        concurrency.map_calls([lambda: 1, bad, lambda: 3])
+    monkeypatch.setenv(concurrency.ENV, "1")
+    assert concurrency.threads() == 1
+    names = []
+    concurrency.map_calls([lambda: names.append(threading.current_thread().name)] * 2)
+    assert names == [threading.main_thread().name] * 2
+
+
+def test_calls_made_inside_a_call_run_in_its_thread(monkeypatch):
+    monkeypatch.setenv(concurrency.ENV, "2")
+
+    def outer(i: int) -> list[str]:
+        inner = concurrency.map_calls([lambda: threading.current_thread().name] * 2)
+        return [threading.current_thread().name, *inner]
+
+    for got in concurrency.map_calls([lambda i=i: outer(i) for i in range(2)]):
+        assert len(set(got)) == 1  # nested: one after the other in the worker itself
+
+
+def test_in_background_waits_for_its_job_and_drops_its_error(monkeypatch):
+    monkeypatch.setenv(concurrency.ENV, "2")
+    done = []
+
+    def job():
+        time.sleep(0.2)
+        done.append(True)
+        raise RuntimeError("dropped: the phase that needs it reports its own")
+
+    with concurrency.in_background(job):
+        assert not done
+    assert done == [True]
+    with pytest.raises(KeyError), concurrency.in_background(lambda: done.append(False)):
+        raise KeyError("the body's error")
+    assert done == [True, False]  # waited for, the body's error raised
+    monkeypatch.setenv(concurrency.ENV, "1")
+    with concurrency.in_background(lambda: done.append("no")):
+        pass
+    assert done == [True, False]  # one thread: nothing runs in the background
+
+
+def test_the_task_blocks_side_by_side_equal_one_after_the_other(monkeypatch):
+    """The PUMA port case of tests/test_staged.py (its block program, 24 targets in
+    chunks of 16): 20 designs (two blocks) solved with two threads and with one give the
+    same joints and values bit for bit."""
+    from test_staged import N, _cfg
+
+    from designopt.app.config import validate
+    from designopt.core.keys import streams
+    from designopt.studies.serial import blocks
+
+    jax.config.update("jax_enable_x64", True)
+    c = validate(_cfg("urdf_puma560_port.yaml", N, chunk=16), "t")
+    rng = np.random.default_rng(3)
+    X = np.array([[0.43, 0.43, 0.4]]) + rng.uniform(-0.05, 0.05, (20, 3))
+    got = {}
+    for n in ("1", "2"):
+        monkeypatch.setenv(concurrency.ENV, n)
+        got[n] = blocks.solutions(c.study, X, streams(c.seed), jnp.float64)
+    assert set(got["1"]) == set(got["2"])
+    for k in got["1"]:
+        np.testing.assert_array_equal(got["1"][k], got["2"][k], err_msg=k)
+    assert got["1"]["success"].any()
