@@ -281,14 +281,15 @@ def run(cfg: Any, text: str | None = None, where: str = "config", out: Path | No
 def _warm(job: Job) -> Callable[[], None] | None:
     """What compiles, beside the search, the programs its scoring after it runs: where the
     search scores with other settings (``optimizer.fidelity``) and the study scores in
-    blocks (``Problem.staged``), one block of the study's own problem (the box's centre in
-    every row) on its targets; the values are dropped. None where the search's programs
-    are the scoring's."""
+    blocks (``Problem.staged``), the quoted problem (the study's own settings on the run
+    kind's fresh stream: ``quoted.problem``, which the scoring then reuses, its
+    normalisation probe included) and one block of it (the box's centre in every row);
+    the block's values are dropped. None where the search's programs are the scoring's."""
     if job.search_cfg is None:
         return None
 
     def warm() -> None:
-        p = job.problem
+        p = quoted.problem(job, job.search_problem)
         if p.staged is None:
             return
         x = 0.5 * (np.asarray(p.lower, np.float64) + np.asarray(p.upper, np.float64))
