@@ -7,7 +7,7 @@ one Python thread one after the other, even when they are independent. The task'
 one call of the planning case's block uses one core. :func:`map_calls` runs a list of
 independent calls from a pool of threads (one per core the process may use), each
 thread waiting for its own call's result, so that ``k`` calls take about the time of
-``⌈k / cores⌉`` (docs/performance.md, "The planning case"). The programs and their
+``⌈k / cores⌉`` (docs/performance.md, "The IK's calls side by side"). The programs and their
 inputs are those of the one-thread path, so the results are the same bit for bit.
 
 :func:`in_background` compiles what a later phase needs while the present one runs (a
