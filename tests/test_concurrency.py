@@ -99,6 +99,45 @@ def test_in_background_waits_for_its_job_and_drops_its_error(monkeypatch):
     assert done == [True, False]  # one thread: nothing runs in the background
 
 
+def test_a_waiting_background_job_ends_with_the_body(monkeypatch):
+    """A job that waits for an event (``concurrency.wait``, as the study's background
+    compile waits for the search's first program) returns False at once when the body
+    ends before the event (an error, Ctrl-C): the body's end is not held up; set in
+    time, the wait returns True."""
+    monkeypatch.setenv(concurrency.ENV, "2")
+    event, seen = threading.Event(), []
+
+    def job():
+        seen.append(concurrency.wait(event, 60.0))
+        seen.append(concurrency.ended())
+
+    t0 = time.monotonic()
+    with pytest.raises(KeyError), concurrency.in_background(job):
+        raise KeyError("the body fails before the event")
+    assert seen == [False, True] and time.monotonic() - t0 < 5.0
+    seen.clear()
+    with concurrency.in_background(job):
+        event.set()
+        time.sleep(0.1)
+    assert seen[0] is True
+    assert not concurrency.ended()  # outside a background job
+    assert concurrency.wait(event, 0.0)
+    assert not concurrency.wait(threading.Event(), 0.05)  # the timeout
+
+
+def test_exported_wait_ready_after_a_first_call(monkeypatch):
+    """``exported.wait_ready`` returns once a program from ``exported.compiled`` has been
+    called (compiled and run); the call's value is the program's."""
+    from designopt.core import exported
+
+    monkeypatch.setattr(exported, "_READY", threading.Event())
+    fn = jax.jit(lambda x: x * 2.0)
+    call = exported.compiled("test-ready", fn, (jnp.ones(3),))
+    assert not exported.wait_ready(0.0)
+    np.testing.assert_array_equal(np.asarray(call(jnp.ones(3))), [2.0, 2.0, 2.0])
+    assert exported.wait_ready(0.0)
+
+
 def test_the_task_blocks_side_by_side_equal_one_after_the_other(monkeypatch):
     """The PUMA port case of tests/test_staged.py (its block program, 24 targets in
     chunks of 16): 20 designs (two blocks) solved with two threads and with one give the

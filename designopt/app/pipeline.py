@@ -34,7 +34,7 @@ from designopt.app.preflight import Estimate
 from designopt.app.records import bind
 from designopt.app.reporting import draw_figures, write_html
 from designopt.app.scoring import check_finite, placement, problem_group, run_groups, with_placement
-from designopt.core import concurrency, devices
+from designopt.core import concurrency, devices, exported
 from designopt.core.errors import ConfigError, WriteError
 from designopt.core.keys import streams
 from designopt.core.timing import Stopwatch
@@ -284,11 +284,16 @@ def _warm(job: Job) -> Callable[[], None] | None:
     blocks (``Problem.staged``), the quoted problem (the study's own settings on the run
     kind's fresh stream: ``quoted.problem``, which the scoring then reuses, its
     normalisation probe included) and one block of it (the box's centre in every row);
-    the block's values are dropped. None where the search's programs are the scoring's."""
+    the block's values are dropped. None where the search's programs are the scoring's.
+    It starts once the search's own block program has run (``exported.wait_ready``):
+    that program's trace and compile are what the search waits for."""
     if job.search_cfg is None:
         return None
 
     def warm() -> None:
+        if job.search_problem.staged is not None and not exported.wait_ready(60.0) \
+                and concurrency.ended():  # fmt: skip
+            return  # the search has ended (an error, Ctrl-C) before its first call
         p = quoted.problem(job, job.search_problem)
         if p.staged is None:
             return

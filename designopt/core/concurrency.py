@@ -22,6 +22,7 @@ from __future__ import annotations
 import contextlib
 import os
 import threading
+import time
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, TypeVar
@@ -114,14 +115,16 @@ def in_background(fn: Callable[[], Any] | None) -> Iterator[None]:
     """Run ``fn()`` (e.g. a later phase's first call, to compile its programs) in a thread
     while the ``with`` body runs; the body's end waits for it, whether the body returns
     or raises, so no thread outlives the block. What ``fn`` raises is dropped: the phase
-    that needs the programs makes its own call and reports its own errors. ``None`` or
-    :func:`threads` 1: nothing runs."""
+    that needs the programs makes its own call and reports its own errors. ``fn`` may
+    ask :func:`ended` between its steps, and wait with :func:`wait`: both end its work
+    early once the body has ended. ``None`` or :func:`threads` 1: nothing runs."""
     if fn is None or threads() <= 1:
         yield
         return
+    done = threading.Event()
 
     def run() -> None:
-        _local.worker = True
+        _local.worker, _local.done = True, done
         with contextlib.suppress(Exception):
             fn()
 
@@ -130,4 +133,22 @@ def in_background(fn: Callable[[], Any] | None) -> Iterator[None]:
     try:
         yield
     finally:
+        done.set()
         t.join()
+
+
+def ended() -> bool:
+    """In a job of :func:`in_background`: whether the ``with`` body it runs beside has
+    ended (returned or raised); elsewhere False."""
+    done = getattr(_local, "done", None)
+    return done is not None and done.is_set()
+
+
+def wait(event: threading.Event, timeout: float) -> bool:
+    """Wait until ``event`` is set (True), ``timeout`` s have passed or, in a job of
+    :func:`in_background`, its ``with`` body has ended (False)."""
+    end = time.monotonic() + timeout
+    while not event.wait(min(0.05, max(end - time.monotonic(), 0.0))):
+        if ended() or time.monotonic() >= end:
+            return False
+    return True

@@ -26,7 +26,9 @@ import jax
 
 _CALLS: dict[str, Callable] = {}
 _LOCK = threading.RLock()
+_LOCKS: dict[str, Any] = {}  # one per program: two programs export side by side
 _SOURCE: list[str] = []
+_READY = threading.Event()
 
 
 def source_hash() -> str:
@@ -115,8 +117,32 @@ def compiled(key: str, fn: Callable, args: tuple) -> Callable:
     cache folder when one is there, else exported now and kept there; ``fn`` itself
     without a cache folder or where exporting fails."""
     sig = signature(key, args)
-    with _LOCK:  # one export per program, whichever thread asks first
-        return _compiled(sig, fn, args)
+    with _LOCK:
+        lock = _LOCKS.setdefault(sig, threading.RLock())
+    with lock:  # one export per program, whichever thread asks first
+        call = _compiled(sig, fn, args)
+    if _READY.is_set():
+        return call
+
+    def first(*a: Any) -> Any:  # the process's first call of such a program, compiled
+        try:
+            return jax.block_until_ready(call(*a))
+        finally:
+            _READY.set()
+
+    return first
+
+
+def wait_ready(timeout: float) -> bool:
+    """Wait (at most ``timeout`` s, and in a background job of
+    ``concurrency.in_background`` no longer than the work beside it) until a program
+    from :func:`compiled` has been called in this process, compiled and run: a
+    background compile that waits for it leaves the machine to that first program (its
+    trace holds the GIL, and two traces take turns; its XLA compile uses more than one
+    core). True once one has."""
+    from designopt.core import concurrency
+
+    return concurrency.wait(_READY, timeout)
 
 
 def _compiled(sig: str, fn: Callable, args: tuple) -> Callable:

@@ -34,6 +34,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from designopt.core import concurrency
 from designopt.numerics.pareto import hypervolume_jax
 from designopt.optim import registry
 from designopt.optim.protocol import Front, Optimizer, Task, clean
@@ -402,12 +403,41 @@ def _drive(name, opt, params, problem, key, n_runs, dtype, chunk_iters, progress
         f, _, v = evaluate_batch(pparams, Xf, ek, fn=problem.fn, constraints=problem.constraints)
         return f, v
 
+    def steps(keys1, k0, X, pending, Xf) -> Callable[[], None]:
+        """The step programs (tell, ask, the records), compiled while the first objective
+        call runs (its own compile, the IK's, takes longer): each called once on zeros of
+        the objective's shapes, so the loop's first calls find them; the values are
+        dropped (:func:`designopt.core.concurrency.in_background`)."""
+
+        def warm() -> None:
+            m = problem.n_objectives
+            f = jnp.zeros(Xf.shape[:2] + ((m,) if m > 1 else ()), dtype)
+            v = jnp.zeros(Xf.shape[:2], dtype)
+            c = _init_tell(keys1, k0, X, pending, f, v, params, lower, upper, opt=opt,
+                           batched=batched)  # fmt: skip
+            r = ref if ref is not None or not mo else jnp.zeros((m,), dtype)
+            if mo and ref is None:
+                _fronts(c, opt, batched)
+            _records(c, r, opt, batched)
+            if concurrency.ended():
+                return
+            k1, k, X1, pend1, _, _ = _ask(c, params, lower, upper, opt=opt, batched=batched,
+                                          rows=rows)  # fmt: skip
+            jax.block_until_ready(_tell((k1, c[1]), k, X1, pend1, f, v, params, lower, upper,
+                                        opt=opt, batched=batched, ref=r, due=np.bool_(True)))  # fmt: skip
+
+        return warm
+
     if resume is None:
         if separate:
             keys1, k0, X, pending, Xf, ek = _init_ask(keys, params, lower, upper, opt=opt,
                                                       batched=batched, rows=rows)  # fmt: skip
-            carry = place(_init_tell(keys1, k0, X, pending, *objective(Xf, ek), params, lower,
-                                     upper, opt=opt, batched=batched))  # fmt: skip
+            with concurrency.in_background(steps(keys1, k0, X, pending, Xf)
+                                           if problem.staged is not None and plan is None
+                                           else None):  # fmt: skip
+                fv = objective(Xf, ek)
+            carry = place(_init_tell(keys1, k0, X, pending, *fv, params, lower, upper, opt=opt,
+                                     batched=batched))  # fmt: skip
         else:
             carry = place(_init(keys, params, pparams, lower, upper, **statics))
         if mo and ref is None:
