@@ -138,3 +138,25 @@ def test_a_task_runs_reach_band_counts_the_searchs_targets(tmp_path, capsys):
     lo, hi = style.wilson(p, 64.0)
     assert band.min() == pytest.approx(lo.min(), abs=1e-12)
     assert band.min() < style.wilson(p, 2048.0)[0].min() - 1e-3  # the study's count is not it
+
+
+def test_the_search_settings_are_checked_once_with_the_studys(monkeypatch):
+    """``reach.check`` (the region in reach, the ports, an obstacle over every link) reads
+    neither the IK's settings nor the samples: the search's settings of a fidelity
+    config (only those differ) are not checked again; other collision settings are."""
+    from designopt.app.config import load
+    from designopt.studies.serial import reach
+
+    s = load(str(ROOT / "configs" / "port_placement.yaml"))[0].study
+    calls: list[int] = []
+    monkeypatch.setattr(reach, "_PASSED", {})
+    monkeypatch.setattr(reach, "_check", lambda st: calls.append(1))
+    reach.check(s)
+    ik = s.task.ik.model_copy(update={"n_best": 2, "n_db": 1024})
+    search = s.model_copy(update={"task": s.task.model_copy(update={"ik": ik}),
+                                  "indices": s.indices.model_copy(update={"n_samples": 48})})
+    reach.check(search)
+    assert calls == [1]
+    col = s.collision.model_copy(update={"tool_radius": 0.003})
+    reach.check(s.model_copy(update={"collision": col}))
+    assert calls == [1, 1]

@@ -6,6 +6,7 @@ far off is said (``Study.warnings``)."""
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Mapping
 from typing import Any
@@ -41,9 +42,26 @@ def largest_reach(s: SerialSettings) -> float:
 def check(s: SerialSettings) -> None:
     """ValueError naming ``task.region`` when no design in the box can reach any point of
     the task region (with ``arms``: when some arm cannot, wherever the design box puts
-    its base)."""
+    its base). A run's search settings (``optimizer.fidelity``: other IK settings, other
+    samples) are checked once with the study's: what is checked reads neither."""
     if s.task is None:
         return
+    d = s.model_dump(mode="json")
+    d.pop("indices", None)
+    d["task"].pop("ik", None)
+    key = json.dumps(d, sort_keys=True, default=str)
+    if key in _PASSED:
+        return
+    _check(s)
+    while len(_PASSED) >= 16:
+        _PASSED.pop(next(iter(_PASSED)))
+    _PASSED[key] = None
+
+
+_PASSED: dict[str, None] = {}  # the settings (without the IK's and the indices') checked
+
+
+def _check(s: SerialSettings) -> None:
     _check_reach(s)  # first: a region out of reach is the cause, whatever the ports say
     plancheck.check(s)  # a unit slip is named before _check_ports finds a port off the wall
     _check_ports(s)
