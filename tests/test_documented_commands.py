@@ -483,6 +483,8 @@ SKIP: dict[str, str] = {
     "python benchmarks/ptpso_tuning.py": BENCH + " (Fig. 9)",
     "python benchmarks/latency.py": BENCH + ": every shipped config cold and warm, ~20 min",
     "python benchmarks/latency.py --only NAME --programs 4": BENCH,
+    "python benchmarks/latency.py --only port_placement --only port_placement-eval":
+        BENCH + ": the planning case's run and eval, each cold and warm, ~3 min",
     ".venv/bin/python benchmarks/ik.py": BENCH + "; the peers from .[bench]",
     "python benchmarks/ik.py": BENCH + "; the peers from .[bench]",
     ".venv/bin/python benchmarks/plas.py": "redraws docs/img from results/plas/ archives",
