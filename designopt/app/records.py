@@ -34,17 +34,20 @@ def binder(rec: Record) -> tuple[Any, dict[str, Any]]:
     hints = study_hints(cfg, rec.groups.get("final"), rec.groups.get("front"))
     fin = rec.groups.get("final")
     if isinstance(fin, dict) and str(fin.get("attrs", {}).get("samples", "")) == "fresh":
-        hints["final_stream"] = lambda: _final_stream(cfg, rec)
+        hints["final_stream"] = lambda: _stream(cfg, rec, "final")
+    if isinstance(rec.groups.get("front"), dict):
+        hints["front_stream"] = lambda: _stream(cfg, rec, "front")
     return cfg, hints
 
 
-def _final_stream(cfg: Any, rec: Record) -> tuple[Any, dict[str, Any]]:
-    """(study settings, named keys) of the samples a run's ``final/`` values are on: the
-    fresh ``final`` stream with ``final.n_samples`` (``app.rescoring.stream``)."""
+def _stream(cfg: Any, rec: Record, section: str) -> tuple[Any, dict[str, Any]]:
+    """(study settings, named keys) of the samples a run's ``final/`` (a front's
+    ``front/``) values are on: the fresh ``section`` stream with ``<section>.n_samples``
+    (``app.rescoring.stream``)."""
     from designopt.app import rescoring
     from designopt.studies import get
 
-    fr = rescoring.stream(cfg, get(cfg.study.name), rec.keys(), "final", f"archive ({rec.kind})")
+    fr = rescoring.stream(cfg, get(cfg.study.name), rec.keys(), section, f"archive ({rec.kind})")
     return fr.cfg.study, fr.keys
 
 

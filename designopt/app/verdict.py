@@ -236,23 +236,47 @@ def race_candidates(job: Any, X: np.ndarray, like: Any = None,
     if cost.samples <= 1:
         n = int(cost.samples)
 
+    S = n_stages(cfg)
+    width = concurrency.threads()  # calls at once (1 inside a worker thread)
     if stage_fn is None:
+        p0 = stage_problem(job, 0, like)
+        B = p0.staged.designs if p0.staged is not None else rs.BLOCK  # designs per call
+
         def stage_fn(s: int, Xa: np.ndarray) -> dict[str, np.ndarray]:
-            return quoted.blocked(stage_problem(job, s, like), Xa)
+            return quoted.blocked(p0 if s == 0 else stage_problem(job, s, like), Xa)
+
+        def ahead(c: int) -> int:  # stages drawn at once: a stage of c designs is
+            return max(1, width // -(-c // B))  # ⌈c / B⌉ calls; the cores run width calls
+    else:
+        def ahead(c: int) -> int:
+            return 1
 
     cons = _constraints(cfg)
-    cache: dict[int, dict[str, np.ndarray]] = {}
+    # stage → (the designs it was drawn for, their values). A stage is drawn ahead, beside
+    # the one the race asks for, where a core would otherwise idle (a stage of at most B
+    # designs is one call, on one core); the race then reads it for the designs still
+    # active. A design's values do not depend on the others drawn with it (the blocks'
+    # rows are independent), so the race decides as if each stage were drawn when asked;
+    # a stage drawn ahead that the race does not reach is dropped.
+    cache: dict[int, tuple[np.ndarray, dict[str, np.ndarray]]] = {}
     share_cons: list[tuple[str, float, str]] = []
 
+    def draw(stages: list[int], active: np.ndarray) -> None:
+        got = concurrency.map_calls([functools.partial(stage_fn, s, X[active]) for s in stages])
+        for s, v in zip(stages, got, strict=True):
+            cache[s] = (active, {k: np.asarray(a) for k, a in v.items()})
+
     def values(s: int, active: np.ndarray) -> dict[str, np.ndarray]:
-        if s == 0 and 0 in cache:
-            return cache.pop(0)
-        return {k: np.asarray(v) for k, v in stage_fn(s, X[active]).items()}
+        drawn, vals = cache.pop(s)
+        if np.array_equal(drawn, active):
+            return vals
+        pos = np.searchsorted(drawn, active)  # the race's active designs only shrink
+        return {k: v[pos] for k, v in vals.items()}
 
     t_first = time.perf_counter()
-    first = {k: np.asarray(v) for k, v in stage_fn(0, X).items()}
+    draw(list(range(min(S, max(2, ahead(len(X)))))), np.arange(len(X)))  # the first call: 2
+    first = cache[0][1]
     t_first = time.perf_counter() - t_first
-    cache[0] = first
     for k, b, sn in cons:  # which constraints are shares (counted per stage)
         if k in first and _counts(first, k, n) is not None:
             share_cons.append((k, b, sn))
@@ -280,15 +304,16 @@ def race_candidates(job: Any, X: np.ndarray, like: Any = None,
         return np.stack(cols, -1), succ, tri
 
     def sample_fn(active: np.ndarray, st: racing.Stage) -> racing.Draw:
-        # a stage's units side by side on the CPU's cores (designopt.core.concurrency)
-        got = concurrency.map_calls([functools.partial(unit, s, active)
-                                     for s in range(st.start, st.stop)])  # fmt: skip
+        need = [s for s in range(st.start, st.stop) if s not in cache]
+        if need:  # with the stages after them that idle cores can draw beside them
+            more = range(st.stop, min(S, st.stop + ahead(len(active)) - len(need)))
+            draw([*need, *more], active)
+        got = [unit(s, active) for s in range(st.start, st.stop)]
         V = np.stack([g[0] for g in got], 1)  # (C_active, units, m)
         if not share_cons:
             return racing.Draw(V)
         return racing.Draw(V, sum(g[1] for g in got), sum(g[2] for g in got))
 
-    S = n_stages(cfg)
     t0 = time.perf_counter()
     rr = racing.race(sample_fn, len(X), margin=margin, max_samples=S, stage=1, first=2,
                      alpha=float(cfg.final.alpha), maximize=maximize, primary=0,

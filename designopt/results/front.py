@@ -34,6 +34,14 @@ class FrontRecord(Record):
         at = self.groups["front"]["attrs"]
         return dict(zip(names(at["objectives"]), names(at["senses"]), strict=True))
 
+    def front_stream(self) -> tuple[Any, dict[str, Any]]:
+        """(study settings, named keys) of the samples ``front/`` is on, for drawing a
+        front design where its quoted values were measured (a task's targets): the fresh
+        ``front`` stream with ``front.n_samples`` (from the binder); unbound: the run's
+        own (``config.study``, ``keys()``)."""
+        made = self.hint("front_stream")
+        return made() if made is not None else (self.config.study, self.keys())
+
     @property
     def X(self) -> np.ndarray:
         """The front's designs (n, D), sorted by the first objective."""

@@ -323,10 +323,23 @@ def design_pose(s: SerialSettings, mech: Mechanism, x: Any,
     representative tuple of targets of its IK solution on the run's targets
     (``blocks.solution``, :func:`representative`); else at the home pose. (label,
     joints (A, n), targets)."""
+    return design_poses(s, keys, mech, np.asarray(x, np.float64)[None])[0]
+
+
+def design_poses(s: SerialSettings, keys: Mapping[str, Any], mech: Mechanism, X: Any
+                 ) -> list[tuple[str, np.ndarray, list[np.ndarray]]]:  # fmt: skip
+    """:func:`design_pose` of several designs X (P, D) (variables; config units) on the
+    targets of ``s`` and ``keys`` (a front's: ``figures.front_stream``, where its values
+    were measured), their IK solutions in one batch (``blocks.solutions``: P designs
+    share the block program's calls, one design's values do not depend on the others';
+    within a run, the front's re-scoring computed them already)."""
     from designopt.studies.serial import blocks
 
-    sol = blocks.solution(s, x, keys) if s.indices.measure == "task" else None
-    return representative(s, mech, sol, keys)
+    X = np.atleast_2d(np.asarray(X, np.float64))
+    if s.indices.measure != "task" or not len(X):
+        return [representative(s, mech, None, keys) for _ in X]
+    per = blocks.solutions(s, X, keys)
+    return [representative(s, mech, blocks.design_of(s, per, i), keys) for i in range(len(X))]
 
 
 def base_poses(s: SerialSettings, mech: Mechanism, x: Any) -> list[np.ndarray | None]:

@@ -383,7 +383,8 @@ def draw_front_robots(rec: Any, picks: Sequence[tuple[str, int]], folder: Path) 
     """``front_robots``: the front's chosen designs (``figures.front.extremes_and_knee``:
     the two extremes and the knee) side by side on common axes, each with every arm at
     its base in the world, at one representative tuple of targets of its own IK
-    solution (``drawing.design_pose``; the home pose without a task), with the task
+    solution on the front's re-scoring targets (:func:`front_stream`, where its values
+    were measured; ``drawing.design_poses``; the home pose without a task), with the task
     region, obstacles and ports; the targets starred. A two-line title; the numbers
     (objectives, design variables, the pose drawn, incision points and bases) in a table
     and text rows under the panels. A planning study (instruments through ports) is
@@ -399,8 +400,9 @@ def draw_front_robots(rec: Any, picks: Sequence[tuple[str, int]], folder: Path) 
     ang = s.angle_names()
     scenes, rows, notes = [], [], []
     fr = getattr(rec, "groups", {}).get("front", {})
-    for (name, i), col in zip(picks, ("#2ca02c", "#ff7f0e", "#9467bd"), strict=False):
-        label, Q, tg = drawing.design_pose(s, mech, rec.X[i], rec.keys())
+    drawn = list(zip(picks, ("#2ca02c", "#ff7f0e", "#9467bd"), strict=False))
+    poses = drawing.design_poses(*front_stream(rec), mech, rec.X[[i for (_, i), _ in drawn]])
+    for ((name, i), col), (label, Q, tg) in zip(drawn, poses, strict=True):
         arms = drawing.study_arms(s, mech, rec.X[i], Q, color=col,  # several: "arm k"
                                   label=f"design {i}" if s.arms is None else "")  # fmt: skip
         around = {"region": region, **drawing.obstacles_and_ports(s, rec.X[i])}  # its ports
@@ -474,6 +476,14 @@ def final_keys(rec: Any) -> Any:
     ``final`` stream, ``RunRecord.final_stream``; a record without one: its own)."""
     fs = getattr(rec, "final_stream", None)
     return fs()[1] if fs is not None else rec.keys()
+
+
+def front_stream(rec: Any) -> tuple[SerialSettings, Any]:
+    """(study settings, named keys) of the samples a front's ``front/`` values are on (the
+    fresh ``front`` stream, ``FrontRecord.front_stream``; a record without one: its own):
+    where its designs are drawn."""
+    fs = getattr(rec, "front_stream", None)
+    return fs() if fs is not None else (rec.config.study, rec.keys())
 
 
 def task_solution(rec: RunRecord) -> dict[str, np.ndarray]:

@@ -14,7 +14,7 @@ from designopt.figures.robot import Scene
 from designopt.studies.serial import blocks, figures  # noqa: F401  (blocks: tests patch it)
 from designopt.studies.serial.drawing import (
     arms,
-    design_pose,
+    design_poses,
     home,
     home_q,
     hover,
@@ -127,8 +127,9 @@ def _design_text(s: SerialSettings, x: Mapping[str, float]) -> str:
 def front_view(rec: Any):
     """The report's front view (``designopt.figures.html.FrontView``): the front's
     first two objectives and each design's robot, every arm at its base in the world,
-    at a representative tuple of targets of its own solution (``drawing.design_pose``; the
-    home pose without a task), with the task region, obstacles and ports; the original
+    at a representative tuple of targets of its own solution on the front's re-scoring
+    targets (``drawing.design_poses``; the home pose without a task), with the task
+    region, obstacles and ports; the original
     robot of a URDF chain (at the home pose, the first design's bases) for reference."""
     from designopt.figures.html.robot import FrontView
 
@@ -140,7 +141,7 @@ def front_view(rec: Any):
     objs, cols, labels = (v[:2] for v in figures.front_columns(rec))
     A = 1 if s.arms is None else len(s.arms)
     budget = _budget(A * (n + 1))
-    poses = [design_pose(s, mech, X[i], rec.keys()) for i in range(n)]
+    poses = design_poses(*figures.front_stream(rec), mech, X)  # where front/ was measured
     robots = [study_arms(s, mech, X[i], Q, label="design", color="#ff7f0e", budget=budget)
               for i, (_, Q, _) in enumerate(poses)]  # fmt: skip
     ref = original_arms(s, mech, X[0], home_q(s, mech), budget=budget) \
