@@ -139,6 +139,7 @@ def test_a_warm_run_loads_the_exported_block_program(tmp_path, monkeypatch):
     assert len(files) == 1
     exported._CALLS.clear()
     blocks._PROGRAMS.clear()
+    blocks._MEMO.clear()  # (the rows of the first call: the program runs again)
 
     def no_trace(*a, **k):
         raise AssertionError("traced again")
@@ -148,3 +149,40 @@ def test_a_warm_run_loads_the_exported_block_program(tmp_path, monkeypatch):
     for a, b in zip(first, again, strict=True):
         for k in a:
             np.testing.assert_array_equal(np.asarray(a[k]), np.asarray(b[k]), err_msg=k)
+
+
+def test_a_block_of_designs_computed_before_reads_their_rows(monkeypatch):
+    """A block call whose designs were all computed before, on the same targets and
+    params, is answered from their kept rows (``blocks._MEMO``; two arms: rows a·M + d)
+    in the new call's order, bit for bit what the program gives for that block; other
+    params (another sample key) run the program. (The two arms' block program of the
+    comparison above.)"""
+    from designopt.core import exported
+
+    _, pr = _problem(_cfg("two_arms_front.yaml", N, chunk=16))
+    a, b = np.asarray(CASES[1][1])
+    ab = np.stack([a] + [b] * (blocks.DESIGNS - 1))
+    ba = np.stack([b] + [a] * 3 + [b] * (blocks.DESIGNS - 4))
+    blocks._MEMO.clear()
+    pr.staged.values(pr.params, ab)  # computes a's and b's rows
+    real = exported.compiled
+
+    def refuse(*args, **kw):
+        def ran(*a, **k):
+            raise AssertionError("the program ran")
+
+        return ran
+
+    monkeypatch.setattr(exported, "compiled", refuse)
+    kept = pr.staged.values(pr.params, ba)
+    other = pr.params | {"sample_key": jax.random.key(7)}
+    with pytest.raises(AssertionError, match="the program ran"):
+        pr.staged.values(other, ab)
+    monkeypatch.setattr(exported, "compiled", real)
+    blocks._MEMO.clear()
+    fresh = pr.staged.values(pr.params, ba)
+    assert len(kept) == len(fresh) == 2  # two chunks of 16 targets
+    for got, ref in zip(kept, fresh, strict=True):
+        assert set(got) == set(ref) and "segments" in got
+        for k in ref:
+            np.testing.assert_array_equal(got[k], np.asarray(ref[k]), err_msg=k)

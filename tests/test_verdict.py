@@ -173,6 +173,16 @@ def test_the_planning_case_at_a_tiny_size_prints_its_verdict(tmp_path, capsys):
     surv = np.asarray(g["x"])[np.asarray(g["verdict"]).astype(str) != "worse"]
     for x in rec.X:
         assert np.any(np.all(np.isclose(surv, x), axis=1))
+    # the front's designs are drawn on the samples front/ is on: its targets group's
+    from designopt.api import load
+    from designopt.studies.serial import blocks
+
+    s, keys = load(tmp_path / "pp.h5").front_stream()
+    assert s.indices.n_samples == rec.groups["front"]["attrs"]["n_samples"]
+    sol = blocks.solutions(s, rec.X[:1], keys)
+    tg = rec.groups["targets"]
+    np.testing.assert_array_equal(sol["target_p"], tg["target_p"])
+    np.testing.assert_array_equal(sol["q"][:, 0], np.asarray(tg["q"])[0])
 
 
 def test_a_halton_sampler_draws_other_points_at_each_stage():
@@ -238,3 +248,36 @@ def test_the_planning_cases_arms_show_a_mirror_symmetry_and_a_tie_names_it():
     raw = yaml.safe_load(open(path))
     raw["study"]["arms"][1]["port"] = ["px", "py1", 0.25]  # not mirrored: another height
     assert verdict.mirror_pairs(validate(raw, path), names) is None
+
+
+def test_stages_drawn_ahead_decide_as_stages_drawn_when_asked(monkeypatch):
+    """Where a stage is one call and a core would idle, the race draws the next stage
+    beside the one it asks for (``per_call``), and reads it for the designs still
+    active: the verdict group equals the one of stages drawn one at a time, array for
+    array, though a stage was drawn for a design the race had dropped by then."""
+    from designopt.core import concurrency
+
+    monkeypatch.setattr(concurrency, "threads", lambda: 2)
+    job = _job(max_samples=32 * 8)  # 8 stages
+    X = np.array([[0.0, 1.0], [0.001, 2.0], [0.04, 3.0]])  # f: column 0 + noise
+    calls: list[tuple[int, int]] = []
+
+    def stage_fn(s: int, Xa: np.ndarray) -> dict[str, np.ndarray]:
+        calls.append((s, len(Xa)))
+        noise = [np.random.default_rng([s, int(x[1])]).normal(0.0, 0.01) for x in Xa]
+        return {"f": Xa[:, 0] + np.asarray(noise)}
+
+    one = verdict.race_candidates(job, X, stage_fn=stage_fn)
+    asked, calls[:] = list(calls), []
+    two = verdict.race_candidates(job, X, stage_fn=stage_fn, per_call=16)
+    assert set(one) == set(two)
+    for k in one:
+        if k != "attrs":
+            np.testing.assert_array_equal(np.asarray(one[k]), np.asarray(two[k]), err_msg=k)
+    drop = {k: v for k, v in one["attrs"].items() if k != "wall_s"}
+    assert drop == {k: v for k, v in two["attrs"].items() if k != "wall_s"}
+    n = np.asarray(one["n_samples"]) // 32  # each candidate's stages
+    assert n.min() < n.max() <= 8  # a candidate dropped before the others stopped
+    drawn = dict(calls)  # stage → designs it was drawn for, ahead
+    assert any(drawn.get(s, 0) > np.sum(n > s) for s in range(8)), (calls, n)
+    assert len(calls) > len(asked) or set(calls) != set(asked)

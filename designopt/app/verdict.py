@@ -223,11 +223,14 @@ def _counts(vals: dict[str, np.ndarray], k: str, n: int) -> tuple[np.ndarray, np
 
 def race_candidates(job: Any, X: np.ndarray, like: Any = None,
                     stage_fn: Callable[[int, np.ndarray], dict[str, np.ndarray]] | None = None,
-                    sources: list[str] | None = None) -> dict[str, Any]:  # fmt: skip
+                    sources: list[str] | None = None, per_call: int | None = None
+                    ) -> dict[str, Any]:  # fmt: skip
     """Race the (cleared) candidates X (C, D) on the validation stream and return the
     archive's ``verdict`` group (:func:`group`). ``like``: the search's problem (a
     weighted objective's normalisation); ``stage_fn(s, X_active)``: every value of the
-    active designs on stage s (default: ``quoted.blocked`` on :func:`stage_problem`)."""
+    active designs on stage s (default: ``quoted.blocked`` on :func:`stage_problem`,
+    whose calls hold a block of designs each); ``per_call``: the designs one call of a
+    given ``stage_fn`` holds (None: its stages are drawn one at a time, when asked)."""
     cfg = job.cfg
     names, sens = objectives(cfg)
     front = cfg.study.pareto is not None
@@ -245,11 +248,11 @@ def race_candidates(job: Any, X: np.ndarray, like: Any = None,
         def stage_fn(s: int, Xa: np.ndarray) -> dict[str, np.ndarray]:
             return quoted.blocked(p0 if s == 0 else stage_problem(job, s, like), Xa)
 
-        def ahead(c: int) -> int:  # stages drawn at once: a stage of c designs is
-            return max(1, width // -(-c // B))  # ⌈c / B⌉ calls; the cores run width calls
     else:
-        def ahead(c: int) -> int:
-            return 1
+        B = per_call
+
+    def ahead(c: int) -> int:  # stages drawn at once: a stage of c designs is ⌈c / B⌉
+        return 1 if B is None else max(1, width // -(-c // B))  # calls; width at once
 
     cons = _constraints(cfg)
     # stage → (the designs it was drawn for, their values). A stage is drawn ahead, beside

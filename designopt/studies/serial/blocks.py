@@ -158,6 +158,11 @@ class _Rows:
         return {k: np.stack([got[d][k][a] for a in range(A) for d in range(M)])
                 for k in got[0]}  # fmt: skip
 
+    def clear(self) -> None:
+        with self.lock:
+            self.data.clear()
+            self.size = 0
+
     def put(self, where: str, X: np.ndarray, A: int, out: dict[str, np.ndarray]) -> None:
         M = len(X)
         with self.lock:

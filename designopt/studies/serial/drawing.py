@@ -20,12 +20,14 @@ joint origins, axes and tip frame, and a URDF chain's visuals are placed by
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 from designopt.figures.robot import Arm, Cone, Scene, Targets
@@ -141,7 +143,6 @@ def _tuples(s: SerialSettings, mech: Mechanism, sol: Mapping[str, np.ndarray],
     own target (N,) bool, the least gap between two arms per tuple, each arm's capsules
     per tuple (N, L, 2, 3) in the world, the collision geometry)."""
 
-    from designopt.kinematics.collision import arms_clearance
     from designopt.studies.serial import bodies
 
     A = len(s.arms)  # type: ignore[arg-type]
@@ -149,19 +150,35 @@ def _tuples(s: SerialSettings, mech: Mechanism, sol: Mapping[str, np.ndarray],
     N = ok.shape[1]
     from designopt.studies.serial import taskindex
 
-    key = jax.random.fold_in(keys["samples"], 2)
     lab = taskindex.labels(N, taskindex.groups(s))  # the tuples pair targets of one group
-    perm = [np.asarray(p) for p in taskindex.perms(key, N, lab, A)]
-    both = np.all(np.stack([ok[k][perm[k]] for k in range(A)]), 0)
-    seg = [np.asarray(sol["segments"])[k][perm[k]] for k in range(A)]  # (N, L, 2, 3) world
     g = bodies.geometry(setup.groups(s)[0].settings, setup.groups(s)[0].mech)
-    gap = np.full(N, np.inf)
-    if both.any() and g is not None:
-        r = _arm_radii(s)
+    segs = np.asarray(sol["segments"])  # (A, N, L, 2, 3) world
+    P, G = _perms_gaps(keys["samples"], lab, segs, _arm_radii(s), N, A, g is not None)
+    perm = list(np.asarray(P))
+    both = np.all(np.stack([ok[k][perm[k]] for k in range(A)]), 0)
+    seg = [segs[k][perm[k]] for k in range(A)]  # (N, L, 2, 3) world
+    gap = np.asarray(G, np.float64) if both.any() else np.full(N, np.inf)
+    return perm, both, gap, seg, g
+
+
+@functools.partial(jax.jit, static_argnums=(4, 5, 6))
+def _perms_gaps(key: Any, lab: Any, segs: Any, r: Any, N: int, A: int, gaps: bool
+                ) -> tuple[jax.Array, jax.Array]:  # fmt: skip
+    """:func:`_tuples`' arrays in one program (one compiled call, not dozens of eager
+    operations): the arms' permutations (A, N) as ``arms_free`` draws them, and each
+    tuple's least gap between two arms (N,) (+inf without ``gaps``: no collision
+    geometry)."""
+    from designopt.kinematics.collision import arms_clearance
+    from designopt.studies.serial import taskindex
+
+    perm = taskindex.perms(jax.random.fold_in(key, 2), N, lab, A)
+    seg = [segs[k][perm[k]] for k in range(A)]
+    gap = jnp.full((N,), jnp.inf, segs.dtype)
+    if gaps:
         for a in range(A):
             for b in range(a + 1, A):
-                gap = np.minimum(gap, np.asarray(arms_clearance(seg[a], r[a], seg[b], r[b])))
-    return perm, both, gap, seg, g
+                gap = jnp.minimum(gap, arms_clearance(seg[a], r[a], seg[b], r[b]))
+    return jnp.stack(perm), gap
 
 
 def _arm_radii(s: SerialSettings) -> Any:
