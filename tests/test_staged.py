@@ -186,3 +186,18 @@ def test_a_block_of_designs_computed_before_reads_their_rows(monkeypatch):
         assert set(got) == set(ref) and "segments" in got
         for k in ref:
             np.testing.assert_array_equal(got[k], np.asarray(ref[k]), err_msg=k)
+
+
+def test_the_least_call_runs_the_first_chunk_only():
+    """``Staged.least`` (what the background compile calls the block program with) keeps
+    the first chunk of targets: one call, whose values are the first chunk's of the
+    whole call."""
+    _, pr = _problem(_cfg("two_arms_front.yaml", N, chunk=16))
+    X = np.repeat(np.asarray(CASES[1][1])[:1], blocks.DESIGNS, 0)
+    least = pr.staged.least(pr.params)
+    assert least["target_p"].shape == (16, 3) and pr.params["target_p"].shape == (N, 3)
+    (one,) = pr.staged.values(least, X)
+    whole = pr.staged.values(pr.params, X)
+    assert len(whole) == 2
+    for k in whole[0]:
+        np.testing.assert_array_equal(np.asarray(one[k]), np.asarray(whole[0][k]), err_msg=k)

@@ -283,8 +283,9 @@ def _warm(job: Job) -> Callable[[], None] | None:
     search scores with other settings (``optimizer.fidelity``) and the study scores in
     blocks (``Problem.staged``), the quoted problem (the study's own settings on the run
     kind's fresh stream: ``quoted.problem``, which the scoring then reuses, its
-    normalisation probe included) and one block of it (the box's centre in every row);
-    the block's values are dropped. None where the search's programs are the scoring's.
+    normalisation probe included) and one block of it (the box's centre in every row) at
+    the least cost that compiles its programs (``Staged.least``: the first chunk of
+    targets); the block's values are dropped. None where the search's programs are the scoring's.
     It starts once the search's own block program has run (``exported.wait_ready``):
     that program's trace and compile are what the search waits for."""
     if job.search_cfg is None:
@@ -299,7 +300,8 @@ def _warm(job: Job) -> Callable[[], None] | None:
             return
         x = 0.5 * (np.asarray(p.lower, np.float64) + np.asarray(p.upper, np.float64))
         X = np.repeat(x[None], p.staged.designs, 0).astype(job.dtype)
-        p.staged.values(p.params, X)
+        least = p.staged.least  # the least call that compiles (or loads) the programs
+        p.staged.values(p.params if least is None else least(p.params), X)
 
     return warm
 

@@ -52,11 +52,14 @@ class Staged(NamedTuple):
     pytree of arrays; ``reduce(params, X, key, values)`` is pure and gives what ``fn``
     gives: ``fn(params, X, key) == reduce(params, X, key, values(params, X))``. The
     scoring (``designopt.problems.evaluate.staged_scores``) calls them block by block
-    of ``designs`` rows, the last one padded."""
+    of ``designs`` rows, the last one padded. ``least(params)``: params with which
+    ``values`` runs every program it runs at the least cost (the task's: its first chunk
+    of targets), for a call made to compile them; None: ``params`` themselves."""
 
     values: Callable[[Any, Array], Any]
     reduce: Callable[..., tuple[Array, dict[str, Array]]]
     designs: int
+    least: Callable[[Any], Any] | None = None
 
 
 @dataclass(frozen=True, eq=False)

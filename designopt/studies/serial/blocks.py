@@ -118,6 +118,17 @@ def values(s: SerialSettings, dtype: Any) -> Callable[[dict[str, Any], Any], lis
     return fn
 
 
+def least(s: SerialSettings) -> Callable[[dict[str, Any]], dict[str, Any]]:
+    """``Staged.least`` of the task: params with only the first chunk of targets, so a
+    call of :func:`values` made to compile the block program runs it once."""
+    C = taskindex.chunk(s)
+
+    def fn(params: dict[str, Any]) -> dict[str, Any]:
+        return params | {k: params[k][:C] for k in ("target_p", "target_R") if k in params}
+
+    return fn
+
+
 def _digest(*parts: Any) -> str:
     """A digest of arrays, pytrees of them (a PRNG key: its data) and text."""
     h = hashlib.blake2b(digest_size=16)
