@@ -138,6 +138,40 @@ def test_exported_wait_ready_after_a_first_call(monkeypatch):
     assert exported.wait_ready(0.0)
 
 
+def test_the_first_call_of_a_reduction_runs_alone_among_its_kind():
+    """Two reductions of one code (two problems of a study, e.g. a race's two stages
+    drawn side by side) called at once for the first time at the same shapes: the
+    second waits until the first has returned (then compiles or loads its own), so
+    their traces do not overlap; the values are each its own."""
+    from designopt.problems import evaluate
+
+    spans: list[tuple[float, float]] = []
+
+    def make(scale: float):
+        def reduce(params, X, k, values):
+            t0 = time.perf_counter()
+            time.sleep(0.3)  # at trace time
+            spans.append((t0, time.perf_counter()))
+            return scale * jnp.sum(X, -1), {"v": values * scale}
+
+        return reduce
+
+    a, b = (evaluate._reducer(make(s), None) for s in (1.0, 2.0))
+    X = jnp.ones((3, 2)) * 0.123  # shapes no other test of the session uses
+    out: dict[int, object] = {}
+    threads = [threading.Thread(target=lambda i=i, r=r: out.__setitem__(i, r({}, X, None, X)))
+               for i, r in enumerate((a, b))]  # fmt: skip
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join(30)
+    assert len(spans) == 2
+    (s0, e0), (s1, e1) = sorted(spans)
+    assert s1 >= e0  # one after the other
+    np.testing.assert_allclose(np.asarray(out[1][0]), 2 * np.asarray(out[0][0]))
+    np.testing.assert_array_equal(np.asarray(out[1][2]), 0.0)  # no constraints: no violation
+
+
 def test_the_task_blocks_side_by_side_equal_one_after_the_other(monkeypatch):
     """The PUMA port case of tests/test_staged.py (its block program, 24 targets in
     chunks of 16): 20 designs (two blocks) solved with two threads and with one give the

@@ -5,6 +5,7 @@ a run's objective calls (``evaluate_batch``: the very program the run compiled).
 from __future__ import annotations
 
 import functools
+import threading
 from collections.abc import Callable
 from typing import Any
 
@@ -117,7 +118,11 @@ _SCORERS: dict[Any, Any] = {}
 
 
 def _reducer(reduce: Callable, constraints: Callable | None) -> Callable:
-    """``reduce`` and the total violation of ``constraints``, jitted (cached per pair)."""
+    """``reduce`` and the total violation of ``constraints``, jitted (cached per pair).
+    Its first call for a shape waits while another thread makes the first call of a
+    reducer of the same code at the same shapes (:func:`_first_alone`): two problems of
+    one study (a race's stages, drawn side by side) compile one program, the second
+    reading it from the compilation cache, instead of both compiling it at once."""
     key = ("staged", reduce, constraints)
     if key not in _SCORERS:
         from designopt.problems.base import violation_of
@@ -126,8 +131,37 @@ def _reducer(reduce: Callable, constraints: Callable | None) -> Callable:
             f, aux = reduce(params, X, k, values)
             return f, aux, violation_of(constraints, params, X, aux)
 
-        _SCORERS[key] = jax.jit(run)
+        code = tuple(getattr(c, "__code__", c) for c in (reduce, constraints))
+        _SCORERS[key] = _first_alone(jax.jit(run), code)
     return _SCORERS[key]
+
+
+_FIRST: dict[Any, threading.Event] = {}
+_FIRST_LOCK = threading.Lock()
+
+
+def _first_alone(fn: Callable, code: Any) -> Callable:
+    """``fn`` whose first call for arguments of given shapes runs alone among the
+    functions of the same ``code``: a later one waits until it has returned."""
+
+    def call(*args: Any) -> Any:
+        leaves, tree = jax.tree_util.tree_flatten(args)
+        sig = (code, tree, tuple((np.shape(a), str(getattr(a, "dtype", type(a).__name__)))
+                                 for a in leaves))  # fmt: skip
+        with _FIRST_LOCK:
+            done = _FIRST.get(sig)
+            mine = done is None
+            if mine:
+                done = _FIRST[sig] = threading.Event()
+        if not mine:
+            done.wait()
+            return fn(*args)
+        try:
+            return jax.block_until_ready(fn(*args))
+        finally:
+            done.set()
+
+    return call
 
 
 def _scorer(fn: Callable, constraints: Callable | None = None) -> Callable:
