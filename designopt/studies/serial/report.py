@@ -155,9 +155,10 @@ def front_view(rec: Any):
                                      if k in fr})  # fmt: skip
         hov.append(f"{_design_text(s, d)}; {objtxt}" + (f"; {placed}" if placed else "")
                    + f"; drawn at {poses[i][0]}")  # fmt: skip
-    where = ("at one representative tuple of targets of its own IK solution (one arm: the "
-             "reached target of median 1/k; several: the tuple of median gap between the arms, "
-             "one target per arm as arms_ok draws them)" if s.indices.measure == "task" else
+    where = ("at one representative tuple of targets of its own IK solution on the front's "
+             "re-scoring targets (one arm: the reached target of median 1/k; several: the "
+             "tuple of median gap between the arms, one target per arm as arms_ok draws them)"
+             if s.indices.measure == "task" else
              "at the home pose (each joint at 0 where its limits allow, else mid-range)")  # fmt: skip
     note = (f"each design {where}" + ("; faint: the original robot (the URDF's numbers) at "
                                       "the home pose" if ref else ""))  # fmt: skip
