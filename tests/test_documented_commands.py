@@ -350,14 +350,17 @@ SMALL: dict[str, dict] = {
     "port_placement": {"study": {"indices": {"n_samples": 32}}, "front": {"n_samples": 32},
                        "optimizer": {"n_particles": 4, "n_iters": 2, "n_runs": 1},
                        "final": {"stage": 32, "max_samples": 64}},
-    # the study's IK at the search's fidelity (tests/test_setup.py's): one IK program per
+    # the search at the study's own IK (tests/test_setup.py's settings): one IK program per
     # robot serves the search, the final stage, the front, `eval` and that file's targets
-    "mixed_setup": {"study": {"indices": {"n_samples": 32},
-                              "task": {"ik": {"climb": 0, "n_best": 2, "neighbours": 0,
-                                              "n_db": 1024, "n_nearest": 8, "rounds": 1}}},
+    "mixed_setup": {"study": {"indices": {"n_samples": 32}, "task": {"ik": {"climb": 0}}},
                     "front": {"n_samples": 32},
                     "optimizer": {"n_particles": 4, "n_iters": 2, "n_runs": 1,
-                                  "fidelity": {"study.indices.n_samples": 32}},
+                                  "fidelity": {"study.indices.n_samples": 32,
+                                               "study.task.ik.n_best": 8,
+                                               "study.task.ik.neighbours": 4,
+                                               "study.task.ik.n_db": 4096,
+                                               "study.task.ik.n_nearest": 16,
+                                               "study.task.ik.rounds": 2}},
                     "final": {"stage": 32, "max_samples": 64}},
     "urdf_arm": {"study": {"indices": {"n_samples": 512}}, "optimizer": OPT,
                  "scan": {"vary": {"l_wrist": {"num": 2}, "l_jaw": {"num": 2}}}} | _final(512),
