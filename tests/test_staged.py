@@ -201,3 +201,34 @@ def test_the_least_call_runs_the_first_chunk_only():
     assert len(whole) == 2
     for k in whole[0]:
         np.testing.assert_array_equal(np.asarray(one[k]), np.asarray(whole[0][k]), err_msg=k)
+
+
+def test_the_elemental_emitters_give_the_same_solutions():
+    """``indices.emitters: elemental`` compiles the block program with XLA:CPU's classic
+    emitters (``core.xlaoptions``): another code generator, so other last bits (the
+    option reached XLA), but the same IK outcome and the same values to the IK's own
+    tolerance. (The two arms' block program of the comparison above, and its twin.)"""
+    from designopt.core import xlaoptions
+
+    assert xlaoptions.options("fusion") == {}
+    assert xlaoptions.options("elemental") == {"xla_cpu_use_fusion_emitters": False}
+    with pytest.raises(ValueError, match="emitters"):
+        xlaoptions.options("llvm")
+    X = np.repeat(np.asarray(CASES[1][1]), blocks.DESIGNS // 2, 0)
+    _, fusion = _problem(_cfg("two_arms_front.yaml", N, chunk=16))
+    cfg = _cfg("two_arms_front.yaml", N, chunk=16)
+    cfg["study"]["indices"]["emitters"] = "elemental"
+    _, elemental = _problem(cfg)
+    a = fusion.staged.values(fusion.params, X)
+    b = elemental.staged.values(elemental.params, X)
+    same_bits = True
+    for ca, cb in zip(a, b, strict=True):
+        assert set(ca) == set(cb)
+        for k in ca:
+            x, y = np.asarray(ca[k]), np.asarray(cb[k])
+            same_bits &= np.array_equal(x, y)
+            if k in ("success", "converged"):
+                np.testing.assert_array_equal(y, x, err_msg=k)
+            else:  # the IK converges to 1e-9 (× the reach scale, rad)
+                np.testing.assert_allclose(y, x, rtol=1e-9, atol=1e-9, err_msg=k)
+    assert not same_bits

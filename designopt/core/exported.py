@@ -112,15 +112,18 @@ def folder() -> Path | None:
     return None if not d else Path(d)
 
 
-def compiled(key: str, fn: Callable, args: tuple) -> Callable:
+def compiled(key: str, fn: Callable, args: tuple, options: dict[str, Any] | None = None
+             ) -> Callable:  # fmt: skip
     """``fn`` (jitted) for arguments shaped like ``args``: from its exported module in the
     cache folder when one is there, else exported now and kept there; ``fn`` itself
-    without a cache folder or where exporting fails."""
+    without a cache folder or where exporting fails. ``options``: the XLA compile options
+    ``fn`` was jitted with (``core.xlaoptions``), which the loaded module is compiled
+    with too (the module itself does not depend on them)."""
     sig = signature(key, args)
     with _LOCK:
         lock = _LOCKS.setdefault(sig, threading.RLock())
     with lock:  # one export per program, whichever thread asks first
-        call = _compiled(sig, fn, args)
+        call = _compiled(sig, fn, args, options or {})
     if _READY.is_set():
         return call
 
@@ -145,9 +148,10 @@ def wait_ready(timeout: float) -> bool:
     return concurrency.wait(_READY, timeout)
 
 
-def _compiled(sig: str, fn: Callable, args: tuple) -> Callable:
-    if sig in _CALLS:
-        return _CALLS[sig]
+def _compiled(sig: str, fn: Callable, args: tuple, options: dict[str, Any]) -> Callable:
+    mem = f"{sig}\n{sorted(options.items())}"
+    if mem in _CALLS:
+        return _CALLS[mem]
     d = folder()
     call = fn
     if d is not None:
@@ -169,6 +173,6 @@ def _compiled(sig: str, fn: Callable, args: tuple) -> Callable:
             else:
                 write_cached(path, data)
         if exp is not None:
-            call = jax.jit(exp.call)
-    _CALLS[sig] = call
+            call = jax.jit(exp.call, compiler_options=options or None)
+    _CALLS[mem] = call
     return call

@@ -34,7 +34,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from designopt.core import concurrency, exported
+from designopt.core import concurrency, exported, xlaoptions
 from designopt.studies.serial import taskindex
 from designopt.studies.serial.mechanism import Mechanism, build
 from designopt.studies.serial.settings import SerialSettings, length_unit
@@ -80,7 +80,9 @@ def program(s: SerialSettings, dtype: Any) -> tuple[Mechanism, Callable]:
                 full = taskindex.design_full(p, X, dtype)
                 return taskindex.setup_values(mech, s, p, full, pt, Rt, t0, dtype)
 
-            _PROGRAMS[ck] = (mech, jax.jit(run))
+            # XLA:CPU's code generator as the config names it (indices.emitters)
+            opts = xlaoptions.options(s.indices.emitters) or None
+            _PROGRAMS[ck] = (mech, jax.jit(run, compiler_options=opts))
         return _PROGRAMS[ck]
 
 
@@ -99,7 +101,8 @@ def values(s: SerialSettings, dtype: Any) -> Callable[[dict[str, Any], Any], lis
         Xh = np.asarray(X)
         X = jnp.asarray(X)
         args = [(p, X, pc[i], None if Rc is None else Rc[i], t0[i]) for i in range(len(t0))]
-        call = exported.compiled(key, run, args[0])  # a warm run loads, not traces, it
+        opts = xlaoptions.options(s.indices.emitters)
+        call = exported.compiled(key, run, args[0], opts)  # a warm run loads, not traces, it
         scene = _digest(key, p)
         where = [_digest(scene, pc[i], None if Rc is None else Rc[i], t0[i])
                  for i in range(len(t0))]  # fmt: skip

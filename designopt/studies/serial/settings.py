@@ -294,6 +294,13 @@ class SerialIndices(Section):
         description="Samples per streamed chunk, bounding memory (task: targets solved at a time, "
         "1024 unless given).",
     )
+    emitters: Literal["fusion", "elemental"] = Field(
+        "fusion",
+        description="Task: the code generator XLA's CPU backend compiles the IK's program with: "
+        "`fusion` (XLA's default) or `elemental` (its classic emitters: about a third less "
+        "compile; faster where collision checks against meshes dominate, slower for long IK "
+        "solves alone). The values agree to their last bits; other backends ignore it.",
+    )
     length_scale: float = Field(
         1.0,
         gt=0,
