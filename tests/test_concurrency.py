@@ -194,3 +194,25 @@ def test_the_task_blocks_side_by_side_equal_one_after_the_other(monkeypatch):
     for k in got["1"]:
         np.testing.assert_array_equal(got["1"][k], got["2"][k], err_msg=k)
     assert got["1"]["success"].any()
+
+
+def test_the_calls_and_a_background_job_run_in_the_callers_precision(monkeypatch):
+    """``jax.enable_x64`` (the API's calls run under it) holds in the thread that entered
+    it: the pool's threads and a background job run in the caller's precision, not the
+    process's (float32 arrays from float64 inputs gave an API ``evaluate`` of a task in
+    several chunks wrong values)."""
+    monkeypatch.setenv(concurrency.ENV, "2")
+    before = jax.config.jax_enable_x64
+    jax.config.update("jax_enable_x64", False)
+    try:
+        seen: list = []
+        with jax.enable_x64(True):
+            out = concurrency.map_calls([lambda: jnp.zeros(2)] * 3)
+            with concurrency.in_background(lambda: seen.append(jnp.zeros(2).dtype)):
+                pass
+        assert [o.dtype for o in out] == [jnp.float64] * 3
+        assert seen == [jnp.float64]
+        out = concurrency.map_calls([lambda: jnp.zeros(2)] * 3)  # and back: the process's
+        assert [o.dtype for o in out] == [jnp.float32] * 3
+    finally:
+        jax.config.update("jax_enable_x64", before)

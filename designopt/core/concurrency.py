@@ -88,13 +88,29 @@ def _ready(fn: Callable[[], T]) -> Callable[[], T]:
     return run
 
 
+def _in_callers_precision(fn: Callable[[], T]) -> Callable[[], T]:
+    """``fn`` to run in another thread under the calling thread's JAX precision:
+    ``jax.enable_x64`` (as the API's calls use it) is a context of the thread that
+    entered it, so a pool thread would otherwise trace and run the call in the process's
+    default precision (float32 arrays from float64 inputs)."""
+    import jax
+
+    x64 = bool(jax.config.jax_enable_x64)
+
+    def run() -> T:
+        with jax.enable_x64(x64):
+            return fn()
+
+    return run
+
+
 def map_calls(calls: Sequence[Callable[[], T]], key: Any = None) -> list[T]:
     """``[c() for c in calls]``, each result ready (``jax.block_until_ready``), the calls
     run at once on :func:`threads` threads. ``key`` (hashable) names the programs the
     calls run: the first time a key is seen the first call runs alone (it compiles or
     loads the programs; two threads would each compile them), then the rest together.
     An exception of any call is raised (the first in the calls' order)."""
-    calls = [_ready(c) for c in calls]
+    calls = [_in_callers_precision(_ready(c)) for c in calls]
     n = min(threads(), len(calls))
     if n <= 1:
         return [c() for c in calls]
@@ -122,11 +138,12 @@ def in_background(fn: Callable[[], Any] | None) -> Iterator[None]:
         yield
         return
     done = threading.Event()
+    job = _in_callers_precision(fn)
 
     def run() -> None:
         _local.worker, _local.done = True, done
         with contextlib.suppress(Exception):
-            fn()
+            job()
 
     t = threading.Thread(target=run, name="designopt-warm", daemon=True)
     t.start()
