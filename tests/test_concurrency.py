@@ -125,17 +125,39 @@ def test_a_waiting_background_job_ends_with_the_body(monkeypatch):
     assert not concurrency.wait(threading.Event(), 0.05)  # the timeout
 
 
-def test_exported_wait_ready_after_a_first_call(monkeypatch):
-    """``exported.wait_ready`` returns once a program from ``exported.compiled`` has been
-    called (compiled and run); the call's value is the program's."""
+def test_exported_wait_ready_once_the_first_program_is_traced(monkeypatch, tmp_path):
+    """``exported.wait_ready`` returns once the first program from ``exported.compiled``
+    has been traced and its call has begun: the call of an exported program already sees
+    it set (that call compiles, which frees the GIL); a program traced by its own call
+    (no cache folder) sets it when the call returns. The call's value is the program's."""
     from designopt.core import exported
 
-    monkeypatch.setattr(exported, "_READY", threading.Event())
     fn = jax.jit(lambda x: x * 2.0)
-    call = exported.compiled("test-ready", fn, (jnp.ones(3),))
-    assert not exported.wait_ready(0.0)
-    np.testing.assert_array_equal(np.asarray(call(jnp.ones(3))), [2.0, 2.0, 2.0])
-    assert exported.wait_ready(0.0)
+    seen = []
+    real_jit = jax.jit
+
+    def recording_jit(f, **kw):  # the loaded module's jit: its call records the event
+        inner = real_jit(f, **kw)
+
+        def call(*a):
+            seen.append(exported._READY.is_set())
+            return inner(*a)
+
+        return call
+
+    for where in (tmp_path, None):
+        monkeypatch.setattr(exported, "_READY", threading.Event())
+        monkeypatch.setattr(exported, "_CALLS", {})
+        monkeypatch.setattr(exported, "folder", lambda w=where: w)
+        with monkeypatch.context() as m:
+            m.setattr(jax, "jit", recording_jit)
+            call = exported.compiled(f"test-ready-{where is None}", fn, (jnp.ones(3),))
+        assert not exported.wait_ready(0.0)
+        np.testing.assert_array_equal(np.asarray(call(jnp.ones(3))), [2.0, 2.0, 2.0])
+        assert seen == ([True] if where is not None else [])  # set before its compile
+        assert exported.wait_ready(0.0)
+        seen.clear()
+    assert list(tmp_path.glob("designopt-export-*.bin"))  # the first one was exported
 
 
 def test_the_first_call_of_a_reduction_runs_alone_among_its_kind():

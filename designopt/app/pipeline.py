@@ -286,8 +286,10 @@ def _warm(job: Job) -> Callable[[], None] | None:
     normalisation probe included) and one block of it (the box's centre in every row) at
     the least cost that compiles its programs (``Staged.least``: the first chunk of
     targets); the block's values are dropped. None where the search's programs are the scoring's.
-    It starts once the search's own block program has run (``exported.wait_ready``):
-    that program's trace and compile are what the search waits for."""
+    It starts once the search's own block program has been traced
+    (``exported.wait_ready``): that trace holds the GIL and is what the search waits for
+    first; the scoring's programs then trace and compile beside the search's compile,
+    which leaves a core idle part of the time."""
     if job.search_cfg is None:
         return None
 

@@ -128,6 +128,8 @@ def compiled(key: str, fn: Callable, args: tuple, options: dict[str, Any] | None
         return call
 
     def first(*a: Any) -> Any:  # the process's first call of such a program, compiled
+        if call is not fn:  # exported (traced) ahead: its call compiles, and frees the GIL
+            _READY.set()
         try:
             return jax.block_until_ready(call(*a))
         finally:
@@ -138,11 +140,13 @@ def compiled(key: str, fn: Callable, args: tuple, options: dict[str, Any] | None
 
 def wait_ready(timeout: float) -> bool:
     """Wait (at most ``timeout`` s, and in a background job of
-    ``concurrency.in_background`` no longer than the work beside it) until a program
-    from :func:`compiled` has been called in this process, compiled and run: a
-    background compile that waits for it leaves the machine to that first program (its
-    trace holds the GIL, and two traces take turns; its XLA compile uses more than one
-    core). True once one has."""
+    ``concurrency.in_background`` no longer than the work beside it) until the first
+    program from :func:`compiled` in this process has been traced and its call has
+    begun (an exported program: its XLA compile, which releases the GIL) or, for one
+    that is traced by its call (no cache folder), until that call has returned: a
+    background trace that waits for it leaves the GIL to that first program's trace (two
+    traces take turns) and compiles beside its compile, on the cores a compile leaves
+    idle. True once it has."""
     from designopt.core import concurrency
 
     return concurrency.wait(_READY, timeout)
