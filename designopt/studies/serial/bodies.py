@@ -375,7 +375,7 @@ def pair_lines(s: SerialSettings, mech: Mechanism | None = None,
     frames = [("", np.eye(3), np.zeros(3))]
     if s.arms is not None:
         bp = base_params(s, mech, jnp.float64)
-        Rb, tb = (np.asarray(v, np.float64) for v in base_frames(bp, jnp.asarray(full[None])))
+        Rb, tb = base_frames(bp, np.asarray(full[None], np.float64), np)
         frames = [(f" of arm {k}", Rb[k, 0], tb[k, 0]) for k in range(len(s.arms))]
     for o, ob in enumerate(c.obstacles):
         op = col.obstacle_params([ob], jnp.float64)
@@ -470,18 +470,22 @@ def port_params(s: SerialSettings, dtype: Any) -> dict[str, Any]:
     return out | ({} if wall is None else {"scene_wall": wall_params(wall, dtype)})
 
 
-def _values(const: jax.Array, col: jax.Array, sign: jax.Array, full: jax.Array) -> jax.Array:
-    """The entries (K, M, W) for designs ``full`` (M, P) (:func:`_entries`' arrays)."""
-    c, sg = const.astype(full.dtype), sign.astype(full.dtype)
-    return c[:, None, :] + jnp.where(col[:, None, :] >= 0,
-                                     sg[:, None, :] * jnp.moveaxis(full[:, jnp.maximum(col, 0)], 0, 1),
-                                     0.0)  # fmt: skip
+def _values(const: Any, col: Any, sign: Any, full: Any, xp: Any = jnp) -> Any:
+    """The entries (K, M, W) for designs ``full`` (M, P) (:func:`_entries`' arrays;
+    ``xp``: jnp, or np on the host)."""
+    col = xp.asarray(col)
+    c, sg = xp.asarray(const).astype(full.dtype), xp.asarray(sign).astype(full.dtype)
+    return c[:, None, :] + xp.where(col[:, None, :] >= 0,
+                                    sg[:, None, :] * xp.moveaxis(full[:, xp.maximum(col, 0)], 0, 1),
+                                    0.0)  # fmt: skip
 
 
-def base_frames(params: dict[str, Any], full: jax.Array) -> tuple[jax.Array, jax.Array]:
-    """(R (A, M, 3, 3), t (A, M, 3)) of every arm's base for designs ``full`` (M, P)."""
-    v = _values(params["arm_const"], params["arm_col"], params["arm_sign"], full)
-    return rpy_matrix(v[..., 3], v[..., 4], v[..., 5]), v[..., :3]
+def base_frames(params: dict[str, Any], full: Any, xp: Any = jnp) -> tuple[Any, Any]:
+    """(R (A, M, 3, 3), t (A, M, 3)) of every arm's base for designs ``full`` (M, P)
+    (``xp``: jnp in a kernel; np on the host, where a set-up check or a figure needs a
+    few frames: no program to compile)."""
+    v = _values(params["arm_const"], params["arm_col"], params["arm_sign"], full, xp)
+    return rpy_matrix(v[..., 3], v[..., 4], v[..., 5], xp), v[..., :3]
 
 
 def port_points(params: dict[str, Any], full: jax.Array, wall: str | None) -> jax.Array:
@@ -615,7 +619,7 @@ def check(s: SerialSettings, mech: Mechanism, ids: tuple[int, ...] | None = None
     frames = [(np.eye(3), np.zeros(3))]
     if s.arms is not None:
         p = base_params(s, mech, jnp.float64 if jax.config.jax_enable_x64 else jnp.float32)
-        Rb, tb = (np.asarray(v, np.float64) for v in base_frames(p, jnp.asarray(full)))
+        Rb, tb = base_frames(p, np.asarray(full, np.float64), np)
         frames = [(Rb[k, 0], tb[k, 0]) for k in range(len(s.arms))]
     last = len(g.links) - 1
     radii = jnp.asarray(g.radii)

@@ -364,14 +364,11 @@ def base_poses(s: SerialSettings, mech: Mechanism, x: Any) -> list[np.ndarray | 
     units), from ``study.arms`` (``bodies.base_frames``); [None] (the world) without."""
     if s.arms is None:
         return [None]
-    import jax.numpy as jnp
 
     from designopt.studies.serial import bodies
 
-    dt = mc.out_dtype()
-    p = bodies.base_params(s, mech, dt)
-    X = jnp.asarray(full(mech, x), dt)
-    Rb, tb = (np.asarray(v, np.float64) for v in bodies.base_frames(p, X))
+    p = bodies.base_params(s, mech, mc.out_dtype())
+    Rb, tb = bodies.base_frames(p, np.asarray(full(mech, x), np.float64), np)
     out: list[np.ndarray | None] = []
     for k in range(len(s.arms)):
         T = np.eye(4)
