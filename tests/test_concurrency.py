@@ -125,37 +125,39 @@ def test_a_waiting_background_job_ends_with_the_body(monkeypatch):
     assert not concurrency.wait(threading.Event(), 0.05)  # the timeout
 
 
-def test_exported_wait_ready_once_the_first_program_is_traced(monkeypatch, tmp_path):
+def test_exported_wait_ready_once_the_first_program_is_traced_or_has_run(monkeypatch, tmp_path):
     """``exported.wait_ready`` returns once the first program from ``exported.compiled``
-    has been traced and its call has begun: the call of an exported program already sees
-    it set (that call compiles, which frees the GIL); a program traced by its own call
-    (no cache folder) sets it when the call returns. The call's value is the program's."""
+    has run; with ``traced``, once it has been traced and its call has begun: the call
+    of an exported program (which compiles it, freeing the GIL) already sees that, not
+    the run; a program traced by its own call (no cache folder) gives both when the call
+    returns. The call's value is the program's."""
     from designopt.core import exported
 
     fn = jax.jit(lambda x: x * 2.0)
     seen = []
     real_jit = jax.jit
 
-    def recording_jit(f, **kw):  # the loaded module's jit: its call records the event
+    def recording_jit(f, **kw):  # the loaded module's jit: its call records the waits
         inner = real_jit(f, **kw)
 
         def call(*a):
-            seen.append(exported._READY.is_set())
+            seen.append((exported.wait_ready(0.0, traced=True), exported.wait_ready(0.0)))
             return inner(*a)
 
         return call
 
     for where in (tmp_path, None):
         monkeypatch.setattr(exported, "_READY", threading.Event())
+        monkeypatch.setattr(exported, "_TRACED", threading.Event())
         monkeypatch.setattr(exported, "_CALLS", {})
         monkeypatch.setattr(exported, "folder", lambda w=where: w)
         with monkeypatch.context() as m:
             m.setattr(jax, "jit", recording_jit)
             call = exported.compiled(f"test-ready-{where is None}", fn, (jnp.ones(3),))
-        assert not exported.wait_ready(0.0)
+        assert not exported.wait_ready(0.0, traced=True)
         np.testing.assert_array_equal(np.asarray(call(jnp.ones(3))), [2.0, 2.0, 2.0])
-        assert seen == ([True] if where is not None else [])  # set before its compile
-        assert exported.wait_ready(0.0)
+        assert seen == ([(True, False)] if where is not None else [])
+        assert exported.wait_ready(0.0) and exported.wait_ready(0.0, traced=True)
         seen.clear()
     assert list(tmp_path.glob("designopt-export-*.bin"))  # the first one was exported
 

@@ -286,15 +286,20 @@ def _warm(job: Job) -> Callable[[], None] | None:
     normalisation probe included) and one block of it (the box's centre in every row) at
     the least cost that compiles its programs (``Staged.least``: the first chunk of
     targets); the block's values are dropped. None where the search's programs are the scoring's.
-    It starts once the search's own block program has been traced
-    (``exported.wait_ready``): that trace holds the GIL and is what the search waits for
-    first; the scoring's programs then trace and compile beside the search's compile,
-    which leaves a core idle part of the time."""
+    It starts once the search's own block program has run (``exported.wait_ready``):
+    that program's trace (which holds the GIL) and compile are what the search waits
+    for, and its calls leave a core idle where one step of the search makes fewer
+    independent calls than there are cores. Where the calls fill the cores (the
+    planning case: two blocks of 16 designs a step on 2 cores), it starts once that
+    program has been traced instead, and compiles beside its compile."""
     if job.search_cfg is None:
         return None
+    st, o = job.search_problem.staged, job.cfg.optimizer
+    full = st is not None and \
+        -(-o.n_particles * o.n_runs // st.designs) * st.calls >= concurrency.threads()  # fmt: skip
 
     def warm() -> None:
-        if job.search_problem.staged is not None and not exported.wait_ready(60.0) \
+        if st is not None and not exported.wait_ready(60.0, traced=full) \
                 and concurrency.ended():  # fmt: skip
             return  # the search has ended (an error, Ctrl-C) before its first call
         p = quoted.problem(job, job.search_problem)

@@ -28,7 +28,8 @@ _CALLS: dict[str, Callable] = {}
 _LOCK = threading.RLock()
 _LOCKS: dict[str, Any] = {}  # one per program: two programs export side by side
 _SOURCE: list[str] = []
-_READY = threading.Event()
+_READY = threading.Event()  # the first program has run
+_TRACED = threading.Event()  # ... has been traced, its compile begun (or it has run)
 
 
 def source_hash() -> str:
@@ -129,27 +130,28 @@ def compiled(key: str, fn: Callable, args: tuple, options: dict[str, Any] | None
 
     def first(*a: Any) -> Any:  # the process's first call of such a program, compiled
         if call is not fn:  # exported (traced) ahead: its call compiles, and frees the GIL
-            _READY.set()
+            _TRACED.set()
         try:
             return jax.block_until_ready(call(*a))
         finally:
+            _TRACED.set()
             _READY.set()
 
     return first
 
 
-def wait_ready(timeout: float) -> bool:
+def wait_ready(timeout: float, traced: bool = False) -> bool:
     """Wait (at most ``timeout`` s, and in a background job of
     ``concurrency.in_background`` no longer than the work beside it) until the first
-    program from :func:`compiled` in this process has been traced and its call has
-    begun (an exported program: its XLA compile, which releases the GIL) or, for one
-    that is traced by its call (no cache folder), until that call has returned: a
-    background trace that waits for it leaves the GIL to that first program's trace (two
-    traces take turns) and compiles beside its compile, on the cores a compile leaves
-    idle. True once it has."""
+    program from :func:`compiled` in this process has been called, compiled and run, or,
+    with ``traced``, until it has been traced and its call has begun (an exported
+    program: its XLA compile, which frees the GIL; one traced by its call, with no cache
+    folder: until that call has returned). A background trace that waits for it leaves
+    the GIL to that first program's trace (two traces take turns); ``traced`` lets it
+    compile beside that program's compile rather than beside its calls. True once it has."""
     from designopt.core import concurrency
 
-    return concurrency.wait(_READY, timeout)
+    return concurrency.wait(_TRACED if traced else _READY, timeout)
 
 
 def _compiled(sig: str, fn: Callable, args: tuple, options: dict[str, Any]) -> Callable:

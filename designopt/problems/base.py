@@ -54,12 +54,15 @@ class Staged(NamedTuple):
     scoring (``designopt.problems.evaluate.staged_scores``) calls them block by block
     of ``designs`` rows, the last one padded. ``least(params)``: params with which
     ``values`` runs every program it runs at the least cost (the task's: its first chunk
-    of targets), for a call made to compile them; None: ``params`` themselves."""
+    of targets), for a call made to compile them; None: ``params`` themselves.
+    ``calls``: the independent program calls one block's ``values`` makes (the task's:
+    its chunks of targets), which run side by side on the CPU's cores."""
 
     values: Callable[[Any, Array], Any]
     reduce: Callable[..., tuple[Array, dict[str, Array]]]
     designs: int
     least: Callable[[Any], Any] | None = None
+    calls: int = 1
 
 
 @dataclass(frozen=True, eq=False)

@@ -124,7 +124,8 @@ def build_task_fn(mech: Mechanism, s: SerialSettings, dtype: Any) -> tuple[Any, 
                 f_se = f_se + abs(w[i]) * se / jnp.abs(b[i, 1] - b[i, 0])
         return f, out | {"f_se": f_se}
 
-    return fn, Staged(blocks.values(s, dtype), reduce, blocks.DESIGNS, blocks.least(s))
+    calls = -(-taskindex.n_targets(s) // taskindex.chunk(s))  # a block's chunks of targets
+    return fn, Staged(blocks.values(s, dtype), reduce, blocks.DESIGNS, blocks.least(s), calls)
 
 
 def search_value(name: str, v: jax.Array, minimised: bool) -> jax.Array:
