@@ -4,8 +4,10 @@ filled (warm).
 
 For each command it prints one row: end to end (the process's wall time), start-up
 (process start to the config loaded), compile (JAX tracing + XLA compiling of the whole
-command, figures included, from its own summary), XLA programs, run (end to end less
-start-up and compile: the arithmetic, drawing and writing), figures (their wall time,
+command, figures included, from its own summary, summed over the threads that compile),
+XLA programs, run (end to end less start-up and compile: the arithmetic, drawing and
+writing; ``-`` where that is negative: compiling ran beside the work, on another core, and
+cannot be split off), figures (their wall time,
 their compiling included), and the time to the first finished iteration (when the progress bar
 first shows an iteration done: everything before it is start-up, set-up and compiling).
 A ``run`` prints its own split (``wall … end to end = start-up … + figures …; compile …``);
@@ -94,7 +96,8 @@ warm archive (``{tmp}``: the folder of the rows' outputs)."""
 
 END_TO_END = re.compile(
     r"wall (?P<wall>[\d.]+) s end to end = start-up (?P<startup>[\d.]+) s .*figures "
-    r"(?P<figures>[\d.]+) s .*compile (?P<compile>[\d.]+) s of it \((?P<n>\d+) XLA programs\)"
+    r"(?P<figures>[\d.]+) s .*compile (?P<compile>[\d.]+) s (?:of it|summed over threads) "
+    r"\((?P<n>\d+) XLA programs\)"
 )
 COMPILE = re.compile(r"compile (?P<compile>[\d.]+) s")
 PROGRAMS = re.compile(r"\((?P<n>\d+) XLA programs\)")
@@ -177,7 +180,9 @@ def one(argv: list[str], cache: Path, out: str, log: bool = False) -> dict[str, 
     if first is not None:
         row["first"] = first
     if "compile" in row:  # everything but starting and compiling: arithmetic, drawing, writing
-        row["run"] = wall - float(row.get("startup", 0.0)) - float(row["compile"])
+        run = wall - float(row.get("startup", 0.0)) - float(row["compile"])
+        if run >= 0.0:  # else the compiling overlapped the work: no such split
+            row["run"] = run
     return row
 
 

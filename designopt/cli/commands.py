@@ -89,8 +89,9 @@ def wall_line(attrs: dict, clock, figures_s: float, config_s: float = 0.0) -> st
     stages = "".join(f" + {k} {v:.1f} s" for k, v in a.items())
     return (f"wall {total:.1f} s end to end = start-up {startup:.1f} s{stages}"
             f" + figures {figures_s:.1f} s + archive and the rest {other:.1f} s; compile "
-            f"{clock.compile:.1f} s of it ({clock.compilations} XLA programs) = tracing, "
-            "lowering and compiling each program or loading it from the compilation cache")
+            f"{clock.compile:.1f} s summed over threads ({clock.compilations} XLA programs) = "
+            "tracing, lowering and compiling each program or loading it from the compilation "
+            "cache, some of it beside the run's work")
 
 
 EXEC_GAP_S = 1.0
