@@ -150,10 +150,11 @@ def _tuples(s: SerialSettings, mech: Mechanism, sol: Mapping[str, np.ndarray],
     N = ok.shape[1]
     from designopt.studies.serial import taskindex
 
-    lab = taskindex.labels(N, taskindex.groups(s))  # the tuples pair targets of one group
+    grp = taskindex.groups(s)  # the tuples pair targets of one group
     g = bodies.geometry(setup.groups(s)[0].settings, setup.groups(s)[0].mech)
     segs = np.asarray(sol["segments"])  # (A, N, L, 2, 3) world
-    P, G = _perms_gaps(keys["samples"], lab, segs, _arm_radii(s), N, A, g is not None)
+    P, G = _perms_gaps(keys["samples"], segs, _arm_radii(s), N, A, g is not None,
+                       None if grp is None else tuple(int(v) for v in grp))  # fmt: skip
     perm = list(np.asarray(P))
     both = np.all(np.stack([ok[k][perm[k]] for k in range(A)]), 0)
     seg = [segs[k][perm[k]] for k in range(A)]  # (N, L, 2, 3) world
@@ -161,17 +162,17 @@ def _tuples(s: SerialSettings, mech: Mechanism, sol: Mapping[str, np.ndarray],
     return perm, both, gap, seg, g
 
 
-@functools.partial(jax.jit, static_argnums=(4, 5, 6))
-def _perms_gaps(key: Any, lab: Any, segs: Any, r: Any, N: int, A: int, gaps: bool
-                ) -> tuple[jax.Array, jax.Array]:  # fmt: skip
+@functools.partial(jax.jit, static_argnums=(3, 4, 5, 6))
+def _perms_gaps(key: Any, segs: Any, r: Any, N: int, A: int, gaps: bool,
+                grp: tuple[int, int] | None) -> tuple[jax.Array, jax.Array]:  # fmt: skip
     """:func:`_tuples`' arrays in one program (one compiled call, not dozens of eager
-    operations): the arms' permutations (A, N) as ``arms_free`` draws them, and each
-    tuple's least gap between two arms (N,) (+inf without ``gaps``: no collision
-    geometry)."""
+    operations): the arms' permutations (A, N) as ``arms_free`` draws them (the targets'
+    groups ``grp``: ``taskindex.groups``), and each tuple's least gap between two arms
+    (N,) (+inf without ``gaps``: no collision geometry)."""
     from designopt.kinematics.collision import arms_clearance
     from designopt.studies.serial import taskindex
 
-    perm = taskindex.perms(jax.random.fold_in(key, 2), N, lab, A)
+    perm = taskindex.perms(jax.random.fold_in(key, 2), N, taskindex.labels(N, grp), A)
     seg = [segs[k][perm[k]] for k in range(A)]
     gap = jnp.full((N,), jnp.inf, segs.dtype)
     if gaps:
