@@ -13,7 +13,7 @@ import pytest
 import trimesh
 import yaml
 
-from designopt.kinematics import sdf
+from designopt.kinematics import collision, sdf
 
 ROOT = Path(__file__).resolve().parents[1]
 ORGAN = ROOT / "configs/data/organ.stl"
@@ -23,6 +23,7 @@ ORGAN = ROOT / "configs/data/organ.stl"
 def cache(tmp_path, monkeypatch):
     """A fresh grid cache: the folder ``tmp_path/cache``, nothing in memory, no builds."""
     folder = tmp_path / "cache"
+    collision.prefetch_done()  # no grid of an earlier test's checks still on its way
     monkeypatch.setattr(sdf, "cache_folder", lambda: folder)
     monkeypatch.setattr(sdf, "_GRIDS", {})
     monkeypatch.setattr(sdf, "BUILDS", {})
@@ -194,3 +195,23 @@ def test_a_flat_closed_mesh_is_refused_in_one_line(tmp_path):
     assert len(lines) == 1, r.stderr
     assert "obstacles.0.file" in lines[0] and "flat.stl" in lines[0], lines[0]
     assert "encloses no volume" in lines[0] and "Warning" not in r.stderr
+
+
+def test_a_prefetched_grid_is_built_once_and_waited_for(cache, monkeypatch, tmp_path):
+    """``collision.prefetch_grids`` builds a mesh obstacle's grid in a thread of its own;
+    the obstacle's own ``grid()``, asked at once, waits for that build instead of
+    building it again: one build, the same grid object, the values of a direct build."""
+    from designopt.core import concurrency
+    from designopt.kinematics.collision import Collision
+
+    monkeypatch.setattr(concurrency, "threads", lambda: 2)  # as on a 2-core machine
+    raw = {"radius": 0.01, "obstacles": [{"shape": "ball", "center": [0, 0, 0], "radius": 0.1},
+                                         {"shape": "mesh", "file": str(ORGAN), "resolution": 32}]}  # fmt: skip
+    obs = Collision.model_validate(raw, context={"config_dir": str(tmp_path)}).obstacles
+    key = sdf.grid_key(ORGAN, 1.0, 32, None)
+    collision.prefetch_grids(obs)
+    g = obs[1].grid()  # meanwhile: waits for the thread's build (or finds it done)
+    collision.prefetch_done()
+    assert sdf.BUILDS == {key: 1} and obs[1].grid() is g
+    v, f = sdf.load_mesh(ORGAN)
+    np.testing.assert_array_equal(g.values, sdf.build_grid(v, f, 32, None).values)

@@ -375,6 +375,42 @@ class Collision(Section):
         return obstacle_params(self.obstacles, dtype)
 
 
+def prefetch_grids(obstacles: Sequence[Any]) -> None:
+    """Start building the SDF grids of the mesh obstacles among ``obstacles`` in a
+    thread of their own, so that they are ready (or on their way) when
+    :func:`obstacle_params` asks for them: a set-up's checks meanwhile trace and compile
+    programs, which leave the GIL free. ``sdf.mesh_grid`` builds a grid once: a caller
+    that asks for one under construction waits for it. Errors are left to that caller.
+    Nothing starts on one core (``concurrency.threads``)."""
+    import contextlib
+    import threading
+
+    from designopt.core import concurrency
+
+    meshes = [o for o in obstacles if _obstacle_kind(o) == "mesh" and hasattr(o, "grid")]
+    if not meshes or concurrency.threads() <= 1:
+        return
+
+    def build() -> None:
+        for o in meshes:
+            with contextlib.suppress(Exception):
+                o.grid()
+
+    th = threading.Thread(target=build, name="designopt-grids", daemon=True)
+    _PREFETCHING.append(th)
+    th.start()
+
+
+def prefetch_done() -> None:
+    """Wait until the grids :func:`prefetch_grids` started are built (e.g. a test,
+    before it swaps ``sdf``'s grid cache)."""
+    while _PREFETCHING:
+        _PREFETCHING.pop().join()
+
+
+_PREFETCHING: list[Any] = []  # the threads prefetch_grids started, not yet waited for
+
+
 def obstacle_params(obstacles: Sequence[Any], dtype=jnp.float64) -> ObstacleParams:
     """Obstacle models (or their dicts, validated here) as a pytree of arrays grouped by shape, so that one compiled
     program serves any obstacle values (the counts are its shapes):

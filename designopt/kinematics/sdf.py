@@ -71,6 +71,7 @@ import contextlib
 import hashlib
 import math
 import os
+import threading
 import warnings
 from dataclasses import dataclass
 from functools import lru_cache
@@ -396,6 +397,8 @@ KEEP_GRIDS = 16
 """Grids kept in memory (the most recently used)."""
 
 _GRIDS: dict[str, MeshGrid] = {}
+_LOCK = threading.Lock()  # guards _GRIDS and _KEY_LOCKS
+_KEY_LOCKS: dict[str, threading.Lock] = {}  # one per grid key: one build at a time
 BUILDS: dict[str, int] = {}
 """How many times each grid (by its key, :func:`grid_key`) was built in this process:
 read by the tests (a grid is built at most once per process)."""
@@ -495,21 +498,26 @@ def mesh_grid(path: str | os.PathLike, scale: float = 1.0, resolution: int = DEF
     is rebuilt and replaced, never trusted)."""
     v, f = load_mesh(path)  # the errors, named
     key = grid_key(path, scale, resolution, padding)
-    g = _GRIDS.pop(key, None)
-    if g is None:
-        folder = cache_folder()
-        file = None if folder is None else grid_file(folder, key)
-        g = None if file is None else _read_grid(file, key, resolution)
+    with _LOCK:
+        lock = _KEY_LOCKS.setdefault(key, threading.Lock())
+    with lock:  # one build per key: a second caller (a prefetch's thread) waits for it
+        with _LOCK:
+            g = _GRIDS.pop(key, None)
         if g is None:
-            pad = None if padding is None else float(padding)
-            g = build_grid(v * float(scale), f, int(resolution), pad)
-            BUILDS[key] = BUILDS.get(key, 0) + 1
-            if file is not None:
-                _write_grid(file, key, g)
-        g.values.flags.writeable = False
-    _GRIDS[key] = g  # the most recently used last
-    while len(_GRIDS) > KEEP_GRIDS:
-        _GRIDS.pop(next(iter(_GRIDS)))
+            folder = cache_folder()
+            file = None if folder is None else grid_file(folder, key)
+            g = None if file is None else _read_grid(file, key, resolution)
+            if g is None:
+                pad = None if padding is None else float(padding)
+                g = build_grid(v * float(scale), f, int(resolution), pad)
+                BUILDS[key] = BUILDS.get(key, 0) + 1
+                if file is not None:
+                    _write_grid(file, key, g)
+            g.values.flags.writeable = False
+        with _LOCK:
+            _GRIDS[key] = g  # the most recently used last
+            while len(_GRIDS) > KEEP_GRIDS:
+                _GRIDS.pop(next(iter(_GRIDS)))
     return g
 
 

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from designopt.kinematics import collision as col
 from designopt.kinematics import task as tk
 from designopt.kinematics.urdf import rpy_matrix
 from designopt.studies.serial import plancheck
@@ -62,6 +63,8 @@ _PASSED: dict[str, None] = {}  # the settings (without the IK's and the indices'
 
 
 def _check(s: SerialSettings) -> None:
+    if s.collision is not None:  # the meshes' grids, built beside the checks' compiles
+        col.prefetch_grids(s.collision.obstacles)
     _check_reach(s)  # first: a region out of reach is the cause, whatever the ports say
     plancheck.check(s)  # a unit slip is named before _check_ports finds a port off the wall
     _check_ports(s)
