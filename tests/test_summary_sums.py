@@ -47,8 +47,8 @@ def test_the_wall_line_adds_up_and_is_the_one_count(tmp_path, capsys):
     # each part and the total rounded to 0.1 s: the sum within 7 roundings of 0.05 s
     assert abs(sum(parts.values()) - total) <= 7 * 0.05 + 1e-9, wall[0]
     assert parts["figures"] == 0.0 and parts["optimizer"] > 0
-    compile_s = float(re.search(r"compile ([\d.]+) s of it", wall[0]).group(1))
-    assert compile_s <= total + 0.05
+    compile_s = float(re.search(r"compile ([\d.]+) s summed over threads", wall[0]).group(1))
+    assert 0 < compile_s <= total + 0.05  # this run compiles on one thread (no staged IK)
     # one count of programs, with its meaning stated, and no other count anywhere
     assert len(re.findall(r"\d+ XLA programs", out)) == 1
     assert "compilations" not in out and "loading it from the compilation cache" in wall[0]
